@@ -162,7 +162,10 @@ impl ChannelId {
 
     /// One of the four probes measuring the journal relative to the bearing.
     pub fn is_bearing_probe(self) -> bool {
-        matches!(self, ChannelId::ProbeAX | ChannelId::ProbeAY | ChannelId::ProbeBX | ChannelId::ProbeBY)
+        matches!(
+            self,
+            ChannelId::ProbeAX | ChannelId::ProbeAY | ChannelId::ProbeBX | ChannelId::ProbeBY
+        )
     }
 
     /// One of the two framework probes measuring the housing's absolute displacement.
@@ -182,7 +185,11 @@ impl ChannelId {
 
     /// Comma-separated list of all names, for error messages.
     fn all_names() -> String {
-        Self::ALL.iter().map(|c| c.name()).collect::<Vec<_>>().join(", ")
+        Self::ALL
+            .iter()
+            .map(|c| c.name())
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 
@@ -210,7 +217,10 @@ pub struct PhysicalSignals {
 impl PhysicalSignals {
     /// All values zero, shaft angle zero.
     pub fn zero() -> Self {
-        Self { values: [0.0; CHANNEL_COUNT], shaft_angle_rad: 0.0 }
+        Self {
+            values: [0.0; CHANNEL_COUNT],
+            shaft_angle_rad: 0.0,
+        }
     }
 
     /// The value of one channel.
@@ -386,7 +396,10 @@ impl DaqConfig {
             ));
         }
         if !(8..=24).contains(&self.adc_bits) {
-            return Err(PhysicsError::invalid(f("adc_bits"), format!("must be in 8..=24, got {}", self.adc_bits)));
+            return Err(PhysicsError::invalid(
+                f("adc_bits"),
+                format!("must be in 8..=24, got {}", self.adc_bits),
+            ));
         }
         if !(self.full_scale_v.is_finite() && self.full_scale_v > 0.0) {
             return Err(PhysicsError::invalid(
@@ -412,7 +425,10 @@ impl DaqConfig {
                 ));
             }
             if !ch.offset_v.is_finite() {
-                return Err(PhysicsError::invalid(cf("offset_v"), format!("must be finite, got {}", ch.offset_v)));
+                return Err(PhysicsError::invalid(
+                    cf("offset_v"),
+                    format!("must be finite, got {}", ch.offset_v),
+                ));
             }
             if !(ch.noise_rms.is_finite() && ch.noise_rms >= 0.0) {
                 return Err(PhysicsError::invalid(
@@ -438,17 +454,24 @@ impl DaqConfig {
                 ));
             }
         }
-        let missing: Vec<&str> =
-            ChannelId::ALL.iter().filter(|c| seen[c.index()].is_none()).map(|c| c.name()).collect();
+        let missing: Vec<&str> = ChannelId::ALL
+            .iter()
+            .filter(|c| seen[c.index()].is_none())
+            .map(|c| c.name())
+            .collect();
         if !missing.is_empty() {
             return Err(PhysicsError::invalid(
                 f("channels"),
-                format!("missing channel(s) {}; all ten must be scanned ({})", missing.join(", "), ChannelId::all_names()),
+                format!(
+                    "missing channel(s) {}; all ten must be scanned ({})",
+                    missing.join(", "),
+                    ChannelId::all_names()
+                ),
             ));
         }
         let scan_span = self.channel_interval_s * (self.channels.len() as f64 - 1.0);
         let period = 1.0 / self.sample_rate_hz;
-        if !(scan_span < period) {
+        if scan_span >= period {
             return Err(PhysicsError::invalid(
                 f("channel_interval_s"),
                 format!(
@@ -572,7 +595,11 @@ impl Calibration {
     /// at a range edge reads within half an LSB of it after quantisation, so readings within
     /// half an LSB of an edge (or beyond) count as **out of range**; a genuinely linear value
     /// that close to the edge is lost too, which is the conservative side.
-    pub fn within_linear_range(&self, channel: ChannelId, volts: f64) -> Result<bool, PhysicsError> {
+    pub fn within_linear_range(
+        &self,
+        channel: ChannelId,
+        volts: f64,
+    ) -> Result<bool, PhysicsError> {
         let [lo, hi] = self.linear_range_v(channel)?;
         let margin = 0.5 * self.lsb_v;
         Ok(volts > lo + margin && volts < hi - margin)
@@ -705,7 +732,11 @@ impl Daq {
                 let ch = ChannelId::parse(&d.channel).map_err(|_| {
                     PhysicsError::invalid(
                         "effects.channel_delay.channel",
-                        format!("unknown DAQ channel `{}`; expected one of {}", d.channel, ChannelId::all_names()),
+                        format!(
+                            "unknown DAQ channel `{}`; expected one of {}",
+                            d.channel,
+                            ChannelId::all_names()
+                        ),
                     )
                 })?;
                 Some((ch, d.delay_s))
@@ -717,7 +748,11 @@ impl Daq {
                 let ch = ChannelId::parse(&s.channel).map_err(|_| {
                     PhysicsError::invalid(
                         "effects.probe_saturation.channel",
-                        format!("unknown DAQ channel `{}`; expected one of {}", s.channel, ChannelId::all_names()),
+                        format!(
+                            "unknown DAQ channel `{}`; expected one of {}",
+                            s.channel,
+                            ChannelId::all_names()
+                        ),
                     )
                 })?;
                 if !ch.is_displacement_probe() {
@@ -739,7 +774,7 @@ impl Daq {
                     let zero = c.calibrated_zero();
                     lo = lo.max(zero - limit);
                     hi = hi.min(zero + limit);
-                    if !(lo < hi) {
+                    if lo >= hi {
                         return Err(PhysicsError::invalid(
                             "effects.probe_saturation.limit_m",
                             format!(
@@ -826,7 +861,9 @@ impl Daq {
             let code = if value.is_finite() {
                 // Sensor linearity: hard clip (finite value and lo < hi, so no NaN games).
                 let sensed = value.max(slot.sensor_lo).min(slot.sensor_hi);
-                let amp = (slot.offset_v + slot.sensitivity * sensed).max(-self.full_scale_v).min(self.full_scale_v);
+                let amp = (slot.offset_v + slot.sensitivity * sensed)
+                    .max(-self.full_scale_v)
+                    .min(self.full_scale_v);
                 let raw = (amp / self.lsb_v).round();
                 // `raw` is finite and within +-2^(bits-1) (+1 at most), so the cast is exact.
                 (raw as i64).clamp(self.code_min as i64, self.code_max as i64) as i32
@@ -842,7 +879,13 @@ impl Daq {
             volts.push(code as f64 * self.lsb_v);
             channels.push(slot.channel);
         }
-        DaqScan { scan_index, scan_start_s, counts, volts, channels }
+        DaqScan {
+            scan_index,
+            scan_start_s,
+            counts,
+            volts,
+            channels,
+        }
     }
 
     /// How far before `scan_start_s` [`Daq::scan`] may ask `signals` (the injected channel
