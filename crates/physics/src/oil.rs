@@ -3,7 +3,8 @@
 //! Three viscosity laws are offered:
 //!
 //! * [`ViscosityLaw::Constant`]: isoviscous, for cross-checks against textbook examples.
-//! * [`ViscosityLaw::Walther`]: the Walther equation standardised in ASTM D341,
+//! * [`ViscosityLaw::Walther`]: the Walther equation (Walther 1931, Erdoel und Teer 7),
+//!   standardised in ASTM D341 ("Viscosity-temperature charts for liquid petroleum products"),
 //!   `log10(log10(nu + 0.7)) = a - b log10(T)`, with `nu` the **kinematic** viscosity in cSt
 //!   and `T` in kelvin. ASTM D341 adds small correction terms to the `0.7` below about
 //!   2 cSt; they are left out, so the law is meant for `nu` above ~2 cSt (every lubricating

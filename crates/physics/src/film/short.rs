@@ -281,7 +281,9 @@ impl Film for ShortBearing {
         let (hf, rot) = half_film(&kin);
         let k = self.force_scale(running);
         let f_arc = Vector2::new(hf.v_a, hf.v_b) * (-0.5 * k * kin.w_norm);
-        Ok(rot * f_arc)
+        let force = rot * f_arc;
+        check_all_finite("short-bearing film force", force.iter())?;
+        Ok(force)
     }
 
     fn force_jacobian(&mut self, state: &FilmState, running: &Running) -> Result<ForceJacobian, PhysicsError> {
@@ -299,6 +301,7 @@ impl Film for ShortBearing {
         let mut jacobian = Matrix2x4::zeros();
         jacobian.fixed_view_mut::<2, 2>(0, 0).copy_from(&d_position);
         jacobian.fixed_view_mut::<2, 2>(0, 2).copy_from(&d_velocity);
+        check_all_finite("short-bearing film force and Jacobian", force_n.iter().chain(jacobian.iter()))?;
         Ok(ForceJacobian { force_n, jacobian })
     }
 
@@ -320,8 +323,19 @@ impl Film for ShortBearing {
         let moments = inverse_film_moments(ab.x, ab.y, kin.eps);
         let g = &self.geometry;
         let scale = density_kg_m3 * g.radius_m() * g.length_m.powi(3) / (12.0 * g.clearance_m);
-        Ok(Some(rot * moments * rot.transpose() * scale))
+        let mass = rot * moments * rot.transpose() * scale;
+        check_all_finite("short-bearing added mass", mass.iter())?;
+        Ok(Some(mass))
     }
+}
+
+/// Errors with [`PhysicsError::NonFinite`] if any value overflowed (possible only within
+/// rounding of the bearing wall or for absurd inputs).
+fn check_all_finite<'a>(what: &str, values: impl Iterator<Item = &'a f64>) -> Result<(), PhysicsError> {
+    for &v in values {
+        PhysicsError::check_finite(what, v)?;
+    }
+    Ok(())
 }
 
 /// `int_0^pi (cos, sin)(cos, sin)^T / (1 - A cos - B sin) dphi`, `eps = |(A, B)| < 1`.
