@@ -13,20 +13,18 @@
 //! the matrix in place, which lets the owner reuse one allocation for every factorisation.
 
 /// A banded symmetric matrix that is factorised in place into its Cholesky factor.
+/// `Default` is the empty 0 x 0 matrix; call [`BandedCholesky::reset`] before use.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct BandedCholesky {
     n: usize,
     bw: usize,
     data: Vec<f64>,
+    /// `1 / L_ii`, filled by the factorisation.
+    inv_diag: Vec<f64>,
     factored: bool,
 }
 
 impl BandedCholesky {
-    /// An empty 0 x 0 matrix; call [`BandedCholesky::reset`] before use.
-    pub(crate) fn new() -> Self {
-        Self::default()
-    }
-
     /// Makes this the zero `n x n` matrix of half-bandwidth `bw`, reusing the allocation.
     pub(crate) fn reset(&mut self, n: usize, bw: usize) {
         self.n = n;
@@ -74,27 +72,27 @@ impl BandedCholesky {
     pub(crate) fn factor(&mut self) -> Result<(), usize> {
         let bw = self.bw;
         let w = bw + 1;
+        self.inv_diag.clear();
+        self.inv_diag.resize(self.n, 0.0);
+        self.factored = false;
         for i in 0..self.n {
+            // Row i stores L_ik at slot k + bw - i; every k in [j0, j) is in both rows i, j.
             let j0 = i.saturating_sub(bw);
-            for j in j0..=i {
-                // s = A_ij - sum_k L_ik L_jk over k in [max(i, j) - bw, j).
-                let k0 = j0.max(j.saturating_sub(bw));
-                let row_i = i * w + bw - i; // data[row_i + k] = L_ik
-                let row_j = j * w + bw - j; // data[row_j + k] = L_jk
-                let mut s = self.data[row_i + j];
-                for k in k0..j {
-                    s -= self.data[row_i + k] * self.data[row_j + k];
-                }
-                if j == i {
-                    if !(s > 0.0 && s.is_finite()) {
-                        self.factored = false;
-                        return Err(i);
-                    }
-                    self.data[row_i + i] = s.sqrt();
-                } else {
-                    self.data[row_i + j] = s / self.data[row_j + j];
-                }
+            let (prev, cur) = self.data.split_at_mut(i * w);
+            let row_i = &mut cur[..w];
+            for j in j0..i {
+                let row_j = &prev[j * w..(j + 1) * w];
+                let dot: f64 = row_i[j0 + bw - i..j + bw - i].iter().zip(&row_j[j0 + bw - j..bw]).map(|(a, b)| a * b).sum();
+                row_i[j + bw - i] = (row_i[j + bw - i] - dot) * self.inv_diag[j];
             }
+            let dot: f64 = row_i[j0 + bw - i..bw].iter().map(|a| a * a).sum();
+            let s = row_i[bw] - dot;
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(i);
+            }
+            let d = s.sqrt();
+            row_i[bw] = d;
+            self.inv_diag[i] = 1.0 / d;
         }
         self.factored = true;
         Ok(())
@@ -110,20 +108,21 @@ impl BandedCholesky {
         let n = self.n.min(rhs.len());
         // Forward: L y = rhs.
         for i in 0..n {
-            let row = i * w + bw - i;
-            let mut s = rhs[i];
-            for (k, r) in rhs.iter().enumerate().take(i).skip(i.saturating_sub(bw)) {
-                s -= self.data[row + k] * r;
-            }
-            rhs[i] = s / self.data[row + i];
+            let j0 = i.saturating_sub(bw);
+            let row = &self.data[i * w..(i + 1) * w];
+            let (done, cur) = rhs.split_at_mut(i);
+            let dot: f64 = row[j0 + bw - i..bw].iter().zip(&done[j0..]).map(|(a, b)| a * b).sum();
+            cur[0] = (cur[0] - dot) * self.inv_diag[i];
         }
         // Backward: L^T x = y, column-oriented so that L is read by rows.
         for i in (0..n).rev() {
-            let row = i * w + bw - i;
-            let xi = rhs[i] / self.data[row + i];
-            rhs[i] = xi;
-            for k in i.saturating_sub(bw)..i {
-                rhs[k] -= self.data[row + k] * xi;
+            let j0 = i.saturating_sub(bw);
+            let row = &self.data[i * w..(i + 1) * w];
+            let (before, cur) = rhs.split_at_mut(i);
+            let xi = cur[0] * self.inv_diag[i];
+            cur[0] = xi;
+            for (r, l) in before[j0..].iter_mut().zip(&row[j0 + bw - i..bw]) {
+                *r -= l * xi;
             }
         }
     }
@@ -158,7 +157,7 @@ mod tests {
             let off: f64 = (0..n).filter(|&j| j != i).map(|j| dense[(i, j)].abs()).sum();
             dense[(i, i)] = off + 0.1 + rng.next().abs();
         }
-        let mut band = BandedCholesky::new();
+        let mut band = BandedCholesky::default();
         band.reset(n, bw);
         for i in 0..n {
             for j in i.saturating_sub(bw)..=i {
@@ -212,7 +211,7 @@ mod tests {
 
     #[test]
     fn reports_the_row_where_definiteness_fails() {
-        let mut band = BandedCholesky::new();
+        let mut band = BandedCholesky::default();
         band.reset(3, 1);
         band.add(0, 0, 1.0);
         band.add(1, 1, 1.0);
