@@ -39,6 +39,34 @@ impl BandedCholesky {
         self.n
     }
 
+    /// Half-bandwidth.
+    pub(crate) fn bandwidth(&self) -> usize {
+        self.bw
+    }
+
+    /// Keeps rows `0..keep` (matrix entries, or factor rows if factorised) and makes rows
+    /// `keep..n` zero, for a matrix of new order `n` and the same bandwidth. With
+    /// [`BandedCholesky::factor_from`]`(keep)` this refactorises only the trailing rows: row `i`
+    /// of `L` depends only on the leading `(i + 1) x (i + 1)` block of the matrix, so when
+    /// only rows `>= keep` change the leading factor rows stay valid.
+    pub(crate) fn truncate_rows(&mut self, keep: usize, n: usize) {
+        let keep = keep.min(self.n).min(n);
+        let w = self.bw + 1;
+        self.n = n;
+        self.data.truncate(keep * w);
+        self.data.resize(n * w, 0.0);
+        self.inv_diag.truncate(keep);
+        self.factored = false;
+    }
+
+    /// Row `i` of the lower band: slot `bw - d` holds column `i - d` (slot `bw`: the diagonal).
+    /// `i` must be below the order.
+    #[inline]
+    pub(crate) fn row_mut(&mut self, i: usize) -> &mut [f64] {
+        let w = self.bw + 1;
+        &mut self.data[i * w..(i + 1) * w]
+    }
+
     #[inline]
     fn slot(&self, i: usize, j: usize) -> usize {
         i * (self.bw + 1) + (j + self.bw - i)
@@ -70,12 +98,20 @@ impl BandedCholesky {
     /// Errors with the failing row when a pivot is not positive and finite: the matrix is not
     /// positive definite (or is contaminated by NaN).
     pub(crate) fn factor(&mut self) -> Result<(), usize> {
+        self.inv_diag.clear();
+        self.factor_from(0)
+    }
+
+    /// Factorises rows `first..n`, the rows before being already factorised (see
+    /// [`BandedCholesky::truncate_rows`]). Errors as [`BandedCholesky::factor`].
+    pub(crate) fn factor_from(&mut self, first: usize) -> Result<(), usize> {
         let bw = self.bw;
         let w = bw + 1;
-        self.inv_diag.clear();
+        let first = first.min(self.inv_diag.len());
+        self.inv_diag.truncate(first);
         self.inv_diag.resize(self.n, 0.0);
         self.factored = false;
-        for i in 0..self.n {
+        for i in first..self.n {
             // Row i stores L_ik at slot k + bw - i; every k in [j0, j) is in both rows i, j.
             let j0 = i.saturating_sub(bw);
             let (prev, cur) = self.data.split_at_mut(i * w);
@@ -184,6 +220,52 @@ mod tests {
             let rec = (&l * l.transpose() - &dense).norm() / dense.norm();
             assert!(rec < 1e-13, "n {n} bw {bw}: L L^T mismatch {rec:e}");
         }
+    }
+
+    #[test]
+    fn refactoring_the_trailing_rows_matches_a_full_factorisation() {
+        let (mut band, dense) = random_banded_spd(60, 5, 21);
+        band.factor().unwrap();
+        // A different matrix of another order that shares the leading 25 x 25 block.
+        let (_, other) = random_banded_spd(70, 5, 22);
+        let mut changed = DMatrix::<f64>::zeros(70, 70);
+        for i in 0..70 {
+            for j in 0..70 {
+                changed[(i, j)] = if i < 25 && j < 25 { dense[(i, j)] } else { other[(i, j)] };
+            }
+        }
+        // Keep diagonal dominance where the blocks meet.
+        for i in 0..70 {
+            let off: f64 = (0..70).filter(|&j| j != i).map(|j| changed[(i, j)].abs()).sum();
+            if i >= 25 {
+                changed[(i, i)] = off + 0.5;
+            }
+        }
+        band.truncate_rows(25, 70);
+        for i in 25..70 {
+            let row = band.row_mut(i);
+            for d in 0..=5.min(i) {
+                row[5 - d] = changed[(i, i - d)];
+            }
+        }
+        band.factor_from(25).unwrap();
+        let mut full = BandedCholesky::default();
+        full.reset(70, 5);
+        for i in 0..70_usize {
+            for j in i.saturating_sub(5)..=i {
+                full.add(i, j, changed[(i, j)]);
+            }
+        }
+        full.factor().unwrap();
+        for i in 0..70_usize {
+            for j in i.saturating_sub(5)..=i {
+                assert!((band.get(i, j) - full.get(i, j)).abs() < 1e-13, "L({i}, {j})");
+            }
+        }
+        let mut x = vec![1.0; 70];
+        band.solve_in_place(&mut x);
+        let residual = &changed * DVector::from_vec(x) - DVector::from_element(70, 1.0);
+        assert!(residual.norm() < 1e-12, "{}", residual.norm());
     }
 
     #[test]

@@ -174,13 +174,13 @@ impl GridSpec {
 }
 
 impl Default for GridSpec {
-    /// The default grid: 36 intervals per pad, 8 across the half length.
+    /// The default grid: 72 intervals per pad, 8 across the half length.
     ///
     /// Chosen by the grid-convergence study in `tests/lund_validation.rs`
     /// (`grid_convergence_study`, run with `--ignored --nocapture`); see that test's doc for
     /// the numbers.
     fn default() -> Self {
-        Self { n_theta: 36, n_z: 8 }
+        Self { n_theta: 72, n_z: 8 }
     }
 }
 
@@ -248,10 +248,11 @@ struct Factorisation {
 }
 
 impl Factorisation {
-    /// Completes the factorisation once `band` is assembled and `wrap` filled.
-    fn factor(&mut self, what: &str) -> Result<(), PhysicsError> {
+    /// Completes the factorisation once `band` is assembled (rows from `first_row` on; the
+    /// ones before are factorised already) and `wrap` filled.
+    fn factor_from(&mut self, first_row: usize, what: &str) -> Result<(), PhysicsError> {
         self.band
-            .factor()
+            .factor_from(first_row)
             .map_err(|row| PhysicsError::Singular { what: format!("{what}: banded Reynolds matrix"), row })?;
         let m = self.wrap.len();
         if m == 0 {
@@ -325,6 +326,11 @@ struct PadSystem {
     free: Vec<bool>,
     /// Position of each node in the reduced (free-node) system, `usize::MAX` if cavitated.
     pos: Vec<usize>,
+    /// Free set of the current factorisation, and whether it belongs to the current state.
+    factored_free: Vec<bool>,
+    factor_valid: bool,
+    /// Diagonal of the full operator per node: the sum of the node's face conductances.
+    diag: Vec<f64>,
     warm: bool,
     last_steps: usize,
     // Workspace.
@@ -365,6 +371,9 @@ impl PadSystem {
             pi: vec![0.0; n],
             free: vec![false; n],
             pos: vec![usize::MAX; n],
+            factored_free: vec![false; n],
+            factor_valid: false,
+            diag: vec![0.0; n],
             warm: false,
             last_steps: 0,
             factorisation: Factorisation::default(),
@@ -414,6 +423,17 @@ impl PadSystem {
             self.h_face[l] = h;
             self.h3_face[l] = h * h * h;
         }
+        let rt = self.dzeta / self.dtheta;
+        let rz = self.dtheta / self.dzeta;
+        for c in 0..self.n_col {
+            let (left, right) = if self.periodic { ((c + self.n_col - 1) % self.n_col, c) } else { (c, c + 1) };
+            let theta = (self.h3_face[left] + self.h3_face[right]) * rt;
+            let axial = self.h3_node[c] * rz;
+            for j in 0..self.n_z {
+                self.diag[c * self.n_z + j] = theta * self.wz[j] + axial * if j == 0 { 1.0 } else { 2.0 };
+            }
+        }
+        self.factor_valid = false;
         for c in 0..self.n_col {
             let f = 6.0 * (w1 * self.sin_node[c] - w2 * self.cos_node[c]);
             for j in 0..self.n_z {
@@ -424,11 +444,28 @@ impl PadSystem {
 
     /// Assembles the matrix of the free (full-film) nodes only, numbered in grid order
     /// (cavitated nodes carry `Pi = 0` and drop out), and factorises it. Numbering in grid
-    /// order keeps every coupling within `n_z` places, so the band never widens.
+    /// order keeps every coupling within `n_z` places, so the half-bandwidth is `n_z`.
+    ///
+    /// Within one state only the free set changes between active-set steps, and row `i` of a
+    /// Cholesky factor depends only on the leading `i + 1` rows of the matrix: so only the rows
+    /// from the first node whose status changed are reassembled and refactorised. On a
+    /// grooved pad the rupture boundary moves downstream, at the end of the numbering, and a
+    /// step costs a few columns instead of a whole factorisation. (Periodic films always
+    /// refactorise fully: the wrap faces couple the first and last columns.)
     fn assemble_and_factor(&mut self, what: &str) -> Result<(), PhysicsError> {
         let nz = self.n_z;
+        let n = self.n();
+        let reuse = self.factor_valid && !self.periodic && self.factorisation.band.bandwidth() == nz;
+        let first_change = if reuse { self.free.iter().zip(&self.factored_free).position(|(a, b)| a != b) } else { Some(0) };
+        let Some(first_change) = first_change else {
+            return Ok(()); // same state, same free set: the factorisation stands
+        };
         let mut n_free = 0;
-        for (pos, &free) in self.pos.iter_mut().zip(&self.free) {
+        let mut first_row = 0;
+        for (k, (pos, &free)) in self.pos.iter_mut().zip(&self.free).enumerate() {
+            if k == first_change {
+                first_row = n_free;
+            }
             *pos = if free {
                 n_free += 1;
                 n_free - 1
@@ -436,64 +473,49 @@ impl PadSystem {
                 usize::MAX
             };
         }
-        // Half-bandwidth of the reduced matrix: the widest circumferential coupling (axial
-        // neighbours are adjacent).
-        let mut bw = 1;
-        for c in 0..self.n_col.saturating_sub(1) {
-            for j in 0..nz {
-                let (p, q) = (self.pos[c * nz + j], self.pos[(c + 1) * nz + j]);
-                if p != usize::MAX && q != usize::MAX {
-                    bw = bw.max(q - p);
-                }
-            }
-        }
         let f = &mut self.factorisation;
-        f.band.reset(n_free, bw);
+        if first_row == 0 {
+            f.band.reset(n_free, nz);
+        } else {
+            f.band.truncate_rows(first_row, n_free);
+        }
         f.wrap.clear();
-        let pos = |k: usize| -> Option<usize> { (self.pos[k] != usize::MAX).then_some(self.pos[k]) };
         let rt = self.dzeta / self.dtheta;
         let rz = self.dtheta / self.dzeta;
-        for l in 0..self.h_face.len() {
-            let (left, right, wrap) = if self.periodic {
-                (Some(l), Some((l + 1) % self.n_col), l + 1 == self.n_col)
-            } else {
-                (l.checked_sub(1), (l < self.n_col).then_some(l), false)
-            };
-            let h3 = self.h3_face[l];
-            for j in 0..nz {
-                let g = h3 * self.wz[j] * rt;
-                let ka = left.and_then(|c| pos(c * nz + j));
-                let kb = right.and_then(|c| pos(c * nz + j));
-                match (ka, kb) {
-                    (Some(p), Some(q)) if wrap => f.wrap.push((p, q, g)),
-                    (Some(p), Some(q)) => {
-                        f.band.add(p, p, g);
-                        f.band.add(q, q, g);
-                        f.band.add(p, q, -g);
-                    }
-                    (Some(p), None) | (None, Some(p)) => f.band.add(p, p, g),
-                    (None, None) => {}
-                }
+        let n_col = self.n_col;
+        for k in first_change..n {
+            let p = self.pos[k];
+            if p == usize::MAX {
+                continue;
             }
-        }
-        for c in 0..self.n_col {
-            let g = self.h3_node[c] * rz;
-            for j in 0..nz {
-                let k = c * nz + j;
-                let ka = pos(k);
-                let kb = if j + 1 < nz { pos(k + 1) } else { None };
-                match (ka, kb) {
-                    (Some(p), Some(q)) => {
-                        f.band.add(p, p, g);
-                        f.band.add(q, q, g);
-                        f.band.add(p, q, -g);
-                    }
-                    (Some(p), None) | (None, Some(p)) => f.band.add(p, p, g),
-                    (None, None) => {}
+            let (c, j) = (k / nz, k % nz);
+            let row = f.band.row_mut(p);
+            let mut diag = self.diag[k];
+            let left_face = if self.periodic { (c + n_col - 1) % n_col } else { c };
+            if c >= 1 {
+                let q = self.pos[k - nz];
+                if q != usize::MAX {
+                    row[nz - (p - q)] = -self.h3_face[left_face] * self.wz[j] * rt;
                 }
+            } else if self.periodic && self.free[(n_col - 1) * nz + j] {
+                // Wrap face to the last column, both ends in the film: Woodbury term.
+                diag -= self.h3_face[left_face] * self.wz[j] * rt;
             }
+            if self.periodic && c + 1 == n_col && self.free[j] {
+                let g = self.h3_face[c] * self.wz[j] * rt;
+                diag -= g;
+                f.wrap.push((p, self.pos[j], g));
+            }
+            if j >= 1 && self.free[k - 1] {
+                row[nz - 1] = -self.h3_node[c] * rz;
+            }
+            row[nz] = diag;
         }
-        f.factor(what)
+        self.factored_free.copy_from_slice(&self.free);
+        self.factor_valid = false;
+        f.factor_from(first_row, what)?;
+        self.factor_valid = true;
+        Ok(())
     }
 
     /// Solves `A_FF x_F = rhs_F` for a full-grid vector in place (entries off the free set are
@@ -1233,7 +1255,10 @@ mod tests {
     /// prints the wall time (no assertion on time: machines differ).
     #[test]
     fn coefficient_set_timing_at_the_zhou_point() {
-        let grids = [GridSpec::default(), GridSpec { n_theta: 24, n_z: 6 }, GridSpec { n_theta: 48, n_z: 12 }, GridSpec { n_theta: 72, n_z: 16 }];
+        let grids: Vec<GridSpec> = match std::env::var("TIMING_GRIDS") {
+            Ok(l) => l.split(',').map(|g| { let v: Vec<usize> = g.split('x').map(|x| x.parse().unwrap()).collect(); GridSpec { n_theta: v[0], n_z: v[1] } }).collect(),
+            Err(_) => vec![GridSpec::default(), GridSpec { n_theta: 24, n_z: 6 }, GridSpec { n_theta: 48, n_z: 12 }, GridSpec { n_theta: 72, n_z: 16 }],
+        };
         for grid in grids {
             let running = Running::from_rpm(1500.0, 0.03);
             let mut times = Vec::new();
