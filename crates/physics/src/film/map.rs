@@ -339,8 +339,7 @@ impl FilmMap {
     /// Whether a journal position (m) lies in the box, where the table answers.
     pub fn covers(&self, x_m: f64, y_m: f64) -> bool {
         let c = self.geometry.clearance_m;
-        let hw = self.spec.half_width;
-        (x_m / c - self.centre_ex).abs() <= hw && (y_m / c - self.centre_ey).abs() <= hw
+        self.grid_position(x_m / c, y_m / c).is_some()
     }
 
     /// The tabulated film, for direct use (its calls are not counted).
@@ -348,18 +347,21 @@ impl FilmMap {
         self.inner.as_mut()
     }
 
+    /// Position in grid-index units, `None` outside the box (or NaN).
+    #[inline]
+    fn grid_position(&self, ex: f64, ey: f64) -> Option<(f64, f64)> {
+        let last = (self.spec.n_position - 1) as f64;
+        let sx = (ex - self.ex_min) / self.d_pos;
+        let sy = (ey - self.ey_min) / self.d_pos;
+        ((0.0..=last).contains(&sx) && (0.0..=last).contains(&sy)).then_some((sx, sy))
+    }
+
     /// Cell indices and local coordinates in [0, 1] of `(ex, ey, alpha)`, `None` outside the box.
     #[inline]
     fn locate(&self, ex: f64, ey: f64, alpha: f64) -> Option<([usize; 3], [f64; 3])> {
         let np = self.spec.n_position;
         let na = self.spec.n_angle;
-        let last = (np - 1) as f64;
-        let sx = (ex - self.ex_min) / self.d_pos;
-        let sy = (ey - self.ey_min) / self.d_pos;
-        // Also false for NaN.
-        if !((0.0..=last).contains(&sx) && (0.0..=last).contains(&sy)) {
-            return None;
-        }
+        let (sx, sy) = self.grid_position(ex, ey)?;
         let a = if alpha < 0.0 { alpha + std::f64::consts::TAU } else { alpha };
         let sa = a / self.d_alpha;
         if !sa.is_finite() {
