@@ -73,14 +73,42 @@
 //! derivatives `O(h^3)`. Each call reads the 8 corners of one cell, 16 numbers each (8 Hermite
 //! quantities x 2 force components, contiguous), from one flat `Vec<f64>`: no allocation.
 //!
-//! `f` is not smooth everywhere: where the cavitation boundary (or, for the pi-film, the edge of
-//! the pressurised half) meets the end of a pad at a groove, the force has a jump in its second
-//! derivative, chiefly along `alpha`. Near such a kink the interpolation error degrades to
-//! `O(h^2)` in force and `O(h)` in the Jacobian over a couple of cells. This sets the angular
-//! resolution. Measured on an exactly integrated grooved pi-film (Zhou bearing, the worst case:
-//! its kinks are sharp), with the defaults, over random states in the box: force error
-//! 1e-4 relative at most (1e-5 rms), Jacobian 0.7 % at most (0.05 % rms), the worst points sitting
-//! next to the kinks. Away from kinks errors are far smaller.
+//! `f` is not smooth everywhere, and two kinds of non-smoothness set the resolution:
+//!
+//! * **Pad-end kinks.** Where the cavitation boundary (or, for the pi-film, the edge of the
+//!   pressurised half) meets the end of a pad at a groove, the force has a jump in its second
+//!   derivative, chiefly along `alpha`. Near such a kink the interpolation error degrades to
+//!   `O(h^2)` in force and `O(h)` in the Jacobian over a couple of cells.
+//! * **Grid roughness of a discrete film.** A Swift-Stieber film solved on a grid is a
+//!   discrete complementarity problem: its pressure is piecewise linear in the right-hand side,
+//!   one piece per set of cavitated nodes. The force is continuous, but the Jacobian jumps each
+//!   time the free boundary crosses a node, so along `alpha` it is a staircase whose period is
+//!   about one circumferential cell of the film's grid (4.4 degrees for the default 36
+//!   intervals per 160 degree pad) and whose steps are of the order of a percent. No smooth
+//!   table can follow the steps: the map's Jacobian follows their mean, and its pointwise
+//!   difference from the inner film's Jacobian cannot fall below the staircase. Worse, an
+//!   angular spacing close to the film's cell aliases the staircase into a slow error (with 96
+//!   angles, 3.75 degrees, the Zhou-point coefficients came out 1.5 % off on the default grid);
+//!   the angular spacing must be well below the film's circumferential cell.
+//!
+//! Measured errors of the default map (relative; "typical" states have velocities up to
+//! `0.1 omega c` per axis, "violent" ones up to `0.5 omega c`, so that `w` points anywhere;
+//! max over seeded random states in a box around the Zhou operating point, 1500 rpm, 5 kN,
+//! unless stated; tests `film::map::tests` and `tests/film_map.rs` print them):
+//!
+//! | inner film | force max (typical / violent) | Jacobian max (typical / violent) | Jacobian rms |
+//! |---|---|---|---|
+//! | Ocvirk pi-film, closed form (no grooves: smooth) | 6e-6 / 6e-6 | 8e-5 / 1.2e-4 | 1.2e-5 |
+//! | grooved pi-film, exact quadrature (sharp pad-end kinks) | 1.6e-5 / 1.9e-5 | 1.9e-3 / 2.3e-3 | 8e-5 |
+//! | the same, box reaching eccentricity 0.9 | 2.9e-4 / 6.0e-4 | 2.7e-3 / 5.6e-3 | 2.7e-4 |
+//! | finite Reynolds, grid 144 x 8 per pad | 6.5e-5 / 1.7e-4 | 8.3e-3 / 8.7e-3 | 1.8e-3 |
+//! | finite Reynolds, default grid 36 x 8 per pad | 4.8e-4 / 1.1e-3 | 2.3e-2 / 3.5e-2 | 5.9e-3 |
+//!
+//! The last row's Jacobian maximum is the grid roughness of that film, not interpolation error:
+//! the film's own Jacobian differs from its own secant over `+-1e-3 c` by up to 1.2e-2 at the
+//! same states (5e-3 on the 144 grid). At the Zhou equilibrium, the map's eight coefficients
+//! match the inner film's within 3e-6 (closed-form pi-film), 2.7e-4 (144 x 8) and 3.0e-3
+//! (36 x 8, where the film's own roughness there is 6e-3), and the eccentricity within 2e-6.
 //!
 //! ## Jacobian
 //!
@@ -140,10 +168,12 @@ pub struct MapSpec {
 
 impl Default for MapSpec {
     /// Half-width 0.15 (17 um on the Zhou bearing: more than the excitation orbits of an
-    /// identification test), 7 x 7 positions (spacing 0.05), 96 angles (3.75 degrees):
-    /// 4704 inner solves. Chosen from the measured errors quoted in the module docs.
+    /// identification test), 5 x 5 positions (spacing 0.075: position is the smooth direction,
+    /// 7 nodes gained nothing measurable), 192 angles (1.875 degrees: below half the default
+    /// finite grid's 4.4 degree cell, see the module docs): 4800 inner solves, about 0.45 s
+    /// with the default finite film (2.2 s on a 144 x 8 grid). Errors in the module docs.
     fn default() -> Self {
-        Self { half_width: 0.15, n_position: 7, n_angle: 96 }
+        Self { half_width: 0.15, n_position: 5, n_angle: 192 }
     }
 }
 
@@ -848,7 +878,7 @@ mod tests {
         // running speed) and violent ones (up to 0.5 omega c: w points anywhere), at the Zhou
         // operating point and in a box that reaches eccentricity 0.9.
         for centre in [CENTRE, (0.25, -0.6)] {
-            for (squeeze, jac_bound) in [(0.1, 1e-2), (0.5, 3e-2)] {
+            for squeeze in [0.1, 0.5] {
                 let e = errors(centre, spec, 2000, squeeze);
                 println!(
                     "grooved pi-film, default spec, centre {centre:?}, velocities up to {squeeze} omega c: \
@@ -856,7 +886,7 @@ mod tests {
                     e.force_max, e.force_rms, e.jac_max, e.jac_rms
                 );
                 assert!(e.force_max < 2e-3 && e.force_rms < 2e-4, "force error over budget");
-                assert!(e.jac_max < jac_bound && e.jac_rms < 1e-3, "Jacobian error over budget");
+                assert!(e.jac_max < 1e-2 && e.jac_rms < 1e-3, "Jacobian error over budget");
             }
         }
     }
@@ -1035,7 +1065,7 @@ mod tests {
     #[ignore = "exploration: error against spec, prints a table"]
     fn explore_specs() {
         for &centre in &[CENTRE, (0.3, -0.45), (0.25, -0.6)] {
-            for &(hw, np, na) in &[(0.15, 5usize, 96usize), (0.15, 5, 128), (0.15, 6, 128), (0.15, 7, 96), (0.15, 7, 128)] {
+            for &(hw, np, na) in &[(0.15, 5usize, 192usize), (0.15, 7, 192), (0.1, 5, 192)] {
                 let spec = MapSpec { half_width: hw, n_position: np, n_angle: na };
                 for squeeze in [0.05, 0.15, 0.5] {
                     let e = errors(centre, spec, 2000, squeeze);
