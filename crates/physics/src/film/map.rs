@@ -39,8 +39,9 @@
 //! (J. F. Booker, "Dynamically loaded journal bearings: mobility method of solution", J. Basic
 //! Eng. 87, 1965) and the impedance method of Childs, Moes & van Leeuwen ("Journal bearing
 //! impedance descriptions for rotordynamic applications", J. Lubr. Technol. 99, 1977), which
-//! tabulate exactly this function (for a plain bearing, where rotational symmetry removes one
-//! more variable). Tabulated bearing-force databases of this kind are the usual way to make long
+//! express the force through exactly this function of the eccentricity and the direction of
+//! the squeeze velocity (for a plain bearing, where rotational symmetry removes one more
+//! variable). Precomputed bearing-force tables of this kind are a common way to make long
 //! nonlinear rotordynamic transients affordable.
 //!
 //! The argument fails, and the map must not be used, when the film has a nonzero supply
