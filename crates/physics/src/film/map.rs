@@ -83,14 +83,17 @@
 //! * **Grid roughness of a discrete film.** A Swift-Stieber film solved on a grid is a
 //!   discrete complementarity problem: its pressure is piecewise linear in the right-hand side,
 //!   one piece per set of cavitated nodes. The force is continuous, but the Jacobian jumps each
-//!   time the free boundary crosses a node, so along `alpha` it is a staircase whose period is
-//!   about one circumferential cell of the film's grid (4.4 degrees for the default 36
-//!   intervals per 160 degree pad) and whose steps are of the order of a percent. No smooth
-//!   table can follow the steps: the map's Jacobian follows their mean, and its pointwise
-//!   difference from the inner film's Jacobian cannot fall below the staircase. Worse, an
-//!   angular spacing close to the film's cell aliases the staircase into a slow error (with 96
-//!   angles, 3.75 degrees, the Zhou-point coefficients came out 1.5 % off on the default grid);
-//!   the angular spacing must be well below the film's circumferential cell.
+//!   time the free boundary crosses a node. Each axial row of the grid ruptures at its own
+//!   place, so along `alpha` the Jacobian is a fine staircase (steps a fraction of one
+//!   circumferential cell apart) of per-mille to percent amplitude. No practical table resolves
+//!   it: the map's Jacobian follows its mean, and the pointwise difference from the inner
+//!   film's Jacobian cannot fall below the staircase. At any one point (an equilibrium, say)
+//!   that difference is a lottery between zero and one or two step heights, which changes with
+//!   the angular spacing but does not shrink with it: on the Zhou point the map's coefficients
+//!   differed from those of a 72 x 8 film by 0.25 % with 128 angles, 0.7 % with 192 and
+//!   0.2-0.4 % with 256 to 384; from a 36 x 8 film by 0.5 % with 128 angles and 1.6 % with 256.
+//!   More angles buy nothing here, so the default takes the fewest that resolve the pad-end
+//!   kinks. The force, being continuous, is matched far below its budget on every grid.
 //!
 //! Measured errors of the default map (relative; "typical" states have velocities up to
 //! `0.1 omega c` per axis, "violent" ones up to `0.5 omega c`, so that `w` points anywhere;
@@ -99,17 +102,18 @@
 //!
 //! | inner film | force max (typical / violent) | Jacobian max (typical / violent) | Jacobian rms |
 //! |---|---|---|---|
-//! | Ocvirk pi-film, closed form (no grooves: smooth) | 6e-6 / 6e-6 | 8e-5 / 1.2e-4 | 1.2e-5 |
-//! | grooved pi-film, exact quadrature (sharp pad-end kinks) | 1.6e-5 / 1.9e-5 | 1.9e-3 / 2.3e-3 | 8e-5 |
-//! | the same, box reaching eccentricity 0.9 | 2.9e-4 / 6.0e-4 | 2.7e-3 / 5.6e-3 | 2.7e-4 |
-//! | finite Reynolds, grid 144 x 8 per pad | 6.5e-5 / 1.7e-4 | 8.3e-3 / 8.7e-3 | 1.8e-3 |
-//! | finite Reynolds, default grid 36 x 8 per pad | 4.8e-4 / 1.1e-3 | 2.3e-2 / 3.5e-2 | 5.9e-3 |
+//! | Ocvirk pi-film, closed form (no grooves: smooth) | 6e-6 / 6e-6 | 8e-5 / 1.1e-4 | 1.2e-5 |
+//! | grooved pi-film, exact quadrature (sharp pad-end kinks) | 2.2e-5 / 3.6e-5 | 2.4e-3 / 2.8e-3 | 9e-5 |
+//! | the same, box reaching eccentricity 0.9 | 2.9e-4 / 5.9e-4 | 2.7e-3 / 5.6e-3 | 2.7e-4 |
+//! | finite Reynolds, grid 144 x 8 per pad | 9.6e-5 / 1.7e-4 | 8.2e-3 / 8.3e-3 | 1.9e-3 |
+//! | finite Reynolds, default grid 72 x 8 per pad | 2.0e-4 / 3.3e-4 | 1.3e-2 / 1.6e-2 | 3.3e-3 |
+//! | finite Reynolds, grid 36 x 8 per pad (typical states only) | 7.8e-4 / - | 2.9e-2 / - | - |
 //!
-//! The last row's Jacobian maximum is the grid roughness of that film, not interpolation error:
-//! the film's own Jacobian differs from its own secant over `+-1e-3 c` by up to 1.2e-2 at the
-//! same states (5e-3 on the 144 grid). At the Zhou equilibrium, the map's eight coefficients
-//! match the inner film's within 3e-6 (closed-form pi-film), 2.7e-4 (144 x 8) and 3.0e-3
-//! (36 x 8, where the film's own roughness there is 6e-3), and the eccentricity within 2e-6.
+//! The finite films' Jacobian maxima are set by their grid roughness, not by interpolation: the
+//! film's own Jacobian differs from its own secant over `+-1e-3 c` by up to 7e-3 (72 x 8) and
+//! 5e-3 (144 x 8) at the same states. At the Zhou equilibrium the eccentricity agrees within
+//! 2e-6 and the map's eight coefficients agree with the inner film's within 8e-6 (closed-form
+//! pi-film), 2.5e-3 (72 x 8, whose own roughness there is 2.1e-3) and 3.3e-3 (144 x 8, 1.7e-3).
 //!
 //! ## Jacobian
 //!
@@ -170,11 +174,11 @@ pub struct MapSpec {
 impl Default for MapSpec {
     /// Half-width 0.15 (17 um on the Zhou bearing: more than the excitation orbits of an
     /// identification test), 5 x 5 positions (spacing 0.075: position is the smooth direction,
-    /// 7 nodes gained nothing measurable), 192 angles (1.875 degrees: below half the default
-    /// finite grid's 4.4 degree cell, see the module docs): 4800 inner solves, about 0.45 s
-    /// with the default finite film (2.2 s on a 144 x 8 grid). Errors in the module docs.
+    /// 7 nodes gained nothing measurable), 128 angles (2.8 degrees: enough for the pad-end
+    /// kinks; more do not help against a discrete film's roughness, see the module docs):
+    /// 3200 inner solves, about 0.5 s with the default finite film (1 s on a 144 x 8 grid).
     fn default() -> Self {
-        Self { half_width: 0.15, n_position: 5, n_angle: 192 }
+        Self { half_width: 0.15, n_position: 5, n_angle: 128 }
     }
 }
 
