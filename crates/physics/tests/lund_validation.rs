@@ -6,7 +6,8 @@
 //! Run `cargo test -p oilfilm-physics --test lund_validation -- --nocapture` to see the table.
 //!
 //! Tolerances: eccentricity within 0.01, attitude within 1 degree, every coefficient within 5 %.
-//! The tables (tests/data, copied from shared/reference with their headers) print
+//! The tables (embedded in `oilfilm_physics::validation`, copied from shared/reference with
+//! their headers) print
 //! coefficients to two decimals, so a coefficient smaller than 0.2 in magnitude carries a
 //! rounding error of up to 0.005, several percent of itself; for those alone the tolerance is
 //! `max(5 % of |ref|, 0.005)` (half a unit of the last printed digit).
@@ -21,47 +22,28 @@
 //! (the 0.013 offset plus the default grid's +-0.01 free-boundary noise on Kyx); it is not
 //! counted as agreement.
 
-use std::f64::consts::PI;
-use std::path::PathBuf;
-
-use nalgebra::Vector2;
-use oilfilm_physics::dimensionless::{lund, to_load_frame};
 use oilfilm_physics::film::finite::{FiniteBearing, GridSpec};
-use oilfilm_physics::film::Running;
-use oilfilm_physics::geometry::{BearingGeometry, BearingKind};
-use oilfilm_physics::operating_point::{solve, EquilibriumOptions};
+use oilfilm_physics::validation::{self, RowComparison, TableRow};
 
-/// One row of a Lund & Thomsen table.
+/// One row of a Lund & Thomsen table, with its table's L/D.
 #[derive(Debug, Clone, Copy)]
 struct Row {
     slenderness: f64,
     sommerfeld: f64,
     eps: f64,
     attitude_deg: f64,
-    /// Kxx, Kxy, Kyx, Kyy, Bxx, Bxy (= Byx), Byy in the load frame.
-    coefficients: [f64; 7],
+    table: TableRow,
 }
 
-const NAMES: [&str; 8] = ["Kxx", "Kxy", "Kyx", "Kyy", "Bxx", "Bxy", "Byx", "Byy"];
-
-fn read_table(file: &str, slenderness: f64) -> Vec<Row> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(file);
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
-    let mut lines = text.lines().filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty());
-    let header = lines.next().expect("table has a header line");
-    assert_eq!(header.trim(), "S,eps,attitude_deg,Kxx,Kxy,Kyx,Kyy,Bxx,Bxy,Byy", "unexpected columns in {file}");
-    lines
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().expect("numeric cell")).collect();
-            assert_eq!(v.len(), 10, "row `{l}` of {file}");
-            Row { slenderness, sommerfeld: v[0], eps: v[1], attitude_deg: v[2], coefficients: [v[3], v[4], v[5], v[6], v[7], v[8], v[9]] }
-        })
-        .collect()
-}
+const NAMES: [&str; 8] = RowComparison::COEFFICIENT_NAMES;
 
 fn all_rows() -> Vec<Row> {
-    let mut rows = read_table("lund-thomsen-1978-ld0.5.csv", 0.5);
-    rows.extend(read_table("lund-thomsen-1978-ld1.0.csv", 1.0));
+    let rows: Vec<Row> = validation::lund_thomsen_1978()
+        .iter()
+        .flat_map(|t| {
+            t.rows.iter().map(|r| Row { slenderness: t.slenderness, sommerfeld: r.sommerfeld, eps: r.eccentricity, attitude_deg: r.attitude_deg, table: *r })
+        })
+        .collect();
     assert_eq!(rows.len(), 10);
     rows
 }
@@ -75,50 +57,22 @@ struct Computed {
 }
 
 fn compute(row: &Row, grid: GridSpec) -> Computed {
-    let diameter_m = 0.1;
-    let geometry = BearingGeometry {
-        diameter_m,
-        length_m: row.slenderness * diameter_m,
-        clearance_m: 1e-4,
-        kind: BearingKind::TwoAxialGroove { groove_arc_deg: 20.0, groove_centre_deg: 0.0 },
-    };
-    let running = Running { omega_rad_s: 200.0, viscosity_pa_s: 0.02 };
-    // S = mu N L D / W (R/c)^2  =>  W = mu N L D (R/c)^2 / S.
-    let r_over_c = geometry.radius_m() / geometry.clearance_m;
-    let n_rev_s = running.omega_rad_s / (2.0 * PI);
-    let w = running.viscosity_pa_s * n_rev_s * geometry.length_m * geometry.diameter_m * r_over_c * r_over_c / row.sommerfeld;
+    let geometry = validation::table_geometry(row.slenderness);
     let mut film = FiniteBearing::new(geometry, grid).expect("valid bearing and grid");
-    let op = solve(&mut film, &running, Vector2::new(0.0, -w), &EquilibriumOptions::default())
-        .unwrap_or_else(|e| panic!("equilibrium at S = {}: {e}", row.sommerfeld));
-    assert!((op.sommerfeld - row.sommerfeld).abs() < 1e-9 * row.sommerfeld);
-    let d = lund(&op.coefficients.stiffness_n_m, &op.coefficients.damping_n_s_m, &geometry, &running, w);
-    let k = to_load_frame(&d.stiffness);
-    let b = to_load_frame(&d.damping);
-    Computed {
-        eps: op.eccentricity,
-        attitude_deg: op.attitude_deg,
-        values: [k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], b[(0, 0)], b[(0, 1)], b[(1, 0)], b[(1, 1)]],
-    }
+    let c = validation::compare_row(&mut film, &row.table).unwrap_or_else(|e| panic!("equilibrium at S = {}: {e}", row.sommerfeld));
+    Computed { eps: c.eccentricity, attitude_deg: c.attitude_deg, values: c.values() }
 }
 
-/// Reference value of coefficient `i` (0..8) of a row: Byx is the table's Bxy.
+/// Reference value of coefficient `i` (0..8) of a row (Byx is the table's Bxy).
 fn reference(row: &Row, i: usize) -> f64 {
-    match i {
-        0..=5 => row.coefficients[i],
-        6 => row.coefficients[5],
-        _ => row.coefficients[6],
-    }
+    let (k, b) = (&row.table.stiffness, &row.table.damping);
+    [k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], b[(0, 0)], b[(0, 1)], b[(1, 0)], b[(1, 1)]][i]
 }
 
 /// Tolerance on coefficient `reference`: 5 %, or half a unit of the table's last printed
-/// digit (0.005) for coefficients below 0.2 in magnitude, whose two-decimal rounding alone is
-/// several percent.
+/// digit (0.005) for coefficients below 0.2 in magnitude.
 fn tolerance(reference: f64) -> f64 {
-    if reference.abs() < 0.2 {
-        (0.05 * reference.abs()).max(0.005)
-    } else {
-        0.05 * reference.abs()
-    }
+    RowComparison::tolerance(reference, 0.05)
 }
 
 /// Table entries the converged model does not reproduce within tolerance: (L/D, S,
