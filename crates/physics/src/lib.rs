@@ -29,6 +29,8 @@
 //! * [`rig`]: the floating housing, exciters, bellows, gravity, time integration.
 //! * [`daq`]: probes, amplifiers, multiplexed 16-bit sampling, calibration.
 //! * [`effects`]: injectable effects, each off by default and set by one magnitude.
+//! * [`simulation`]: rig and DAQ stepped together into a seeded, reproducible record.
+//! * [`validation`]: published coefficient tables and comparison against them.
 //! * [`config`]: the typed rig configuration (TOML, `deny_unknown_fields`) and its validation.
 
 pub mod config;
@@ -41,6 +43,8 @@ pub mod geometry;
 pub mod oil;
 pub mod operating_point;
 pub mod rig;
+pub mod simulation;
+pub mod validation;
 
 pub use error::PhysicsError;
 
