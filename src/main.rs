@@ -1,1 +1,140 @@
-fn main() {}
+//! `oilfilm`: the command-line shell over the physics and identification cores.
+//!
+//! Thin by design: it parses arguments, reads files, calls the core and prints. All physics
+//! lives in `oilfilm-physics`.
+
+mod bench;
+mod report;
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use oilfilm_physics::config::RigConfig;
+
+/// Journal-bearing oil-film coefficients on a (simulated or real) test rig.
+///
+/// Frame everywhere: x horizontal, y vertical up, journal turning from +x to +y; coefficients
+/// in Lund's convention dF_on_journal = -(K dr + C dr'), SI units unless a column says otherwise.
+#[derive(Debug, Parser)]
+#[command(name = "oilfilm", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the rig: operating point, film coefficients, and a simulated two-tone record
+    /// through the multiplexed DAQ chain.
+    Rig(RigArgs),
+    /// The film's static equilibrium and linear coefficients at an operating point.
+    Coefficients(CoefficientArgs),
+    /// Benchmarks that print a table (film coefficient set, rig simulation speed).
+    Bench(bench::BenchArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RigSource {
+    /// Rig configuration file (TOML). Default: the built-in Zhou et al. (2004) rig.
+    #[arg(long, value_name = "FILE")]
+    rig: Option<PathBuf>,
+}
+
+impl RigSource {
+    fn load(&self) -> Result<RigConfig> {
+        match &self.rig {
+            None => Ok(RigConfig::zhou2004()?),
+            Some(path) => {
+                let text = std::fs::read_to_string(path).with_context(|| format!("cannot read rig file {}", path.display()))?;
+                Ok(RigConfig::from_toml_str(&text, &path.display().to_string())?)
+            }
+        }
+    }
+}
+
+#[derive(Debug, clap::Args)]
+struct RigArgs {
+    #[command(flatten)]
+    source: RigSource,
+    /// Seconds of record to simulate.
+    #[arg(long, default_value_t = 2.0)]
+    seconds: f64,
+    /// Exciter amplitude, N (exciter 1 at 23 Hz, exciter 2 at 37 Hz).
+    #[arg(long, default_value_t = 100.0)]
+    amplitude_n: f64,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct CoefficientArgs {
+    #[command(flatten)]
+    source: RigSource,
+    /// Shaft speed, rpm (default: the rig file's operating point).
+    #[arg(long)]
+    speed_rpm: Option<f64>,
+    /// Static load carried by the film, N.
+    #[arg(long)]
+    load_n: Option<f64>,
+    /// Bearing temperature, degrees C (sets the viscosity through the oil law).
+    #[arg(long, conflicts_with = "viscosity_pa_s")]
+    temperature_c: Option<f64>,
+    /// Oil viscosity, Pa s (overrides the oil law).
+    #[arg(long)]
+    viscosity_pa_s: Option<f64>,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Rig(args) => run_rig(&args),
+        Command::Coefficients(args) => run_coefficients(&args),
+        Command::Bench(args) => bench::run(&args),
+    }
+}
+
+fn run_coefficients(args: &CoefficientArgs) -> Result<()> {
+    let mut config = args.source.load()?;
+    if let Some(v) = args.speed_rpm {
+        config.operating.speed_rpm = v;
+    }
+    if let Some(v) = args.load_n {
+        config.operating.bearing_load_n = v;
+    }
+    if let Some(v) = args.temperature_c {
+        config.operating.bearing_temperature_c = v;
+    }
+    config.validate()?;
+    let mut running = config.running()?;
+    if let Some(mu) = args.viscosity_pa_s {
+        anyhow::ensure!(mu.is_finite() && mu > 0.0, "--viscosity-pa-s must be positive, got {mu}");
+        running.viscosity_pa_s = mu;
+    }
+    let point = report::operating_point(&config, &running)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&point)?);
+    } else {
+        report::print_operating_point(&point);
+    }
+    Ok(())
+}
+
+fn run_rig(args: &RigArgs) -> Result<()> {
+    anyhow::ensure!(args.seconds.is_finite() && args.seconds > 0.0, "--seconds must be positive, got {}", args.seconds);
+    let config = args.source.load()?;
+    let running = config.running()?;
+    let point = report::operating_point(&config, &running)?;
+    let record = report::simulate_two_tone(&config, args.seconds, args.amplitude_n)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "operating_point": point, "record": record }))?);
+    } else {
+        report::print_operating_point(&point);
+        report::print_record(&record);
+    }
+    Ok(())
+}

@@ -1,0 +1,154 @@
+//! `oilfilm bench`: benchmarks that print a table. Wall-clock numbers vary with the machine;
+//! the ratios measured in one run (speed-up over a reference, multiple of real time) are the
+//! numbers to compare between runs.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use nalgebra::Vector2;
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::film::finite::{FiniteBearing, GridSpec};
+use oilfilm_physics::film::{FilmModelConfig, Running};
+use oilfilm_physics::operating_point::{self, EquilibriumOptions};
+use oilfilm_physics::rig::RigInput;
+use oilfilm_physics::simulation::SimulatedRig;
+use oilfilm_physics::validation;
+
+/// ROS 3.1's time for one coefficient set, s (the measurement of the open peer).
+const ROSS_COEFFICIENT_SET_S: f64 = 0.06;
+
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    what: BenchWhat,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum BenchWhat {
+    /// Film coefficient set at the Zhou point and rig simulation speed.
+    Physics {
+        /// Repeats of the coefficient set (the median is reported).
+        #[arg(long, default_value_t = 30)]
+        repeats: usize,
+        /// Simulated seconds for each rig-speed row (the direct finite film runs a tenth).
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+    },
+}
+
+pub fn run(args: &BenchArgs) -> Result<()> {
+    match args.what {
+        BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn physics(repeats: usize, seconds: f64) -> Result<()> {
+    anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "--seconds must be positive");
+    let base = RigConfig::zhou2004()?;
+    let FilmModelConfig::Finite { n_theta, n_z, .. } = base.film else {
+        anyhow::bail!("the built-in rig is expected to use the finite-length film");
+    };
+    let grid = GridSpec { n_theta, n_z };
+    let running = Running::from_rpm(1500.0, 0.03);
+    let load = Vector2::new(0.0, -5000.0);
+
+    // 1. One coefficient set from a cold start (new solver, no warm start), Zhou point.
+    let mut times = Vec::with_capacity(repeats);
+    let mut last = None;
+    for _ in 0..repeats {
+        let started = Instant::now();
+        let mut film = FiniteBearing::new(base.bearing, grid)?;
+        let op = operating_point::solve(&mut film, &running, load, &EquilibriumOptions::default())?;
+        times.push(started.elapsed().as_secs_f64());
+        last = Some(op);
+    }
+    let set_s = median(times);
+    let op = last.ok_or_else(|| anyhow::anyhow!("no repeat ran"))?;
+
+    // 2. The same grid against every row of Lund & Thomsen.
+    let mut lund_rows = Vec::new();
+    for table in validation::lund_thomsen_1978() {
+        let mut film = FiniteBearing::new(validation::table_geometry(table.slenderness), grid)?;
+        for row in validation::compare(&mut film, &table)? {
+            lund_rows.push((table.slenderness, row));
+        }
+    }
+    let max_coef = lund_rows.iter().flat_map(|(_, r)| r.coefficient_errors()).map(f64::abs).fold(0.0, f64::max);
+    let max_eps = lund_rows.iter().map(|(_, r)| (r.eccentricity - r.reference.eccentricity).abs()).fold(0.0, f64::max);
+    let max_att = lund_rows.iter().map(|(_, r)| (r.attitude_deg - r.reference.attitude_deg).abs()).fold(0.0, f64::max);
+    // Entries outside max(5 %, 0.005 for |ref| < 0.2): named, not hidden.
+    let outside: Vec<String> = lund_rows
+        .iter()
+        .flat_map(|(ld, r)| {
+            let (v, t) = (r.values(), r.reference_values());
+            (0..8)
+                .filter(move |&i| (v[i] - t[i]).abs() > validation::RowComparison::tolerance(t[i], 0.05))
+                .map(move |i| format!("{} at L/D {ld}, S {}: {:.4} vs {}", validation::RowComparison::COEFFICIENT_NAMES[i], r.reference.sommerfeld, v[i], t[i]))
+        })
+        .collect();
+
+    // 3. Rig simulation speed at 5 kHz (rig + DAQ chain), two-tone excitation.
+    let mut rig_rows = Vec::new();
+    let variants: [(&str, FilmModelConfig, f64); 3] = [
+        ("short-bearing film", FilmModelConfig::Short, seconds),
+        ("finite film, tabulated", FilmModelConfig::Finite { n_theta, n_z, tabulate: true }, seconds),
+        ("finite film, direct solve", FilmModelConfig::Finite { n_theta, n_z, tabulate: false }, (seconds / 10.0).max(0.05)),
+    ];
+    for (label, film, secs) in variants {
+        let mut config = base.clone();
+        config.film = film;
+        let built = Instant::now();
+        let mut sim = SimulatedRig::new(&config, 0.0)?;
+        let build_s = built.elapsed().as_secs_f64();
+        let period = sim.period_s();
+        let n = (secs / period).round() as usize;
+        let started = Instant::now();
+        for i in 1..=n {
+            let t = i as f64 * period;
+            let w = 2.0 * std::f64::consts::PI;
+            let input = RigInput { exciter_n: [100.0 * (w * 23.0 * t).sin(), 100.0 * (w * 37.0 * t).sin()] };
+            sim.step(&input, t)?;
+        }
+        let wall = started.elapsed().as_secs_f64();
+        rig_rows.push((label, secs, wall, build_s));
+    }
+
+    println!("oilfilm bench physics (one core; wall-clock, median of {repeats} for the coefficient set)");
+    println!();
+    println!("| measurement | value |");
+    println!("|---|---|");
+    println!("| grid (per pad: n_theta x n_z half-length) | {n_theta} x {n_z} |");
+    println!("| coefficient set, Zhou point (1500 rpm, 5 kN, 0.03 Pa s), cold start | {:.3} ms |", set_s * 1e3);
+    println!("| ... eccentricity, attitude | {:.4}, {:.2} deg |", op.eccentricity, op.attitude_deg);
+    println!("| speed-up over ROSS 3.1 (0.06 s per set) | {:.0}x (target >= 10x) |", ROSS_COEFFICIENT_SET_S / set_s);
+    println!(
+        "| Lund & Thomsen 1978, 80 coefficients: outside 5 % (or 0.005 below 0.2) | {} of 80{} |",
+        outside.len(),
+        if outside.is_empty() { String::new() } else { format!(": {}", outside.join("; ")) }
+    );
+    println!("| ... largest relative error of any coefficient | {:.2} % |", 100.0 * max_coef);
+    println!("| ... max eccentricity error / attitude error | {max_eps:.4} / {max_att:.2} deg |");
+    for (label, secs, wall, build) in &rig_rows {
+        println!("| rig + DAQ at 5 kHz, {label} | {:.1}x real time ({secs} s simulated in {:.3} s; set-up {:.3} s) |", secs / wall, wall, build);
+    }
+    println!();
+    println!("Lund rows (load frame): L/D, S, eps err, attitude err, worst coefficient error");
+    for (ld, r) in &lund_rows {
+        let errs = r.coefficient_errors();
+        let (k, e) = errs.iter().enumerate().map(|(k, e)| (k, e.abs())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+        println!(
+            "  {ld:.1} {:>6.3} {:>+8.4} {:>+7.2} deg  {} {:+.2} %",
+            r.reference.sommerfeld,
+            r.eccentricity - r.reference.eccentricity,
+            r.attitude_deg - r.reference.attitude_deg,
+            validation::RowComparison::COEFFICIENT_NAMES[k],
+            100.0 * e * errs[k].signum()
+        );
+    }
+    Ok(())
+}
