@@ -86,6 +86,16 @@ struct Node {
     input: RigInput,
 }
 
+/// The right-hand side of the equations of motion at one state.
+struct Derivative {
+    /// d/dt of (X, X').
+    rate: Vector4<f64>,
+    /// Its Jacobian with respect to (X, X'), when asked for.
+    jacobian: Option<Matrix4<f64>>,
+    /// The film force as the journal feels it, including any added-mass reaction.
+    film_on_journal: Vector2<f64>,
+}
+
 /// Rig parameters resolved from the configuration.
 #[derive(Debug, Clone)]
 struct Params {
@@ -247,7 +257,7 @@ impl Rig {
     }
 
     /// Time derivative of `(X, X')` and, if asked, its Jacobian.
-    fn rhs(&mut self, t: f64, y: &Vector4<f64>, input: &RigInput, jacobian: bool) -> Result<(Vector4<f64>, Option<Matrix4<f64>>, Vector2<f64>), PhysicsError> {
+    fn rhs(&mut self, t: f64, y: &Vector4<f64>, input: &RigInput, jacobian: bool) -> Result<Derivative, PhysicsError> {
         let p = &self.params;
         let x = Vector2::new(y[0], y[1]);
         let v = Vector2::new(y[2], y[3]);
@@ -287,7 +297,7 @@ impl Rig {
         });
         // The film force as the journal feels it, including the added-mass reaction.
         let film_on_journal = film_force + (accel - jdd) * p.added_mass_kg;
-        Ok((f, jac, film_on_journal))
+        Ok(Derivative { rate: f, jacobian: jac, film_on_journal })
     }
 
     /// Advances the rig to `stamp_s` with exciter forces `input` acting at `stamp_s` (linear
@@ -310,13 +320,14 @@ impl Rig {
             let in0 = lerp_input(&start.input, input, (t0 - start.t_s) / (stamp_s - start.t_s));
             let in1 = lerp_input(&start.input, input, (t1 - start.t_s) / (stamp_s - start.t_s));
             let y0 = Vector4::new(node.x.x, node.x.y, node.v.x, node.v.y);
-            let (f0, jac, _) = self.rhs(t0, &y0, &in0, true)?;
+            let d0 = self.rhs(t0, &y0, &in0, true)?;
+            let f0 = d0.rate;
             // `rhs` asked with jacobian = true always returns Some.
-            let jac = jac.unwrap_or_else(Matrix4::zeros);
+            let jac = d0.jacobian.unwrap_or_else(Matrix4::zeros);
             let w = Matrix4::identity() - jac * (gamma * h);
             let lu = w.lu();
             let k1 = lu.solve(&f0).ok_or_else(|| PhysicsError::Singular { what: "rig Rosenbrock stage matrix".into(), row: 0 })?;
-            let (f1, _, _) = self.rhs(t1, &(y0 + k1 * h), &in1, false)?;
+            let f1 = self.rhs(t1, &(y0 + k1 * h), &in1, false)?.rate;
             let k2 = lu.solve(&(f1 - k1 * 2.0)).ok_or_else(|| PhysicsError::Singular { what: "rig Rosenbrock stage matrix".into(), row: 0 })?;
             let y1 = y0 + (k1 * 1.5 + k2 * 0.5) * h;
             for i in 0..4 {
@@ -333,7 +344,7 @@ impl Rig {
 
     fn sample_at_node(&mut self, node: &Node) -> Result<RigSample, PhysicsError> {
         let y = Vector4::new(node.x.x, node.x.y, node.v.x, node.v.y);
-        let (_, _, film_force_n) = self.rhs(node.t_s, &y, &node.input, false)?;
+        let film_force_n = self.rhs(node.t_s, &y, &node.input, false)?.film_on_journal;
         let (j, jd, _) = Self::journal_at(&self.params, node.t_s);
         let running = self.running_at(node.t_s)?;
         Ok(RigSample {

@@ -105,10 +105,10 @@ fn transfer_error(config: &RigConfig, rig: &mut Rig, tones: &Tones, mass_for_mod
     let y: Vec<f64> = samples.iter().map(|s| s.housing_m.y).collect();
     let d = dirs(config);
     let mut worst: f64 = 0.0;
-    for e in 0..2 {
+    for (e, dir) in d.iter().enumerate() {
         let f = tones.freq[e];
         let sim = [phasor(&t, &x, f), phasor(&t, &y, f)];
-        let lin = linear_response(&k, &c, mass_for_model, d[e], f, tones.amp[e]);
+        let lin = linear_response(&k, &c, mass_for_model, *dir, f, tones.amp[e]);
         let err = ((sim[0] - lin[0]).norm_sqr() + (sim[1] - lin[1]).norm_sqr()).sqrt() / (lin[0].norm_sqr() + lin[1].norm_sqr()).sqrt();
         println!(
             "  exciter {} at {f:5.1} Hz: |X| sim {:.4e} m, linear {:.4e} m, error {:.3}%",
@@ -174,8 +174,8 @@ fn fit_kc(samples: &[RigSample]) -> (Matrix2<f64>, Matrix2<f64>, f64) {
     let mut b = nalgebra::DMatrix::<f64>::zeros(rows, 2);
     let mut dmax: f64 = 0.0;
     for i in 0..rows {
-        for j in 0..4 {
-            a[(i, j)] = cols[j][i];
+        for (j, col) in cols.iter().enumerate() {
+            a[(i, j)] = col[i];
         }
         b[(i, 0)] = -fx[i];
         b[(i, 1)] = -fy[i];
@@ -183,8 +183,7 @@ fn fit_kc(samples: &[RigSample]) -> (Matrix2<f64>, Matrix2<f64>, f64) {
     }
     // Scale columns for conditioning.
     let scale: Vec<f64> = (0..4).map(|j| a.column(j).norm()).collect();
-    for j in 0..4 {
-        let s = scale[j];
+    for (j, s) in scale.iter().enumerate() {
         a.column_mut(j).scale_mut(1.0 / s);
     }
     let sol = a.svd(true, true).solve(&b, 1e-12).expect("svd solve");
