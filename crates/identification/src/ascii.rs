@@ -29,9 +29,10 @@
 //! * **Blank lines** and **comment lines** (first non-blank characters `##`) are ignored
 //!   anywhere after the first line.
 //! * **Numbers** are decimal floating point as printed by C `%g`/`%.17g`, MATLAB, Python
-//!   `repr` or Rust: `5000`, `-8.1e-05`, `1E-5`, `.5`, `+3`. `nan`, `inf` and values that
-//!   overflow to infinity are refused. Write 17 significant digits (or a shortest
-//!   round-trip form) if the values must come back bit for bit.
+//!   `repr` or Rust: `5000`, `-8.1e-05`, `1E-5`, `.5`, `+3`. `nan`, `inf`, values that
+//!   overflow to infinity and Fortran's `D` exponent (write `E`) are refused. Write 17
+//!   significant digits (or a shortest round-trip form) if the values must come back bit for
+//!   bit.
 //! * Errors give 1-based line and column numbers; columns count characters; column 0 means
 //!   the whole line is at fault.
 //!
@@ -47,7 +48,7 @@
 //!
 //! | key | required | value |
 //! | --- | --- | --- |
-//! | `rig` | yes | name or path of the rig configuration the record belongs to (the rest of the line, trimmed, non-empty). With `units: volts` its DAQ calibration converts the values. |
+//! | `rig` | yes | name or path of the rig configuration the record belongs to: the rest of the line without the blanks at its ends, non-empty, no control characters. With `units: volts` its DAQ calibration converts the values. |
 //! | `sample_rate_hz` | yes | scan rate, Hz, finite and > 0 (Zhou: 5000) |
 //! | `channel_interval_s` | yes | time between the conversions of two successive channels of one scan by the multiplexer, s, >= 0 (0 for simultaneous sampling; Zhou's card at 100 kHz: 1e-5). The channel in position `p` of the column line (0-based) is converted `p * channel_interval_s` after the scan starts; `(channels - 1) * channel_interval_s` must be shorter than the scan period `1 / sample_rate_hz`. |
 //! | `channel_offsets_s` | no | for a DAQ that is not uniformly multiplexed: one offset per channel, in column-line order, blank-separated, each >= 0 and < `1 / sample_rate_hz`. Replaces `p * channel_interval_s` (which is then not checked against the scan period). |
@@ -258,6 +259,11 @@ impl Record {
     /// record) of the channel at `channel` (position in `header.channels`) was sampled:
     /// `start_time_s + scan_index / sample_rate_hz + offset`. Rows past the end continue the
     /// consecutive scan indices; NaN for an empty record or a channel out of range.
+    ///
+    /// With a large `start_time_s` (seconds since the epoch, ~1.7e9) an `f64` resolves only
+    /// about 0.2 µs, a few percent of a 10 µs multiplex offset: to correct for the
+    /// multiplexing, use `scan_index / sample_rate_hz` and [`Header::channel_offset_s`] relative
+    /// to the start rather than differences of absolute times.
     pub fn time_of(&self, scan: usize, channel: usize) -> f64 {
         let Some(offset) = self.header.channel_offset_s(channel) else {
             return f64::NAN;
@@ -274,11 +280,15 @@ impl Record {
 // ---------------------------------------------------------------------------------------------
 // Checks shared by the reader and the writer.
 
+/// The rig value as the reader leaves it: non-empty, no blank (space, tab) at either end, no
+/// control character (tab, CR, LF, ...), so that writing it and reading it back changes nothing.
 fn check_rig(rig: &str) -> Result<(), String> {
-    if rig.trim().is_empty() {
+    if rig.is_empty() {
         Err("the rig name must not be empty".into())
-    } else if rig.trim() != rig || rig.contains(['\n', '\r']) {
-        Err("the rig name must not start or end with blanks nor contain a line break".into())
+    } else if rig.trim_matches([' ', '\t']) != rig {
+        Err("the rig name must not start or end with a blank".into())
+    } else if let Some(c) = rig.chars().find(|c| c.is_control()) {
+        Err(format!("the rig name must not contain control characters (found {c:?})"))
     } else {
         Ok(())
     }
@@ -721,7 +731,11 @@ fn parse_header(
         check(x).map_err(|m| fail(e.line, e.column, m))?;
         Ok(x)
     };
-    let rig = get("rig")?.value.to_string();
+    let rig = {
+        let e = get("rig")?;
+        check_rig(e.value).map_err(|m| fail(e.line, e.column, m))?;
+        e.value.to_string()
+    };
     let sample_rate_hz = number("sample_rate_hz", check_sample_rate)?;
     let channel_interval_s = number("channel_interval_s", check_interval)?;
     let start_time_s = number("start_time_s", |x| {
