@@ -630,6 +630,32 @@ fn plans_round_trip_through_toml_and_unknown_keys_are_refused() {
 
 #[test]
 fn excessive_multisine_lengths_are_refused_not_attempted() {
+    // The longest allowed multisine validates, and quickly.
+    let period_s = MAX_HARMONIC as f64 / 80.0;
+    let longest = ExcitationPlan::multisine([0.0, 80.0], period_s, 400.0);
+    let started = std::time::Instant::now();
+    longest.validate(&paper()).expect("the longest multisine is allowed");
+    let lines = longest.lines_hz();
+    println!(
+        "validated {} + {} lines in {:?}; crest factors {:.3}, {:.3}",
+        lines[0].len(),
+        lines[1].len(),
+        started.elapsed(),
+        longest.exciters[0].crest_factor(),
+        longest.exciters[1].crest_factor()
+    );
+    assert_eq!(lines[0].len() + lines[1].len(), MAX_HARMONIC as usize);
+    let started = std::time::Instant::now();
+    let mut sum = 0.0;
+    for j in 0..1000 {
+        sum += longest.force_at(2.0 + j as f64 * 2e-4, &paper())[0];
+    }
+    println!(
+        "force_at with {} lines: {:?} per call ({sum:.1})",
+        lines[0].len(),
+        started.elapsed() / 1000
+    );
+
     let f_max = 80.0;
     let period_s = (MAX_HARMONIC as f64 + 1.0) / f_max;
     let w =

@@ -212,8 +212,8 @@ impl Waveform {
                     * (2.0 * PI * (frequency_hz * t_s).fract() + phase_deg.to_radians()).sin()
             }
             Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
-                match Design::new(band_hz, period_s, rms_n, line_set) {
-                    Ok(d) => d.value(t_s),
+                match multisine::lines(band_hz, period_s, line_set) {
+                    Ok(lines) => multisine::value(lines, rms_n, period_s, t_s),
                     Err(_) => 0.0,
                 }
             }
@@ -257,10 +257,12 @@ impl Waveform {
         self.tones().iter().map(|t| t.frequency_hz).collect()
     }
 
-    /// An upper bound of `|force|` that is attained to within 0.1 %: the amplitude of a sine
-    /// or chirp; for a multisine the maximum of the signal sampled densely over one period
-    /// (inverse FFT) plus the most the continuous signal can rise between samples. NaN when
-    /// the waveform is malformed.
+    /// An upper bound of `|force|`: the amplitude of a sine or chirp; for a multisine the
+    /// maximum of the signal sampled densely over one period (inverse FFT) plus the most the
+    /// continuous signal can rise between samples. The bound is within 0.1 % of the true peak
+    /// unless the sampling hits its cap of 2^22 points per period (multisines of many
+    /// thousands of lines), where it stays a bound but is looser. NaN when the waveform is
+    /// malformed.
     pub fn peak_force_n(&self) -> f64 {
         match *self {
             Waveform::Off => 0.0,
