@@ -1,0 +1,19 @@
+//! # oilfilm-identification
+//!
+//! From what a journal-bearing rig measures to the oil-film coefficients, as a pure library
+//! (no ROS, no I/O, no clock). Frame and sign conventions are those of `oilfilm-physics`:
+//! x horizontal, y up; relative motion r = journal centre minus bearing centre; the film
+//! force is the force on the journal, `dF = -(K r + C r' + M r'')`.
+//!
+//! * [`excitation`]: waveforms for the two exciters and the hard limits no waveform exceeds.
+//! * [`estimator`]: windowed least squares (QR/SVD, never normal equations unless the paper's
+//!   method is asked for), uncertainties, refusals, the frequency-domain cross-check and the
+//!   streaming form.
+//! * [`ascii`]: the documented, versioned text format for records from any DAQ.
+
+pub mod ascii;
+pub mod error;
+pub mod estimator;
+pub mod excitation;
+
+pub use error::IdentificationError;
