@@ -54,6 +54,7 @@
 //! | `channel_offsets_s` | no | for a DAQ that is not uniformly multiplexed: one offset per channel, in column-line order, blank-separated, each >= 0 and < `1 / sample_rate_hz`. Replaces `p * channel_interval_s` (which is then not checked against the scan period). |
 //! | `units` | yes | `si` (m, N, degC as in the channel table) or `volts` (amplifier outputs, converted with the calibration of the rig config named by `rig`) |
 //! | `start_time_s` | yes | time of scan index 0 on the recording's clock, s, finite (0, or seconds since the Unix epoch) |
+//! | `speed_rpm` | no | shaft speed during the record, rpm, finite and > 0. The ten channels carry no tachometer; without this key the rig configuration's operating speed is assumed, and tools say so. |
 //!
 //! ## 3. Column line
 //!
@@ -127,8 +128,18 @@ pub const CHANNEL_NAMES: [&str; 10] = [
 pub const CHANNEL_UNITS_SI: [&str; 10] = ["m", "m", "m", "m", "m", "m", "N", "N", "N", "degC"];
 
 /// Header keys, in the order [`write`] prints them.
-const KEYS: [&str; 6] =
-    ["rig", "sample_rate_hz", "channel_interval_s", "channel_offsets_s", "units", "start_time_s"];
+const KEYS: [&str; 7] = [
+    "rig",
+    "sample_rate_hz",
+    "channel_interval_s",
+    "channel_offsets_s",
+    "units",
+    "start_time_s",
+    "speed_rpm",
+];
+
+/// Header keys a file may leave out.
+const OPTIONAL_KEYS: [&str; 2] = ["channel_offsets_s", "speed_rpm"];
 
 /// What the values of a record are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -160,6 +171,8 @@ pub struct Header {
     pub channel_offsets_s: Option<Vec<f64>>,
     pub units: Units,
     pub start_time_s: f64,
+    /// Shaft speed during the record, rpm, when the file states it.
+    pub speed_rpm: Option<f64>,
     /// Channel names in file (scan) order: a permutation of [`CHANNEL_NAMES`].
     pub channels: Vec<String>,
 }
@@ -175,6 +188,7 @@ impl Header {
             channel_offsets_s: None,
             units: Units::Si,
             start_time_s: 0.0,
+            speed_rpm: None,
             channels: CHANNEL_NAMES.iter().map(|c| c.to_string()).collect(),
         }
     }
@@ -212,6 +226,11 @@ impl Header {
         }
         if !self.start_time_s.is_finite() {
             return bad("start_time_s", format!("must be finite, got {}", self.start_time_s));
+        }
+        if let Some(v) = self.speed_rpm {
+            if !v.is_finite() || v <= 0.0 {
+                return bad("speed_rpm", format!("must be finite and > 0, got {v}"));
+            }
         }
         if let Err((_, reason)) = check_channels(self.channels.iter().map(String::as_str)) {
             return bad("channels", reason);
@@ -576,13 +595,14 @@ pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> 
         ));
     };
     for key in KEYS {
-        if key != "channel_offsets_s" && !entries.contains_key(key) {
+        if !OPTIONAL_KEYS.contains(&key) && !entries.contains_key(key) {
             return Err(fail(
                 column_line_number,
                 0,
                 format!(
-                    "header key `{key}` is missing: every key but channel_offsets_s is required \
-                     before the column line"
+                    "header key `{key}` is missing: every key but {} is required before the \
+                     column line",
+                    OPTIONAL_KEYS.join(" and ")
                 ),
             ));
         }
@@ -717,7 +737,7 @@ fn parse_header(
     column_line: &str,
     fail: &dyn Fn(usize, usize, String) -> IdentificationError,
 ) -> Result<Header, IdentificationError> {
-    // Present: checked by the caller for every key but channel_offsets_s.
+    // Present: checked by the caller for every key but the optional ones.
     let get = |key: &str| {
         entries
             .get(key)
@@ -745,6 +765,16 @@ fn parse_header(
             Err(format!("start_time_s must be finite, got {x}"))
         }
     })?;
+    let speed_rpm = match entries.get("speed_rpm") {
+        None => None,
+        Some(_) => Some(number("speed_rpm", |x| {
+            if x.is_finite() && x > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("speed_rpm must be finite and > 0, got {x}"))
+            }
+        })?),
+    };
     let units = {
         let e = get("units")?;
         match e.value {
@@ -805,6 +835,7 @@ fn parse_header(
         channel_offsets_s: offsets.as_ref().map(|(_, v)| v.iter().map(|(_, x)| *x).collect()),
         units,
         start_time_s,
+        speed_rpm,
         channels: names.iter().map(|(_, n)| n.to_string()).collect(),
     };
     check_timing(&header).map_err(|(index, message)| match &offsets {
@@ -864,6 +895,10 @@ impl<W: Write> Writer<W> {
                     None => continue,
                 },
                 "units" => header.units.as_str().to_string(),
+                "speed_rpm" => match header.speed_rpm {
+                    Some(v) => number_text(v),
+                    None => continue,
+                },
                 _ => number_text(header.start_time_s),
             };
             let _ = writeln!(text, "# {key}: {value}"); // writing to a String cannot fail

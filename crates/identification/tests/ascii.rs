@@ -40,6 +40,7 @@ fn the_si_example_reads_with_plausible_values() {
     assert_eq!(r.header.sample_rate_hz, 5000.0);
     assert_eq!(r.header.channel_interval_s, 1e-5);
     assert_eq!(r.header.channel_offsets_s, None);
+    assert_eq!(r.header.speed_rpm, Some(1500.0));
     assert_eq!(r.header.channels, CHANNEL_NAMES);
     assert_eq!(r.scan_index, (0..50).collect::<Vec<u64>>());
     // Zhou's operating point: journal about (+0.05, -0.08) mm from the bearing centre.
@@ -288,6 +289,7 @@ fn random_record(rng: &mut ChaCha8Rng, scans: usize) -> Record {
             channel_offsets_s,
             units: if rng.random::<bool>() { Units::Si } else { Units::Volts },
             start_time_s: awkward(rng),
+            speed_rpm: rng.random::<bool>().then(|| 1.0 + rng.random::<f64>() * 5000.0),
             channels,
         },
         scan_index: (first..first + scans as u64).collect(),
@@ -368,6 +370,8 @@ fn writers_refuse_what_a_reader_would_refuse() {
         (Header { channel_interval_s: f64::NAN, ..header.clone() }, "header.channel_interval_s"),
         (Header { channel_interval_s: 1e-4, ..header.clone() }, "header.channel_interval_s"),
         (Header { start_time_s: f64::INFINITY, ..header.clone() }, "header.start_time_s"),
+        (Header { speed_rpm: Some(0.0), ..header.clone() }, "header.speed_rpm"),
+        (Header { speed_rpm: Some(f64::NAN), ..header.clone() }, "header.speed_rpm"),
         (
             Header { channel_offsets_s: Some(vec![0.0; 9]), ..header.clone() },
             "header.channel_offsets_s",
