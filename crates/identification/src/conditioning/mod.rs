@@ -36,10 +36,10 @@
 //! ## The valid range
 //! Every stage treats the record's ends differently from its interior (shifted Lagrange
 //! stencils, reflected extension, one-sided Savitzky-Golay windows). [`Conditioned::valid`]
-//! excludes, at each end, `deskew_taps` + the low-pass settling time (slowest pole down to
-//! 1e-7, 168 samples for the defaults) + `2 M` (two differentiator passes): 180 samples,
-//! 36 ms, for the defaults. The estimator must use only `valid`; the static force is the
-//! mean over `valid`.
+//! excludes, at each end, the deskew stencil's reach (2 samples for 4 taps) + the low-pass
+//! settling time (slowest pole down to 1e-7: 169 samples for the defaults) + `2 M` (two
+//! differentiator passes, 10 samples): 181 samples, 36 ms, for the defaults. The estimator
+//! must use only `valid`; the static force is the mean over `valid`.
 //!
 //! ## Inputs that are refused
 //! Non-finite samples (`BadInput` naming channel and sample index), columns of unequal
