@@ -5,6 +5,8 @@
 //! x horizontal, y up; relative motion r = journal centre minus bearing centre; the film
 //! force is the force on the journal, `dF = -(K r + C r' + M r'')`.
 //!
+//! * [`conditioning`]: raw multiplexed DAQ samples to kinematics and the eq. 2 film force
+//!   (calibration, linear-range check, deskew, zero-phase low-pass, FIR differentiation).
 //! * [`excitation`]: waveforms for the two exciters and the hard limits no waveform exceeds.
 //! * [`estimator`]: windowed least squares (QR/SVD, never normal equations unless the paper's
 //!   method is asked for), uncertainties, refusals, the frequency-domain cross-check and the
@@ -12,6 +14,7 @@
 //! * [`ascii`]: the documented, versioned text format for records from any DAQ.
 
 pub mod ascii;
+pub mod conditioning;
 pub mod error;
 pub mod estimator;
 pub mod excitation;

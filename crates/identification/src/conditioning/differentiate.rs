@@ -1,0 +1,288 @@
+//! Step 6 of Zhou et al. (2004), section 3.1: "calculate the velocity from displacement using
+//! a differential FIR filter. After that, derive the acceleration from velocity reusing the
+//! differential FIR filter." We do exactly that with one symmetric FIR differentiator.
+//!
+//! ## The filter: Savitzky-Golay first derivative
+//! A. Savitzky & M. J. E. Golay, "Smoothing and differentiation of data by simplified least
+//! squares procedures", Analytical Chemistry 36(8), 1964: fit a polynomial of degree
+//! [`DEGREE`] (= 4) by least squares to the `2M + 1` samples around `n` and take its slope
+//! at `n`. The weights do not depend on the data, so this is an FIR filter; for the centred
+//! window the weights are **antisymmetric**, `c_{-k} = -c_k`, so the response is
+//! `H(w) = 2j sum_k c_k sin(k w)`: purely imaginary, i.e. exactly the +90 degrees of an
+//! ideal differentiator with **no delay at any frequency** (the weights are antisymmetrised
+//! after the solve so that this holds to the last bit). Degree 4 makes it exact for
+//! polynomials up to degree 4 and its relative gain error grows as `w^4`, not `w^2` as for
+//! the quadratic fit, so a short window stays accurate over the whole 0-80 Hz band.
+//!
+//! Relative gain error `H(w) / (j w) - 1` at 80 Hz, 5 kHz ([`SavitzkyGolayDerivative::gain_error`]):
+//!
+//! | half-length `M` | velocity (one pass) | acceleration (two passes) | gain at 1 kHz / ideal |
+//! |---|---|---|---|
+//! | 2 | -3.4e-6 | -6.8e-6 | 0.93 |
+//! | 4 | -6.7e-5 | -1.3e-4 | 0.31 |
+//! | **5 (default)** | **-1.6e-4** | **-3.2e-4** | 0.005 |
+//! | 8 | -9.8e-4 | -2.0e-3 | 0.025 |
+//!
+//! The default meets the target (< 1e-3) for both velocity and acceleration. Noise above the
+//! band is already removed by the low-pass, so a short window is chosen for accuracy; the
+//! default has, in addition, a near-zero of its response at 1 kHz.
+//!
+//! ## Edges
+//! Within `M` samples of either end the window is the first (last) `2M + 1` samples and the
+//! fitted polynomial's slope is taken at the sample's own position (P. A. Gorry, "General
+//! least-squares smoothing and differentiation by the convolution (Savitzky-Golay) method",
+//! Analytical Chemistry 62(6), 1990). Those samples are less accurate and are outside
+//! [`super::Conditioned::valid`] (the conditioning trims `2M`, one `M` per pass).
+//!
+//! ## Cost
+//! `M` multiply-adds and `2M` adds per sample, as `M` vectorised passes over the column.
+
+use oilfilm_physics::daq::ChannelId;
+
+use super::first_non_finite;
+use crate::IdentificationError;
+
+/// Degree of the least-squares polynomial.
+pub const DEGREE: usize = 4;
+
+/// Longest half-length accepted.
+pub const MAX_HALF_LENGTH: usize = 64;
+
+/// Solves the small dense system `g v = rhs` in place (Gaussian elimination, partial
+/// pivoting). `g` is `n x n`, row-major. Returns `false` if it is singular.
+fn solve_small(g: &mut [f64], rhs: &mut [f64]) -> bool {
+    let n = rhs.len();
+    for col in 0..n {
+        let mut piv = col;
+        for r in col + 1..n {
+            if g[r * n + col].abs() > g[piv * n + col].abs() {
+                piv = r;
+            }
+        }
+        if g[piv * n + col] == 0.0 || !g[piv * n + col].is_finite() {
+            return false;
+        }
+        if piv != col {
+            for c in 0..n {
+                g.swap(piv * n + c, col * n + c);
+            }
+            rhs.swap(piv, col);
+        }
+        let d = g[col * n + col];
+        for r in col + 1..n {
+            let f = g[r * n + col] / d;
+            if f != 0.0 {
+                for c in col..n {
+                    g[r * n + c] -= f * g[col * n + c];
+                }
+                rhs[r] -= f * rhs[col];
+            }
+        }
+    }
+    for col in (0..n).rev() {
+        let mut s = rhs[col];
+        for c in col + 1..n {
+            s -= g[col * n + c] * rhs[c];
+        }
+        rhs[col] = s / g[col * n + col];
+    }
+    true
+}
+
+/// Least-squares derivative weights (per sample) for a window of `w.len()` consecutive
+/// samples, the slope taken at window position `eval` (0-based, may be fractional).
+fn ls_derivative_weights(eval: f64, w: &mut [f64]) -> Result<(), IdentificationError> {
+    let len = w.len();
+    let p = DEGREE + 1;
+    let centre = 0.5 * (len as f64 - 1.0);
+    let half = centre.max(1.0);
+    // Normal equations in the scaled abscissa u = (i - centre) / half, in [-1, 1].
+    let mut g = [0.0; (DEGREE + 1) * (DEGREE + 1)];
+    for i in 0..len {
+        let u = (i as f64 - centre) / half;
+        let mut pw = [1.0; DEGREE + 1];
+        for j in 1..p {
+            pw[j] = pw[j - 1] * u;
+        }
+        for r in 0..p {
+            for c in 0..p {
+                g[r * p + c] += pw[r] * pw[c];
+            }
+        }
+    }
+    let u0 = (eval - centre) / half;
+    let mut v = [0.0; DEGREE + 1];
+    for (j, vj) in v.iter_mut().enumerate().skip(1) {
+        *vj = j as f64 * u0.powi(j as i32 - 1);
+    }
+    if !solve_small(&mut g, &mut v) {
+        return Err(IdentificationError::invalid(
+            "conditioning.differentiator_half_length",
+            format!("a {len}-sample window cannot fit a degree-{DEGREE} polynomial"),
+        ));
+    }
+    for (i, wi) in w.iter_mut().enumerate() {
+        let u = (i as f64 - centre) / half;
+        let mut pw = 1.0;
+        let mut s = 0.0;
+        for vj in v {
+            s += vj * pw;
+            pw *= u;
+        }
+        *wi = s / half;
+    }
+    Ok(())
+}
+
+/// A Savitzky-Golay first-derivative FIR (degree [`DEGREE`], half-length `M`), output in
+/// units of the input per second.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SavitzkyGolayDerivative {
+    half_length: usize,
+    sample_rate_hz: f64,
+    /// `c_1 .. c_M` (per second): `out[n] = sum_k c_k (x[n+k] - x[n-k])`.
+    interior: Vec<f64>,
+    /// `M` rows of `2M + 1` weights (per second) for output `n < M`, on `x[0 .. 2M]`.
+    left: Vec<f64>,
+    /// `M` rows for output `len - M + r`, on `x[len - 2M - 1 ..]`.
+    right: Vec<f64>,
+}
+
+impl SavitzkyGolayDerivative {
+    /// Designs the filter; `2 <= half_length <= MAX_HALF_LENGTH` (a degree-4 fit needs at
+    /// least 5 samples).
+    pub fn new(half_length: usize, sample_rate_hz: f64) -> Result<Self, IdentificationError> {
+        if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+            return Err(IdentificationError::invalid(
+                "sample_rate_hz",
+                format!("must be finite and > 0, got {sample_rate_hz}"),
+            ));
+        }
+        let min = DEGREE.div_ceil(2);
+        if !(min..=MAX_HALF_LENGTH).contains(&half_length) {
+            return Err(IdentificationError::invalid(
+                "conditioning.differentiator_half_length",
+                format!(
+                    "must be in {min}..={MAX_HALF_LENGTH} (a degree-{DEGREE} fit needs {} samples), got {half_length}",
+                    DEGREE + 1
+                ),
+            ));
+        }
+        let m = half_length;
+        let width = 2 * m + 1;
+        let mut w = vec![0.0; width];
+        ls_derivative_weights(m as f64, &mut w)?;
+        let interior = (1..=m)
+            .map(|k| 0.5 * (w[m + k] - w[m - k]) * sample_rate_hz)
+            .collect();
+        let mut left = vec![0.0; m * width];
+        let mut right = vec![0.0; m * width];
+        for r in 0..m {
+            ls_derivative_weights(r as f64, &mut w)?;
+            for (dst, &src) in left[r * width..(r + 1) * width].iter_mut().zip(&w) {
+                *dst = src * sample_rate_hz;
+            }
+            ls_derivative_weights((m + 1 + r) as f64, &mut w)?;
+            for (dst, &src) in right[r * width..(r + 1) * width].iter_mut().zip(&w) {
+                *dst = src * sample_rate_hz;
+            }
+        }
+        Ok(Self {
+            half_length: m,
+            sample_rate_hz,
+            interior,
+            left,
+            right,
+        })
+    }
+
+    pub fn half_length(&self) -> usize {
+        self.half_length
+    }
+
+    /// `c_1 .. c_M` in 1/s: `out[n] = sum_k c_k (x[n+k] - x[n-k])`.
+    pub fn coefficients(&self) -> &[f64] {
+        &self.interior
+    }
+
+    /// Relative gain error of the interior filter at `freq_hz` (> 0),
+    /// `|H(w)| / w - 1`; the phase is exactly that of `j w` by antisymmetry.
+    pub fn gain_error(&self, freq_hz: f64) -> f64 {
+        let w = 2.0 * std::f64::consts::PI * freq_hz / self.sample_rate_hz;
+        let h: f64 = self
+            .interior
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| 2.0 * c * ((i + 1) as f64 * w).sin())
+            .sum();
+        h / (2.0 * std::f64::consts::PI * freq_hz) - 1.0
+    }
+
+    /// Differentiates `input` into `out` (same length, at least `2M + 1` samples).
+    pub fn apply_into(&self, input: &[f64], out: &mut [f64]) -> Result<(), IdentificationError> {
+        let len = input.len();
+        let m = self.half_length;
+        let width = 2 * m + 1;
+        if out.len() != len {
+            return Err(IdentificationError::BadInput {
+                what: "differentiator output".into(),
+                reason: format!("buffer has {} samples, input {len}", out.len()),
+            });
+        }
+        if len < width {
+            return Err(IdentificationError::BadInput {
+                what: "differentiator input".into(),
+                reason: format!("{len} samples, a half-length {m} window needs at least {width}"),
+            });
+        }
+        let inner = len - 2 * m;
+        {
+            let dst = &mut out[m..m + inner];
+            let c1 = self.interior[0];
+            for (o, (&a, &b)) in dst
+                .iter_mut()
+                .zip(input[m + 1..].iter().zip(&input[m - 1..]))
+            {
+                *o = c1 * (a - b);
+            }
+            for (k, &c) in self.interior.iter().enumerate().skip(1) {
+                let k = k + 1;
+                for (o, (&a, &b)) in dst
+                    .iter_mut()
+                    .zip(input[m + k..].iter().zip(&input[m - k..]))
+                {
+                    *o += c * (a - b);
+                }
+            }
+        }
+        let tail = &input[len - width..];
+        for r in 0..m {
+            let lw = &self.left[r * width..(r + 1) * width];
+            out[r] = lw.iter().zip(&input[..width]).map(|(a, b)| a * b).sum();
+            let rw = &self.right[r * width..(r + 1) * width];
+            out[len - m + r] = rw.iter().zip(tail).map(|(a, b)| a * b).sum();
+        }
+        Ok(())
+    }
+
+    /// Differentiates, allocating the output.
+    pub fn apply(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
+        let mut out = vec![0.0; input.len()];
+        self.apply_into(input, &mut out)?;
+        Ok(out)
+    }
+}
+
+/// One-call derivative (per second) of one channel's samples at `sample_rate_hz` with a
+/// Savitzky-Golay FIR of half-length `half_length`. NaN input is a `BadInput`.
+pub fn fir_derivative(
+    channel: ChannelId,
+    column: &[f64],
+    half_length: usize,
+    sample_rate_hz: f64,
+) -> Result<Vec<f64>, IdentificationError> {
+    if let Some(i) = first_non_finite(column) {
+        return Err(super::non_finite_error(channel, i, column[i], "sample"));
+    }
+    SavitzkyGolayDerivative::new(half_length, sample_rate_hz)?.apply(column)
+}

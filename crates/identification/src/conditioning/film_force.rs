@@ -1,0 +1,103 @@
+//! Step 7 of Zhou et al. (2004), section 3.1, with their eq. 2 (section 2.2): the oil-film
+//! force from the housing's equation of motion.
+//!
+//! The housing (mass `m`) carries the exciter forces `f1`, `f2` along their axes at angles
+//! `a1`, `a2` from `+x` (paper: 45 and 135 degrees), the bellows' pull `f3` along `+y`,
+//! gravity `-m g e_y`, and the film's reaction `-F` (`F` = film force **on the journal**,
+//! crate convention). Newton for the housing, `m X'' = F_exc + (f3 - m g) e_y - F`, gives
+//!
+//! `F = f1 (cos a1, sin a1) + f2 (cos a2, sin a2) + (f3 - m g) e_y - m X''`,
+//!
+//! which is the paper's eq. 2 in our frame (`f_X = f1 cos45 - f2 cos45 - m X''`,
+//! `f_Y = f1 sin45 + f2 sin45 + f3 - m g - m Y''`). The **static part** is the mean over the
+//! window/record ([`static_part`]), the **dynamic part** (the paper's film-force increment)
+//! the rest.
+
+use std::ops::Range;
+
+use super::Mechanics;
+use crate::IdentificationError;
+
+/// Eq. 2 into caller buffers: all inputs and outputs the same length. Forces in N, housing
+/// acceleration in m/s^2.
+#[allow(clippy::too_many_arguments)] // five named input columns and two outputs, all plain
+pub fn eq2_into(
+    f1: &[f64],
+    f2: &[f64],
+    f3: &[f64],
+    housing_ax: &[f64],
+    housing_ay: &[f64],
+    mechanics: &Mechanics,
+    fx: &mut [f64],
+    fy: &mut [f64],
+) -> Result<(), IdentificationError> {
+    mechanics.validate()?;
+    let n = f1.len();
+    for (name, len) in [
+        ("f2", f2.len()),
+        ("f3", f3.len()),
+        ("housing_ax", housing_ax.len()),
+        ("housing_ay", housing_ay.len()),
+        ("fx output", fx.len()),
+        ("fy output", fy.len()),
+    ] {
+        if len != n {
+            return Err(IdentificationError::BadInput {
+                what: format!("eq. 2 `{name}`"),
+                reason: format!("{len} samples, f1 has {n}"),
+            });
+        }
+    }
+    let m = mechanics.housing_mass_kg;
+    let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
+    let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
+    let mg = m * mechanics.gravity_m_s2;
+    // Re-sliced to the common length so the loop carries no bounds checks.
+    let (f2, f3, hx, hy) = (&f2[..n], &f3[..n], &housing_ax[..n], &housing_ay[..n]);
+    let (fx, fy) = (&mut fx[..n], &mut fy[..n]);
+    for i in 0..n {
+        fx[i] = c1 * f1[i] + c2 * f2[i] - m * hx[i];
+        fy[i] = s1 * f1[i] + s2 * f2[i] + (f3[i] - mg) - m * hy[i];
+    }
+    Ok(())
+}
+
+/// Eq. 2, allocating `(fx, fy)`.
+pub fn eq2(
+    f1: &[f64],
+    f2: &[f64],
+    f3: &[f64],
+    housing_ax: &[f64],
+    housing_ay: &[f64],
+    mechanics: &Mechanics,
+) -> Result<(Vec<f64>, Vec<f64>), IdentificationError> {
+    let mut fx = vec![0.0; f1.len()];
+    let mut fy = vec![0.0; f1.len()];
+    eq2_into(
+        f1, f2, f3, housing_ax, housing_ay, mechanics, &mut fx, &mut fy,
+    )?;
+    Ok((fx, fy))
+}
+
+/// The static film force: the mean of `fx`, `fy` over `range` (non-empty, inside both).
+pub fn static_part(
+    fx: &[f64],
+    fy: &[f64],
+    range: Range<usize>,
+) -> Result<[f64; 2], IdentificationError> {
+    if range.is_empty() || range.end > fx.len() || range.end > fy.len() {
+        return Err(IdentificationError::BadInput {
+            what: "static film force window".into(),
+            reason: format!(
+                "range {range:?} is empty or outside the {} / {} samples",
+                fx.len(),
+                fy.len()
+            ),
+        });
+    }
+    let k = range.len() as f64;
+    Ok([
+        fx[range.clone()].iter().sum::<f64>() / k,
+        fy[range].iter().sum::<f64>() / k,
+    ])
+}

@@ -1,0 +1,644 @@
+//! # Conditioning: from raw multiplexed DAQ samples to what the estimator consumes
+//!
+//! Zhou et al. (2004), section 3.1, process each record in nine steps; this module does
+//! steps 1-7 and hands the kinematics `r, r', r''` and the film force `F` of eq. 2 to the
+//! least-squares estimator (steps 8-9, [`crate::estimator`]).
+//!
+//! | paper step | stage | here |
+//! |---|---|---|
+//! | 3 volts -> physical value | [`calibrate`] | first, per channel |
+//! | 2 linear-range check | [`range_check`] | on the raw samples, before any filter |
+//! | 4 "inner-insert filter" (multiplex phase) | [`deskew`] | Lagrange fractional delay per channel |
+//! | 1 low-pass | [`lowpass`] | zero-phase Butterworth, forward-backward, same on every channel |
+//! | 5 relative / absolute displacement | [`kinematics`] | `r` = mean of ends A, B; tilt = A - B; `X` = frame probes |
+//! | 6 velocity, acceleration | [`differentiate`] | Savitzky-Golay FIR, applied twice |
+//! | 7 eq. 2, static / dynamic | [`film_force`] | `F = F_exc + (f3 - m g) e_y - m X''`; static = mean over `valid` |
+//!
+//! ## Order of the stages
+//! Deskew, low-pass, kinematics and differentiation are all linear and time-invariant, so
+//! their order does not change the result away from the record's ends; what matters is
+//! that (a) the range check sees the **raw** samples (a filter would smear a clipped
+//! plateau below the threshold), and (b) every channel that enters eq. 1 and eq. 2 passes
+//! through the **same** low-pass, so its passband droop is common to both sides of the
+//! linear relation and cancels in the fit. Channels then differ only by the deskew residual
+//! and the differentiator's gain error, which are the budgeted numbers below.
+//!
+//! ## Error budget at the top of the excitation band (80 Hz, 5 kHz, defaults)
+//!
+//! | stage | error at 80 Hz | literature |
+//! |---|---|---|
+//! | deskew, 4-tap Lagrange, offsets 0..90 us | amplitude <= 2.4e-6, phase <= 3.6e-8 rad | Laakso et al., "Splitting the unit delay", IEEE SP Magazine 1996 |
+//! | low-pass, Butterworth N = 4, 200 Hz, forward-backward | gain 0.999367 (-6.3e-4), phase exactly 0; 1 kHz at -122 dB | Gustafsson, IEEE Trans. SP 44(4) 1996 (edge states) |
+//! | differentiator, Savitzky-Golay degree 4, M = 5 | gain -1.6e-4 (velocity), -3.2e-4 (acceleration), phase exact | Savitzky & Golay, Anal. Chem. 1964; Gorry, Anal. Chem. 1990 (edges) |
+//!
+//! The tests in `tests/conditioning.rs` measure each of these on synthetic sines.
+//!
+//! ## The valid range
+//! Every stage treats the record's ends differently from its interior (shifted Lagrange
+//! stencils, reflected extension, one-sided Savitzky-Golay windows). [`Conditioned::valid`]
+//! excludes, at each end, the deskew stencil's reach (2 samples for 4 taps) + the low-pass
+//! settling time (slowest pole down to 1e-7: 169 samples for the defaults) + `2 M` (two
+//! differentiator passes, 10 samples): 181 samples, 36 ms, for the defaults. The estimator
+//! must use only `valid`; the static force is the mean over `valid`.
+//!
+//! ## Inputs that are refused
+//! Non-finite samples (`BadInput` naming channel and sample index), columns of unequal
+//! length, a channel missing or given twice, a non-positive sample rate, a cutoff at or
+//! above Nyquist, a record shorter than the edge trims. A probe out of its linear range is
+//! *not* an error of [`condition`]: the record is conditioned and carries the violation
+//! ([`Conditioned::range_violations`]), and [`Conditioned::require_in_range`] is what a
+//! consumer calls to refuse it, as the paper's step 2 demands.
+//!
+//! ## Cost
+//! Each stage is a few tight passes over contiguous columns, with no allocation per
+//! sample: about 20 buffers of one column each per record. `examples/bench_conditioning.rs`
+//! prints the throughput per stage.
+
+pub mod calibrate;
+pub mod deskew;
+pub mod differentiate;
+pub mod film_force;
+pub mod kinematics;
+pub mod lowpass;
+pub mod range_check;
+
+use std::ops::Range;
+
+use oilfilm_physics::daq::{Calibration, ChannelId, DaqScan, CHANNEL_COUNT};
+use serde::{Deserialize, Serialize};
+
+use crate::IdentificationError;
+
+/// The rig's mechanics needed by eq. 2 (the caller builds it from the rig file).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mechanics {
+    /// Mass of the floating housing and everything moving with it (kg), `> 0`.
+    pub housing_mass_kg: f64,
+    /// Exciter axes measured from `+x` towards `+y` (deg); paper: `[45, 135]`.
+    pub exciter_angles_deg: [f64; 2],
+    /// Gravitational acceleration (m/s^2), acting along `-y`.
+    pub gravity_m_s2: f64,
+}
+
+impl Mechanics {
+    /// Checks that every field is finite and the mass positive; errors name the field
+    /// (`mechanics.housing_mass_kg`).
+    pub fn validate(&self) -> Result<(), IdentificationError> {
+        if !(self.housing_mass_kg.is_finite() && self.housing_mass_kg > 0.0) {
+            return Err(IdentificationError::invalid(
+                "mechanics.housing_mass_kg",
+                format!("must be finite and > 0, got {}", self.housing_mass_kg),
+            ));
+        }
+        for (i, a) in self.exciter_angles_deg.iter().enumerate() {
+            if !a.is_finite() {
+                return Err(IdentificationError::invalid(
+                    format!("mechanics.exciter_angles_deg[{i}]"),
+                    format!("must be finite, got {a}"),
+                ));
+            }
+        }
+        if !self.gravity_m_s2.is_finite() {
+            return Err(IdentificationError::invalid(
+                "mechanics.gravity_m_s2",
+                format!("must be finite, got {}", self.gravity_m_s2),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Parameters of the conditioning chain. Missing fields in a file take the defaults.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConditioningConfig {
+    /// Butterworth cutoff (Hz, -3 dB of one pass); default 200 Hz for an excitation band up
+    /// to 80 Hz at 5 kHz. Must lie below Nyquist.
+    pub lowpass_cutoff_hz: f64,
+    /// Butterworth order (1..=12); default 4.
+    pub lowpass_order: usize,
+    /// Savitzky-Golay differentiator half-length `M` (2..=64); default 5.
+    pub differentiator_half_length: usize,
+    /// Remove the multiplex skew (the paper's step 4). `false` only to demonstrate what the
+    /// skew does.
+    pub deskew: bool,
+    /// Lagrange interpolator length (2..=16); default 4 (cubic).
+    pub deskew_taps: usize,
+}
+
+impl Default for ConditioningConfig {
+    fn default() -> Self {
+        Self {
+            lowpass_cutoff_hz: 200.0,
+            lowpass_order: 4,
+            differentiator_half_length: 5,
+            deskew: true,
+            deskew_taps: 4,
+        }
+    }
+}
+
+impl ConditioningConfig {
+    /// Checks every field against the record's sample rate; errors name the field
+    /// (`conditioning.lowpass_cutoff_hz`, ...).
+    pub fn validate(&self, sample_rate_hz: f64) -> Result<(), IdentificationError> {
+        if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+            return Err(IdentificationError::invalid(
+                "sample_rate_hz",
+                format!("must be finite and > 0, got {sample_rate_hz}"),
+            ));
+        }
+        lowpass::Butterworth::design(self.lowpass_order, self.lowpass_cutoff_hz, sample_rate_hz)?;
+        differentiate::SavitzkyGolayDerivative::new(
+            self.differentiator_half_length,
+            sample_rate_hz,
+        )?;
+        if !(2..=deskew::MAX_TAPS).contains(&self.deskew_taps) {
+            return Err(IdentificationError::invalid(
+                "conditioning.deskew_taps",
+                format!(
+                    "must be in 2..={}, got {}",
+                    deskew::MAX_TAPS,
+                    self.deskew_taps
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The unit of a raw record's columns.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RawUnits {
+    /// Amplifier volts as read by the ADC; calibrated here.
+    Volts,
+    /// Already in the channel's SI unit (m, N, degC).
+    Si,
+}
+
+impl RawUnits {
+    /// `"volts"` or `"si"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RawUnits::Volts => "volts",
+            RawUnits::Si => "si",
+        }
+    }
+}
+
+/// A raw record: one column per channel in scan order, sample `i` of every column belonging
+/// to the scan that started at `start_time_s + i / sample_rate_hz`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawRecord {
+    /// Scans per second.
+    pub sample_rate_hz: f64,
+    /// Start time of the first scan (s).
+    pub start_time_s: f64,
+    /// Channel of each column, in scan order.
+    pub channels: Vec<ChannelId>,
+    pub units: RawUnits,
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl RawRecord {
+    /// Transposes a sequence of consecutive scans (volts) into columns. The scans must share
+    /// one channel order and be spaced `1 / sample_rate_hz` apart (within 0.1 % of a period):
+    /// a gap, a repeated or out-of-order scan is a `BadInput` naming the scan.
+    pub fn from_scans(scans: &[DaqScan], sample_rate_hz: f64) -> Result<Self, IdentificationError> {
+        if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+            return Err(IdentificationError::invalid(
+                "sample_rate_hz",
+                format!("must be finite and > 0, got {sample_rate_hz}"),
+            ));
+        }
+        let Some(first) = scans.first() else {
+            return Err(IdentificationError::BadInput {
+                what: "scans".into(),
+                reason: "no scans".into(),
+            });
+        };
+        let channels = first.channels.clone();
+        let start = first.scan_start_s;
+        if !start.is_finite() {
+            return Err(IdentificationError::BadInput {
+                what: "scans[0].scan_start_s".into(),
+                reason: format!("not finite ({start})"),
+            });
+        }
+        let period = 1.0 / sample_rate_hz;
+        let mut columns: Vec<Vec<f64>> = (0..channels.len())
+            .map(|_| Vec::with_capacity(scans.len()))
+            .collect();
+        for (i, s) in scans.iter().enumerate() {
+            if s.channels != channels || s.volts.len() != channels.len() {
+                return Err(IdentificationError::BadInput {
+                    what: format!("scans[{i}] (scan_index {})", s.scan_index),
+                    reason: format!(
+                        "channels {:?} with {} readings; scans[0] has {:?}",
+                        s.channels.iter().map(|c| c.name()).collect::<Vec<_>>(),
+                        s.volts.len(),
+                        channels.iter().map(|c| c.name()).collect::<Vec<_>>()
+                    ),
+                });
+            }
+            let expected = start + i as f64 * period;
+            let deviation = (s.scan_start_s - expected).abs();
+            if deviation.is_nan() || deviation > 1.0e-3 * period {
+                return Err(IdentificationError::BadInput {
+                    what: format!("scans[{i}].scan_start_s (scan_index {})", s.scan_index),
+                    reason: format!(
+                        "{} s, expected {expected} s at {sample_rate_hz} scans/s: missing, repeated or out-of-order scan",
+                        s.scan_start_s
+                    ),
+                });
+            }
+            for (col, &v) in columns.iter_mut().zip(&s.volts) {
+                col.push(v);
+            }
+        }
+        Ok(Self {
+            sample_rate_hz,
+            start_time_s: start,
+            channels,
+            units: RawUnits::Volts,
+            columns,
+        })
+    }
+
+    /// Samples per column (of the first column; [`RawRecord::validate_shape`] checks the rest).
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The column of `channel`, if present.
+    pub fn column(&self, channel: ChannelId) -> Option<&[f64]> {
+        self.channels
+            .iter()
+            .position(|&c| c == channel)
+            .and_then(|k| self.columns.get(k))
+            .map(Vec::as_slice)
+    }
+
+    /// Checks the shape: finite positive sample rate, finite start time, one column per
+    /// channel, no channel twice, all columns the same non-zero length.
+    pub fn validate_shape(&self) -> Result<(), IdentificationError> {
+        if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
+            return Err(IdentificationError::invalid(
+                "sample_rate_hz",
+                format!("must be finite and > 0, got {}", self.sample_rate_hz),
+            ));
+        }
+        if !self.start_time_s.is_finite() {
+            return Err(IdentificationError::BadInput {
+                what: "start_time_s".into(),
+                reason: format!("not finite ({})", self.start_time_s),
+            });
+        }
+        if self.channels.len() != self.columns.len() {
+            return Err(IdentificationError::BadInput {
+                what: "columns".into(),
+                reason: format!(
+                    "{} columns for {} channels",
+                    self.columns.len(),
+                    self.channels.len()
+                ),
+            });
+        }
+        let mut seen = [false; CHANNEL_COUNT];
+        for &c in &self.channels {
+            if std::mem::replace(&mut seen[c.index()], true) {
+                return Err(IdentificationError::BadInput {
+                    what: format!("channel `{c}`"),
+                    reason: "appears twice in the record".into(),
+                });
+            }
+        }
+        let n = self.len();
+        if n == 0 {
+            return Err(IdentificationError::BadInput {
+                what: "columns".into(),
+                reason: "the record has no samples".into(),
+            });
+        }
+        for (c, col) in self.channels.iter().zip(&self.columns) {
+            if col.len() != n {
+                return Err(IdentificationError::BadInput {
+                    what: format!("column `{c}`"),
+                    reason: format!(
+                        "{} samples, but `{}` has {n}: ragged columns",
+                        col.len(),
+                        self.channels[0]
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a record was rejected by the linear-range check (paper step 2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RangeViolation {
+    pub channel: ChannelId,
+    /// First offending sample.
+    pub index: usize,
+    /// Its value in the channel's SI unit.
+    pub value_si: f64,
+    /// The calibrated linear range in SI, `[low, high]` (readings within half an LSB of an
+    /// edge count as outside, see `Calibration::within_linear_range`).
+    pub range_si: [f64; 2],
+    /// How many samples of the channel are out of range.
+    pub count: usize,
+}
+
+impl std::fmt::Display for RangeViolation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let u = self.channel.unit();
+        write!(
+            f,
+            "`{}` left its linear range [{}, {}] {u} at sample {} (value {} {u}); {} sample(s) out of range",
+            self.channel, self.range_si[0], self.range_si[1], self.index, self.value_si, self.count
+        )
+    }
+}
+
+/// A conditioned record on ONE time base (the scan start times), all SI.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Conditioned {
+    /// Scan start times (s).
+    pub t_s: Vec<f64>,
+    /// Relative displacement `r` (journal minus bearing centre): mean of bearing ends A, B.
+    pub x_m: Vec<f64>,
+    pub y_m: Vec<f64>,
+    /// End A minus end B (misalignment / tilt indicator).
+    pub tilt_x_m: Vec<f64>,
+    pub tilt_y_m: Vec<f64>,
+    /// `r'`, `r''`.
+    pub vx_m_s: Vec<f64>,
+    pub vy_m_s: Vec<f64>,
+    pub ax_m_s2: Vec<f64>,
+    pub ay_m_s2: Vec<f64>,
+    /// Housing absolute displacement `X` and acceleration `X''`.
+    pub housing_x_m: Vec<f64>,
+    pub housing_y_m: Vec<f64>,
+    pub housing_ax_m_s2: Vec<f64>,
+    pub housing_ay_m_s2: Vec<f64>,
+    /// Film force on the journal, eq. 2 (total: static + dynamic).
+    pub fx_n: Vec<f64>,
+    pub fy_n: Vec<f64>,
+    /// Mean of `fx`, `fy` over `valid`.
+    pub static_force_n: [f64; 2],
+    pub temperature_c: Vec<f64>,
+    /// The bellows' load sensor `f3` (N).
+    pub static_load_n: Vec<f64>,
+    /// Samples free of the stages' edge effects; use only these.
+    pub valid: Range<usize>,
+    /// Empty when every channel stayed in its linear range.
+    pub range_violations: Vec<RangeViolation>,
+}
+
+impl Conditioned {
+    /// Samples per column.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// `Err(BadInput)` describing every violation if any channel left its linear range: the
+    /// paper's step 2 says such a record is invalid as a whole.
+    pub fn require_in_range(&self) -> Result<(), IdentificationError> {
+        if self.range_violations.is_empty() {
+            return Ok(());
+        }
+        Err(IdentificationError::BadInput {
+            what: format!(
+                "record ({} channel(s) out of linear range: {})",
+                self.range_violations.len(),
+                self.range_violations
+                    .iter()
+                    .map(|v| v.channel.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            reason: self
+                .range_violations
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("; "),
+        })
+    }
+
+    /// The dynamic film force (`F` minus its static part) at sample `i`.
+    pub fn dynamic_force_n(&self, i: usize) -> Option<[f64; 2]> {
+        Some([
+            self.fx_n.get(i)? - self.static_force_n[0],
+            self.fy_n.get(i)? - self.static_force_n[1],
+        ])
+    }
+}
+
+/// Index of the first non-finite value, by a branch-free scan (vectorisable) and, only when
+/// one exists, a second search for its position.
+pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
+    let any = x.iter().fold(false, |acc, v| acc | !v.is_finite());
+    if any {
+        x.iter().position(|v| !v.is_finite())
+    } else {
+        None
+    }
+}
+
+/// The `BadInput` for a non-finite sample.
+pub(crate) fn non_finite_error(
+    channel: ChannelId,
+    index: usize,
+    value: f64,
+    unit: &str,
+) -> IdentificationError {
+    IdentificationError::BadInput {
+        what: format!("channel `{channel}`, sample {index}"),
+        reason: format!("{value} is not a finite reading ({unit})"),
+    }
+}
+
+/// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
+/// differentiate twice, eq. 2. The record must hold all ten channels.
+pub fn condition(
+    raw: &RawRecord,
+    calibration: &Calibration,
+    mechanics: &Mechanics,
+    config: &ConditioningConfig,
+) -> Result<Conditioned, IdentificationError> {
+    raw.validate_shape()?;
+    config.validate(raw.sample_rate_hz)?;
+    mechanics.validate()?;
+    let fs = raw.sample_rate_hz;
+    let n = raw.len();
+
+    let mut col_of = [usize::MAX; CHANNEL_COUNT];
+    for (k, &c) in raw.channels.iter().enumerate() {
+        col_of[c.index()] = k;
+    }
+    if let Some(missing) = ChannelId::ALL
+        .iter()
+        .find(|c| col_of[c.index()] == usize::MAX)
+    {
+        return Err(IdentificationError::BadInput {
+            what: format!("channel `{missing}`"),
+            reason: "missing from the record; conditioning needs all ten channels".into(),
+        });
+    }
+
+    let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, fs)?;
+    let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
+    let mut delays = Vec::with_capacity(CHANNEL_COUNT);
+    let mut deskew_trim = 0;
+    for &ch in &ChannelId::ALL {
+        let offset = calibration.sample_offset_s(ch)?;
+        if config.deskew {
+            let d = deskew::FractionalDelay::for_offset(offset, fs, config.deskew_taps)?;
+            deskew_trim = deskew_trim.max(d.edge_samples());
+            delays.push(Some(d));
+        } else {
+            delays.push(None);
+        }
+    }
+    let trim = deskew_trim + lp.settling_samples() + 2 * sg.half_length();
+    if n <= 2 * trim {
+        return Err(IdentificationError::BadInput {
+            what: "record length".into(),
+            reason: format!(
+                "{n} scans; the filters' edge effects need {trim} at each end, so at least {} scans",
+                2 * trim + 1
+            ),
+        });
+    }
+    let valid = trim..n - trim;
+
+    // Per channel: SI, range check on the raw column, deskew, low-pass.
+    let mut range_violations = Vec::new();
+    let mut tmp = vec![0.0; n];
+    let mut scratch = Vec::new();
+    let mut si: [Vec<f64>; CHANNEL_COUNT] = Default::default();
+    for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
+        let column = &raw.columns[col_of[ch.index()]];
+        let mut buf = vec![0.0; n];
+        match raw.units {
+            RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, &mut buf)?,
+            RawUnits::Si => {
+                if let Some(i) = first_non_finite(column) {
+                    return Err(non_finite_error(ch, i, column[i], "si"));
+                }
+                buf.copy_from_slice(column);
+            }
+        }
+        if let Some(v) = range_check::check(ch, column, raw.units, calibration)? {
+            range_violations.push(v);
+        }
+        if let Some(d) = delay {
+            d.apply_into(&buf, &mut tmp)?;
+            std::mem::swap(&mut buf, &mut tmp);
+        }
+        lp.filtfilt_in_place(&mut buf, &mut scratch)?;
+        si[ch.index()] = buf;
+    }
+    let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
+
+    // Kinematics: in place, A becomes the mean and B the difference.
+    let (mut x_m, mut tilt_x_m) = (a_x, b_x);
+    let (mut y_m, mut tilt_y_m) = (a_y, b_y);
+    kinematics::mean_and_difference_in_place(&mut x_m, &mut tilt_x_m)?;
+    kinematics::mean_and_difference_in_place(&mut y_m, &mut tilt_y_m)?;
+
+    // Differentiate, twice, as the paper does.
+    let derive2 = |x: &[f64]| -> Result<(Vec<f64>, Vec<f64>), IdentificationError> {
+        let mut v = vec![0.0; n];
+        let mut a = vec![0.0; n];
+        sg.apply_into(x, &mut v)?;
+        sg.apply_into(&v, &mut a)?;
+        Ok((v, a))
+    };
+    let (vx_m_s, ax_m_s2) = derive2(&x_m)?;
+    let (vy_m_s, ay_m_s2) = derive2(&y_m)?;
+    let housing_ax_m_s2 = {
+        sg.apply_into(&frame_x, &mut tmp)?;
+        let mut a = vec![0.0; n];
+        sg.apply_into(&tmp, &mut a)?;
+        a
+    };
+    let housing_ay_m_s2 = {
+        sg.apply_into(&frame_y, &mut tmp)?;
+        let mut a = vec![0.0; n];
+        sg.apply_into(&tmp, &mut a)?;
+        a
+    };
+
+    let mut fx_n = vec![0.0; n];
+    let mut fy_n = tmp;
+    film_force::eq2_into(
+        &f1,
+        &f2,
+        &f3,
+        &housing_ax_m_s2,
+        &housing_ay_m_s2,
+        mechanics,
+        &mut fx_n,
+        &mut fy_n,
+    )?;
+    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
+
+    // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
+    // non-finite number on.
+    for (name, col) in [
+        ("x_m", &x_m),
+        ("y_m", &y_m),
+        ("tilt_x_m", &tilt_x_m),
+        ("tilt_y_m", &tilt_y_m),
+        ("ax_m_s2", &ax_m_s2),
+        ("ay_m_s2", &ay_m_s2),
+        ("fx_n", &fx_n),
+        ("fy_n", &fy_n),
+        ("temperature_c", &temperature),
+    ] {
+        if let Some(i) = first_non_finite(col) {
+            return Err(IdentificationError::BadInput {
+                what: format!("conditioned `{name}`, sample {i}"),
+                reason: "not finite after conditioning: an input magnitude overflowed".into(),
+            });
+        }
+    }
+
+    let t0 = raw.start_time_s;
+    let t_s = (0..n).map(|i| t0 + i as f64 / fs).collect();
+    Ok(Conditioned {
+        t_s,
+        x_m,
+        y_m,
+        tilt_x_m,
+        tilt_y_m,
+        vx_m_s,
+        vy_m_s,
+        ax_m_s2,
+        ay_m_s2,
+        housing_x_m: frame_x,
+        housing_y_m: frame_y,
+        housing_ax_m_s2,
+        housing_ay_m_s2,
+        fx_n,
+        fy_n,
+        static_force_n,
+        temperature_c: temperature,
+        static_load_n: f3,
+        valid,
+        range_violations,
+    })
+}

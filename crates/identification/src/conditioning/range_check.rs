@@ -1,0 +1,106 @@
+//! Step 2 of Zhou et al. (2004), section 3.1: "all of the data in this file are considered
+//! invalid if an eddy current sensor's output is out of its own linear range".
+//!
+//! The test is exactly [`Calibration::within_linear_range`]: a reading is in range when it
+//! lies strictly inside the calibrated linear range (in volts) by more than half an LSB, so
+//! a sensor clipped at an edge (which reads within half an LSB of it after quantisation)
+//! counts as out of range. Records given in SI are mapped back to volts with the channel's
+//! calibration (`volts = offset + sensitivity * si`) and tested the same way.
+//!
+//! ## Where in the chain
+//! The paper lists its low-pass (step 1) before this check; we check the **raw** samples,
+//! before any filter: a clipped plateau or a single out-of-range spike is what the sensor
+//! said, and a filter would smear it below the threshold. The check is never skipped and is
+//! never silently acted on: [`check`] reports, for a channel, the first offending sample
+//! (index and value), how many samples offend, and the range; [`super::condition`] carries
+//! every violation in [`super::Conditioned::range_violations`] so the estimator refuses the
+//! record ([`super::Conditioned::require_in_range`]).
+//!
+//! All calibrated channels are checked, not only the six eddy-current probes: a clipped
+//! force sensor corrupts eq. 2 just as surely. Each violation names its channel, so a
+//! consumer may decide, for instance, that an out-of-range temperature is only a warning.
+
+use oilfilm_physics::daq::{Calibration, ChannelId};
+
+use super::{first_non_finite, non_finite_error, RangeViolation, RawRecord, RawUnits};
+use crate::IdentificationError;
+
+/// Checks one column of `channel` (in `units`) against its calibrated linear range.
+/// `Ok(None)` when every sample is inside; a non-finite sample is a `BadInput`.
+pub fn check(
+    channel: ChannelId,
+    column: &[f64],
+    units: RawUnits,
+    calibration: &Calibration,
+) -> Result<Option<RangeViolation>, IdentificationError> {
+    if let Some(i) = first_non_finite(column) {
+        return Err(non_finite_error(channel, i, column[i], units.name()));
+    }
+    let c = calibration.channel(channel)?;
+    let [lo_v, hi_v] = c.linear_range_v;
+    let margin = 0.5 * calibration.lsb_v();
+    let (lo, hi) = (lo_v + margin, hi_v - margin);
+    let (offset, sens) = (c.offset_v, c.sensitivity_v_per_unit);
+    if !(sens.is_finite() && sens != 0.0) {
+        return Err(IdentificationError::invalid(
+            format!("calibration.{channel}.sensitivity_v_per_unit"),
+            format!("must be finite and non-zero, got {sens}"),
+        ));
+    }
+    let a = (lo_v - offset) / sens;
+    let b = (hi_v - offset) / sens;
+    let range_si = [a.min(b), a.max(b)];
+
+    // `volts > lo && volts < hi`, as `Calibration::within_linear_range`; the counting loop has
+    // no branch so it vectorises, the index of the first offender is looked up only if needed.
+    let out_of_range = |v: f64| !(v > lo && v < hi);
+    let (count, first) = match units {
+        RawUnits::Volts => {
+            let count = column
+                .iter()
+                .map(|&v| out_of_range(v) as usize)
+                .sum::<usize>();
+            (count, column.iter().position(|&v| out_of_range(v)))
+        }
+        RawUnits::Si => {
+            let to_v = |si: f64| offset + sens * si;
+            let count = column
+                .iter()
+                .map(|&si| out_of_range(to_v(si)) as usize)
+                .sum::<usize>();
+            (count, column.iter().position(|&si| out_of_range(to_v(si))))
+        }
+    };
+    Ok(match first {
+        Some(index) if count > 0 => {
+            let raw = column[index];
+            let value_si = match units {
+                RawUnits::Volts => (raw - offset) / sens,
+                RawUnits::Si => raw,
+            };
+            Some(RangeViolation {
+                channel,
+                index,
+                value_si,
+                range_si,
+                count,
+            })
+        }
+        _ => None,
+    })
+}
+
+/// Checks every column of a record; violations in the record's channel order.
+pub fn check_record(
+    raw: &RawRecord,
+    calibration: &Calibration,
+) -> Result<Vec<RangeViolation>, IdentificationError> {
+    raw.validate_shape()?;
+    let mut out = Vec::new();
+    for (&ch, col) in raw.channels.iter().zip(&raw.columns) {
+        if let Some(v) = check(ch, col, raw.units, calibration)? {
+            out.push(v);
+        }
+    }
+    Ok(out)
+}
