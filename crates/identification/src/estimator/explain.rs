@@ -156,3 +156,13 @@ pub fn ill_conditioned_explanation(svd: &SmallSvd, names: &[&str], lines: &LineA
     }
     text
 }
+
+/// Regressors that do not vary over the window.
+pub fn constant_columns(cols: &[usize], names: &[&str]) -> String {
+    let list: Vec<&str> = cols.iter().map(|&j| names.get(j).copied().unwrap_or("?")).collect();
+    let verb = if list.len() == 1 { "does" } else { "do" };
+    format!(
+        "{} {verb} not vary over the window: that direction is not excited or its probe is dead",
+        list.join(", ")
+    )
+}

@@ -439,6 +439,7 @@ pub(crate) fn analyse_window(
     est.frequencies_hz = lines.merged.clone();
     let names = model.regressor_names();
     let structural = explain::structural_rank(model, &lines);
+    excitation_flags(&mut est.flags, model, &lines);
 
     // 4. Solve.
     let (mean, scale, coef, ginv) = match config.solver {
@@ -493,9 +494,13 @@ pub(crate) fn analyse_window(
                 }
             }
             if est.rank < p {
-                let explanation = match structural {
-                    Some(r) => explain::structural_explanation(model, &lines, r.min(factor.rank), Some(&factor.svd)),
-                    None => explain::dependency(&factor.svd, names),
+                let explanation = if !factor.zero_columns.is_empty() {
+                    explain::constant_columns(&factor.zero_columns, names)
+                } else {
+                    match structural {
+                        Some(r) => explain::structural_explanation(model, &lines, r.min(factor.rank), Some(&factor.svd)),
+                        None => explain::dependency(&factor.svd, names),
+                    }
                 };
                 est.result = Err(Refusal::RankDeficient { rank: est.rank, needed: p, explanation });
                 return est;
@@ -547,39 +552,48 @@ fn assemble(model: ModelOrder, coef: &[f64], se: &[f64]) -> Coefficients {
     }
 }
 
-/// Warnings that do not refuse.
+/// Warnings about the excitation itself (known before solving).
+fn excitation_flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalysis) {
+    let dir = ["x", "y"];
+    let dominated = |d: usize| lines.line_fraction[d] >= explain::LINE_DOMINATED;
+    for d in 0..2 {
+        let l = &lines.lines[d];
+        if model == ModelOrder::Kcm && dominated(d) && l.len() < 2 {
+            out.push(format!(
+                "stiffness and added mass alias at one frequency (K - w^2 M): {} moves at {} only",
+                dir[d],
+                explain::fmt_hz(l)
+            ));
+        }
+        if !dominated(d) && l.is_empty() {
+            out.push(format!(
+                "no excitation line in {}: its coefficients rest on broadband motion (biased if that motion is sensor noise)",
+                dir[d]
+            ));
+        }
+    }
+}
+
+/// Noise fractions below this (60 dB) are at the floor of the spectral estimate.
+const EIV_FLOOR: f64 = 1e-6;
+
+/// Warnings about the solved window that do not refuse it.
 fn flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalysis, c: &Coefficients, data: &[&[f64]], hac: &uncertainty::Hac) {
     let dir = ["x", "y"];
     let dominated = |d: usize| lines.line_fraction[d] >= explain::LINE_DOMINATED;
-    if model == ModelOrder::Kcm {
-        for d in 0..2 {
-            let l = &lines.lines[d];
-            if dominated(d) && l.len() < 2 {
-                out.push(format!(
-                    "stiffness and added mass alias at one frequency (K - w^2 M): {} moves at {} only",
-                    dir[d],
-                    explain::fmt_hz(l)
-                ));
-            }
-        }
-    }
     for d in 0..2 {
         if !dominated(d) {
-            if lines.lines[d].is_empty() {
-                out.push(format!(
-                    "no excitation line in {}: its coefficients rest on broadband motion (biased if that motion is sensor noise)",
-                    dir[d]
-                ));
-            }
             continue;
         }
         // Errors in variables: noise power fraction eta in a regressor attenuates its
-        // coefficient by about eta (relative).
+        // coefficient by about eta (relative). Flag when that is 1 % or more, or when it exceeds
+        // half the standard error; fractions below 1e-6 (60 dB) are at the floor of the
+        // spectral estimate and say nothing.
         let eta_x = (1.0 - lines.line_fraction[d]).max(0.0);
         let eta_v = lines.velocity_noise_fraction[d].max(0.0);
         let (kd, kse) = (c.stiffness_n_m[(d, d)], c.stiffness_se[(d, d)]);
         let (dd, dse) = (c.damping_n_s_m[(d, d)], c.damping_se[(d, d)]);
-        if eta_x.is_finite() && (eta_x > 0.01 || eta_x * kd.abs() > 0.5 * kse) {
+        if eta_x.is_finite() && eta_x > EIV_FLOOR && (eta_x > 0.01 || eta_x * kd.abs() > 0.5 * kse) {
             out.push(format!(
                 "stiffness may be biased by displacement noise (errors in variables): {v} has {:.1} dB SNR at its lines, attenuation ≈ {:.2} % of k{v}{v} against a standard error of {:.2} %",
                 -10.0 * eta_x.log10(),
@@ -588,7 +602,7 @@ fn flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalysis, c: &Coe
                 v = dir[d]
             ));
         }
-        if eta_v.is_finite() && (eta_v > 0.01 || eta_v * dd.abs() > 0.5 * dse) {
+        if eta_v.is_finite() && eta_v > EIV_FLOOR && (eta_v > 0.01 || eta_v * dd.abs() > 0.5 * dse) {
             out.push(format!(
                 "damping from differentiated noisy displacement may be biased: {v}' has {:.1} dB SNR at the lines, errors-in-variables attenuation ≈ {:.2} % of d{v}{v} against a standard error of {:.2} %",
                 -10.0 * eta_v.log10(),

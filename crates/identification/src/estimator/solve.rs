@@ -26,6 +26,8 @@ pub struct ScaledFactor {
     pub mean: Vec<f64>,
     /// Norms of the centred regressor columns (1 for an all-zero column).
     pub scale: Vec<f64>,
+    /// Regressors that do not vary at all (zero centred norm).
+    pub zero_columns: Vec<usize>,
     /// Scaled factor `R D⁻¹`, row-major `p × p`.
     pub rs: Vec<f64>,
     /// `Qᵀb`, row-major `p × m`.
@@ -59,8 +61,10 @@ impl ScaledFactor {
         }
         let m = q - p;
         let r = &summary.r;
-        let scale: Vec<f64> = (0..p)
-            .map(|j| r.column_norm(j))
+        let norms: Vec<f64> = (0..p).map(|j| r.column_norm(j)).collect();
+        let zero_columns: Vec<usize> = (0..p).filter(|&j| norms[j] == 0.0).collect();
+        let scale: Vec<f64> = norms
+            .into_iter()
             .map(|d| if d > 0.0 && d.is_finite() { d } else { 1.0 }).collect();
         let mut rs = vec![0.0; p * p];
         for i in 0..p {
@@ -89,7 +93,7 @@ impl ScaledFactor {
         let rtol = (n.max(p) as f64) * f64::EPSILON;
         let rank = svd.rank(rtol);
         let condition = svd.condition();
-        Some(Self { p, m, mean: summary.mean.clone(), scale, rs, qtb, rss, svd, condition, rank })
+        Some(Self { p, m, mean: summary.mean.clone(), scale, zero_columns, rs, qtb, rss, svd, condition, rank })
     }
 
     /// Solve with QR back-substitution or the SVD pseudo-inverse. `None` if rank-deficient.

@@ -11,7 +11,7 @@
 //! **Method.** Welch-averaged periodogram (P. D. Welch, IEEE Trans. Audio Electroacoust. 15
 //! (1967) 70–73) with segments of the largest power of two not exceeding the window (at most
 //! 2¹⁶), 50 % overlap, a 4-term Blackman–Harris taper (sidelobes below −92 dB, main lobe ±4
-//! bins: F. J. Harris, Proc. IEEE 66 (1978) 51–83), each segment's mean removed. Two real
+//! bins: F. J. Harris, Proc. IEEE 66 (1978) 51–83), each segment's taper-weighted mean removed. Two real
 //! signals share one complex radix-2 FFT (`z = x + i y`). A bin is a line when it is the
 //! largest within ±4 bins, within 70 dB of the strongest bin, and at least 30 dB above the
 //! median of its ±64-bin neighbourhood (a local floor, so low-pass coloured noise near DC is not
@@ -127,9 +127,12 @@ fn welch_pair(a: &[f64], b: &[f64], seg: usize) -> (Vec<f64>, Vec<f64>) {
     let (mut pa, mut pb) = (vec![0.0; nb], vec![0.0; nb]);
     let mut re = vec![0.0; seg];
     let mut im = vec![0.0; seg];
+    // Taper-weighted means: removing them leaves the tapered segment with exactly zero DC
+    // (a plain mean would leave a small constant that leaks into the lowest bins).
+    let wsum: f64 = taper.iter().sum();
     for &s0 in &starts {
-        let ma = a[s0..s0 + seg].iter().sum::<f64>() / seg as f64;
-        let mb = b[s0..s0 + seg].iter().sum::<f64>() / seg as f64;
+        let ma = a[s0..s0 + seg].iter().zip(&taper).map(|(v, w)| v * w).sum::<f64>() / wsum;
+        let mb = b[s0..s0 + seg].iter().zip(&taper).map(|(v, w)| v * w).sum::<f64>() / wsum;
         for k in 0..seg {
             re[k] = (a[s0 + k] - ma) * taper[k];
             im[k] = (b[s0 + k] - mb) * taper[k];
