@@ -60,7 +60,7 @@ mod explain;
 pub mod frequency;
 pub mod normal_equations;
 pub mod qr;
-mod solve;
+pub mod solve;
 pub mod spectrum;
 pub mod streaming;
 pub mod svd;
@@ -76,7 +76,7 @@ use serde::{Deserialize, Serialize};
 use crate::IdentificationError;
 
 pub use frequency::{frequency_domain, Axis, FrequencyEstimate, LinePhasors};
-pub use streaming::{Sample, StreamingEstimator};
+pub use streaming::{Sample, StreamingEstimator, WindowFactors};
 
 use solve::ScaledFactor;
 use spectrum::LineAnalysis;

@@ -11,6 +11,8 @@
 //! combinations of each suffix), so each block is combined O(1) times on average however many
 //! windows it belongs to. The normal equations are never formed.
 //!
+//! [`WindowFactors`] is that least-squares stage on its own (rows in, window factors out).
+//!
 //! The rest of a window's analysis (line search, HAC standard errors, refusals, flags) needs
 //! the samples themselves, so the last `window` samples are kept in a mirrored ring buffer
 //! (each sample stored twice, `window` apart, so every window is one contiguous slice) and the
@@ -83,6 +85,121 @@ fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
+/// The least-squares stage of streaming on its own: rows in, the triangular factor of every
+/// completed window out, reusing the factors of `gcd(window, hop)`-row blocks.
+#[derive(Debug, Clone)]
+pub struct WindowFactors {
+    window: usize,
+    hop: usize,
+    block: usize,
+    cols: usize,
+    /// Rows received.
+    count: usize,
+    /// Rows of the current, incomplete block (column-wise).
+    partial: Vec<Vec<f64>>,
+    queue: Queue,
+    /// End (exclusive) of the next window to emit.
+    next_end: usize,
+}
+
+impl WindowFactors {
+    /// `cols` columns per row (regressors then right-hand sides).
+    pub fn new(window: usize, hop: usize, cols: usize) -> Result<Self, IdentificationError> {
+        if window == 0 {
+            return Err(IdentificationError::invalid("window", "must be at least 1 sample"));
+        }
+        if hop == 0 {
+            return Err(IdentificationError::invalid("hop", "must be at least 1 sample (0 would never advance)"));
+        }
+        if cols == 0 {
+            return Err(IdentificationError::invalid("cols", "need at least one column"));
+        }
+        let block = gcd(window, hop);
+        Ok(Self {
+            window,
+            hop,
+            block,
+            cols,
+            count: 0,
+            partial: vec![Vec::with_capacity(block); cols],
+            queue: Queue::new(cols),
+            next_end: window,
+        })
+    }
+
+    /// Block length, `gcd(window, hop)`.
+    pub fn block_len(&self) -> usize {
+        self.block
+    }
+
+    /// Rows received so far.
+    pub fn rows(&self) -> usize {
+        self.count
+    }
+
+    fn complete_block(&mut self, summary: BlockSummary, out: &mut Vec<(usize, BlockSummary)>) {
+        self.count += self.block;
+        self.queue.push(summary);
+        if self.count == self.next_end {
+            out.push((self.next_end - self.window, self.queue.combined()));
+            self.next_end += self.hop;
+        }
+        // Drop blocks that end before the next window starts.
+        let first_needed = (self.next_end - self.window) / self.block;
+        let pushed = self.count / self.block;
+        while self.queue.len > 0 && pushed - self.queue.len < first_needed {
+            self.queue.pop();
+        }
+    }
+
+    /// Push rows given as columns of one length (the shortest is used). Returns
+    /// `(window start, window factor)` for every window completed.
+    pub fn push_rows(&mut self, cols: &[&[f64]]) -> Vec<(usize, BlockSummary)> {
+        let mut out = Vec::new();
+        if cols.len() != self.cols {
+            debug_assert_eq!(cols.len(), self.cols, "column count");
+            return out;
+        }
+        let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
+        let g = self.block;
+        let mut i = 0;
+        while i < n {
+            let have = self.partial[0].len();
+            if have == 0 && n - i >= g {
+                // A whole block straight from the caller's slices, no copy.
+                let view: Vec<&[f64]> = cols.iter().map(|c| &c[i..i + g]).collect();
+                self.complete_block(BlockSummary::from_columns(&view), &mut out);
+                i += g;
+                continue;
+            }
+            let take = (g - have).min(n - i);
+            for (dst, src) in self.partial.iter_mut().zip(cols) {
+                dst.extend_from_slice(&src[i..i + take]);
+            }
+            i += take;
+            if self.partial[0].len() == g {
+                let view: Vec<&[f64]> = self.partial.iter().map(|c| c.as_slice()).collect();
+                let summary = BlockSummary::from_columns(&view);
+                for c in &mut self.partial {
+                    c.clear();
+                }
+                self.complete_block(summary, &mut out);
+            }
+        }
+        out
+    }
+
+    /// Push one row.
+    pub fn push_row(&mut self, row: &[f64]) -> Option<(usize, BlockSummary)> {
+        if row.len() != self.cols {
+            debug_assert_eq!(row.len(), self.cols, "column count");
+            return None;
+        }
+        let view: Vec<&[f64]> = row.iter().map(std::slice::from_ref).collect();
+        self.push_rows(&view).pop()
+    }
+}
+
 /// Streaming form of [`super::estimate_windows`].
 #[derive(Debug, Clone)]
 pub struct StreamingEstimator {
@@ -90,11 +207,8 @@ pub struct StreamingEstimator {
     /// Design columns (regressors, then fx, fy), each a mirrored ring of `2 * window`.
     ring: Vec<Vec<f64>>,
     names: Vec<&'static str>,
-    block: usize,
     count: usize,
-    queue: Queue,
-    /// End (exclusive) of the next window to emit.
-    next_end: usize,
+    factors: WindowFactors,
 }
 
 impl StreamingEstimator {
@@ -108,8 +222,8 @@ impl StreamingEstimator {
         let q = names.len();
         let w = config.window;
         let ring = vec![vec![0.0; 2 * w]; q];
-        let block = gcd(w, config.hop);
-        Ok(Self { next_end: w, config, ring, names, block, count: 0, queue: Queue::new(q) })
+        let factors = WindowFactors::new(w, config.hop, q)?;
+        Ok(Self { config, ring, names, count: 0, factors })
     }
 
     /// The configuration.
@@ -124,42 +238,24 @@ impl StreamingEstimator {
 
     /// Block length used for factor reuse, `gcd(window, hop)`.
     pub fn block_len(&self) -> usize {
-        self.block
+        self.factors.block_len()
     }
 
     /// Push one sample; returns a window estimate when one completes.
     pub fn push(&mut self, sample: &Sample) -> Option<WindowEstimate> {
         let w = self.config.window;
-        let values: [f64; 8] = [sample.x_m, sample.y_m, sample.vx_m_s, sample.vy_m_s, sample.ax_m_s2, sample.ay_m_s2, sample.fx_n, sample.fy_n];
-        let pick: &[usize] = match self.config.model {
-            ModelOrder::Kc => &[0, 1, 2, 3, 6, 7],
-            ModelOrder::Kcm => &[0, 1, 2, 3, 4, 5, 6, 7],
+        let all: [f64; 8] = [sample.x_m, sample.y_m, sample.vx_m_s, sample.vy_m_s, sample.ax_m_s2, sample.ay_m_s2, sample.fx_n, sample.fy_n];
+        let row: Vec<f64> = match self.config.model {
+            ModelOrder::Kc => vec![all[0], all[1], all[2], all[3], all[6], all[7]],
+            ModelOrder::Kcm => all.to_vec(),
         };
         let pos = self.count % w;
-        for (col, &src) in self.ring.iter_mut().zip(pick) {
-            col[pos] = values[src];
-            col[pos + w] = values[src];
+        for (col, &v) in self.ring.iter_mut().zip(&row) {
+            col[pos] = v;
+            col[pos + w] = v;
         }
         self.count += 1;
-        let g = self.block;
-        if self.count % g == 0 {
-            // Block [count - g, count): aligned to g, and g divides w, so it does not wrap.
-            let s = (self.count - g) % w;
-            let cols: Vec<&[f64]> = self.ring.iter().map(|c| &c[s..s + g]).collect();
-            self.queue.push(BlockSummary::from_columns(&cols));
-        }
-        // Drop blocks that end before the next window starts.
-        let next_start_block = (self.next_end - w) / g;
-        let pushed = self.count / g;
-        while self.queue.len > 0 && pushed - self.queue.len < next_start_block {
-            self.queue.pop();
-        }
-        if self.count < self.next_end {
-            return None;
-        }
-        let start = self.next_end - w;
-        self.next_end += self.config.hop;
-        let summary = self.queue.combined();
+        let (start, summary) = self.factors.push_row(&row)?;
         let s = start % w;
         let cols: Vec<(&'static str, &[f64])> =
             self.names.iter().zip(&self.ring).map(|(name, c)| (*name, &c[s..s + w])).collect();
