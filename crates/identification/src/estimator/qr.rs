@@ -87,32 +87,16 @@ impl Triangle {
             debug_assert!(rows == 0 || block.len() == rows * q, "block size mismatch");
             return;
         }
-        for j in 0..q {
-            let (head, tail) = block.split_at_mut((j + 1) * rows);
-            let v = &mut head[j * rows..];
-            let sigma = dot(v, v);
-            if sigma == 0.0 {
-                continue; // column already zero below the diagonal: identity reflector
-            }
-            let alpha = self.r[j * q + j];
-            let norm = alpha.hypot(sigma.sqrt());
-            // beta = -sign(alpha) * norm keeps alpha - beta free of cancellation.
-            let beta = if alpha > 0.0 { -norm } else { norm };
-            let denom = alpha - beta;
-            let inv = 1.0 / denom;
-            for x in v.iter_mut() {
-                *x *= inv;
-            }
-            let tau = -denom / beta;
-            self.r[j * q + j] = beta;
-            for k in (j + 1)..q {
-                let ck = &mut tail[(k - j - 1) * rows..(k - j) * rows];
-                let w = self.r[j * q + k] + dot(v, ck);
-                let tw = tau * w;
-                self.r[j * q + k] -= tw;
-                axpy(-tw, v, ck);
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the features, which was checked on the line above.
+                unsafe { absorb_avx2_fma(&mut self.r, q, block, rows) };
+                return;
             }
         }
+        absorb_kernel::<false>(&mut self.r, q, block, rows);
     }
 
     /// Stack another factor below this one and re-triangularise: afterwards `self` is the
@@ -151,32 +135,72 @@ impl Triangle {
     }
 }
 
-/// Dot product with eight independent accumulators, so the compiler can keep several SIMD
-/// lanes busy without reassociating a single sum.
-#[inline]
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+/// The Householder sweep compiled for AVX2 and FMA (selected at run time).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn absorb_avx2_fma(r: &mut [f64], q: usize, block: &mut [f64], rows: usize) {
+    absorb_kernel::<true>(r, q, block, rows);
+}
+
+/// One Householder reflector per column `j` annihilates `block[:, j]` into `r[j][j]`; see
+/// [`Triangle::absorb`]. `FMA` selects fused multiply-adds (only where the CPU has them).
+#[inline(always)]
+fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], rows: usize) {
+    for j in 0..q {
+        let (head, tail) = block.split_at_mut((j + 1) * rows);
+        let v = &mut head[j * rows..];
+        let sigma = dot_k::<FMA>(v, v);
+        if sigma == 0.0 {
+            continue; // column already zero below the diagonal: identity reflector
+        }
+        let alpha = r[j * q + j];
+        let norm = alpha.hypot(sigma.sqrt());
+        // beta = -sign(alpha) * norm keeps alpha - beta free of cancellation.
+        let beta = if alpha > 0.0 { -norm } else { norm };
+        let denom = alpha - beta;
+        let inv = 1.0 / denom;
+        for x in v.iter_mut() {
+            *x *= inv;
+        }
+        let tau = -denom / beta;
+        r[j * q + j] = beta;
+        for k in (j + 1)..q {
+            let ck = &mut tail[(k - j - 1) * rows..(k - j) * rows];
+            let w = r[j * q + k] + dot_k::<FMA>(v, ck);
+            let tw = tau * w;
+            r[j * q + k] -= tw;
+            axpy_k::<FMA>(-tw, v, ck);
+        }
+    }
+}
+
+#[inline(always)]
+fn dot_k<const FMA: bool>(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
-    let mut acc = [0.0f64; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
+    let mut acc = [0.0f64; 16];
+    let mut ca = a.chunks_exact(16);
+    let mut cb = b.chunks_exact(16);
     for (xa, xb) in (&mut ca).zip(&mut cb) {
-        for l in 0..8 {
-            acc[l] += xa[l] * xb[l];
+        for l in 0..16 {
+            acc[l] = if FMA { xa[l].mul_add(xb[l], acc[l]) } else { acc[l] + xa[l] * xb[l] };
         }
     }
     let mut tail = 0.0;
     for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
         tail += x * y;
     }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    let mut s = [0.0f64; 4];
+    for l in 0..4 {
+        s[l] = (acc[l] + acc[l + 4]) + (acc[l + 8] + acc[l + 12]);
+    }
+    ((s[0] + s[2]) + (s[1] + s[3])) + tail
 }
 
-/// `y += alpha * x`.
-#[inline]
-pub fn axpy(alpha: f64, x: &[f64], y: &mut [f64]) {
+#[inline(always)]
+fn axpy_k<const FMA: bool>(alpha: f64, x: &[f64], y: &mut [f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
-        *yi += alpha * xi;
+        *yi = if FMA { alpha.mul_add(*xi, *yi) } else { *yi + alpha * xi };
     }
 }
 

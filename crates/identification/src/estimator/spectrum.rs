@@ -60,11 +60,27 @@ impl LineAnalysis {
     }
 }
 
+/// Twiddle factors `exp(-2πik/n)`, `k < n/2`, for [`fft_with`].
+pub fn twiddles(n: usize) -> (Vec<f64>, Vec<f64>) {
+    (0..n / 2)
+        .map(|k| {
+            let ang = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
+            (ang.cos(), ang.sin())
+        })
+        .unzip()
+}
+
 /// In-place iterative radix-2 complex FFT (decimation in time). `re.len()` must be a power of
 /// two equal to `im.len()`; otherwise nothing is done.
 pub fn fft(re: &mut [f64], im: &mut [f64]) {
+    let (tc, ts) = twiddles(re.len());
+    fft_with(re, im, &tc, &ts);
+}
+
+/// [`fft`] with precomputed [`twiddles`] of the same length.
+pub fn fft_with(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
     let n = re.len();
-    if n < 2 || !n.is_power_of_two() || im.len() != n {
+    if n < 2 || !n.is_power_of_two() || im.len() != n || tc.len() != n / 2 || ts.len() != n / 2 {
         return;
     }
     let bits = n.trailing_zeros();
@@ -75,14 +91,7 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
             im.swap(i, j);
         }
     }
-    // Twiddles for the largest stage; smaller stages stride through them.
-    let half = n / 2;
-    let (tc, ts): (Vec<f64>, Vec<f64>) = (0..half)
-        .map(|k| {
-            let ang = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
-            (ang.cos(), ang.sin())
-        })
-        .unzip();
+    // Twiddles are those of the largest stage; smaller stages stride through them.
     let mut len = 2;
     while len <= n {
         let step = n / len;
@@ -103,8 +112,30 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
     }
 }
 
+/// Per-segment-length tables shared by the Welch passes of one window.
+struct Tables {
+    taper: Vec<f64>,
+    tc: Vec<f64>,
+    ts: Vec<f64>,
+}
+
+impl Tables {
+    fn new(seg: usize) -> Self {
+        let taper = (0..seg)
+            .map(|k| {
+                let x = 2.0 * std::f64::consts::PI * k as f64 / seg as f64;
+                0.35875 - 0.48829 * x.cos() + 0.14128 * (2.0 * x).cos() - 0.01168 * (3.0 * x).cos()
+            })
+            .collect();
+        let (tc, ts) = twiddles(seg);
+        Self { taper, tc, ts }
+    }
+}
+
 /// Welch power spectra (bins `0..=N/2`) of two real signals computed together.
-fn welch_pair(a: &[f64], b: &[f64], seg: usize) -> (Vec<f64>, Vec<f64>) {
+fn welch_pair(a: &[f64], b: &[f64], tables: &Tables) -> (Vec<f64>, Vec<f64>) {
+    let seg = tables.taper.len();
+    let taper = &tables.taper;
     let n = a.len().min(b.len());
     let mut starts = Vec::new();
     let mut s = 0;
@@ -117,12 +148,6 @@ fn welch_pair(a: &[f64], b: &[f64], seg: usize) -> (Vec<f64>, Vec<f64>) {
             starts.push(n - seg);
         }
     }
-    let taper: Vec<f64> = (0..seg)
-        .map(|k| {
-            let x = 2.0 * std::f64::consts::PI * k as f64 / seg as f64;
-            0.35875 - 0.48829 * x.cos() + 0.14128 * (2.0 * x).cos() - 0.01168 * (3.0 * x).cos()
-        })
-        .collect();
     let nb = seg / 2 + 1;
     let (mut pa, mut pb) = (vec![0.0; nb], vec![0.0; nb]);
     let mut re = vec![0.0; seg];
@@ -131,13 +156,13 @@ fn welch_pair(a: &[f64], b: &[f64], seg: usize) -> (Vec<f64>, Vec<f64>) {
     // (a plain mean would leave a small constant that leaks into the lowest bins).
     let wsum: f64 = taper.iter().sum();
     for &s0 in &starts {
-        let ma = a[s0..s0 + seg].iter().zip(&taper).map(|(v, w)| v * w).sum::<f64>() / wsum;
-        let mb = b[s0..s0 + seg].iter().zip(&taper).map(|(v, w)| v * w).sum::<f64>() / wsum;
+        let ma = a[s0..s0 + seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
+        let mb = b[s0..s0 + seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
         for k in 0..seg {
             re[k] = (a[s0 + k] - ma) * taper[k];
             im[k] = (b[s0 + k] - mb) * taper[k];
         }
-        fft(&mut re, &mut im);
+        fft_with(&mut re, &mut im, &tables.tc, &tables.ts);
         for k in 0..nb {
             let kn = (seg - k) % seg;
             // X_k = (Z_k + conj Z_{N-k}) / 2, Y_k = (Z_k - conj Z_{N-k}) / (2i).
@@ -233,8 +258,9 @@ pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64
     }
     let seg = (1usize << (usize::BITS - 1 - n.leading_zeros())).min(MAX_SEGMENT);
     let df = sample_rate_hz / seg as f64;
-    let (px, py) = welch_pair(&x[..n], &y[..n], seg);
-    let (pvx, pvy) = welch_pair(&vx[..n], &vy[..n], seg);
+    let tables = Tables::new(seg);
+    let (px, py) = welch_pair(&x[..n], &y[..n], &tables);
+    let (pvx, pvy) = welch_pair(&vx[..n], &vy[..n], &tables);
     let bx = find_lines(&px);
     let by = find_lines(&py);
     let line_fraction = [fraction_in(&px, &bx), fraction_in(&py, &by)];

@@ -117,17 +117,21 @@ pub fn newey_west(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: 
 /// Least-squares VAR(1) coefficient `Â` (row-major `p × p`) of the scores, singular values
 /// capped at [`RHO_MAX`]; zero if the lagged scores are degenerate.
 fn var1(g: &[f64], n: usize, p: usize) -> Vec<f64> {
-    let mut sxx = nalgebra::DMatrix::<f64>::zeros(p, p);
-    let mut syx = nalgebra::DMatrix::<f64>::zeros(p, p);
+    let mut xx = vec![0.0; p * p];
+    let mut yx = vec![0.0; p * p];
     for t in 1..n {
         let (prev, cur) = (&g[(t - 1) * p..t * p], &g[t * p..(t + 1) * p]);
         for i in 0..p {
+            let (pi, ci) = (prev[i], cur[i]);
+            let (rx, ry) = (&mut xx[i * p..(i + 1) * p], &mut yx[i * p..(i + 1) * p]);
             for j in 0..p {
-                sxx[(i, j)] += prev[i] * prev[j];
-                syx[(i, j)] += cur[i] * prev[j];
+                rx[j] += pi * prev[j];
+                ry[j] += ci * prev[j];
             }
         }
     }
+    let sxx = nalgebra::DMatrix::from_row_slice(p, p, &xx);
+    let syx = nalgebra::DMatrix::from_row_slice(p, p, &yx);
     let zero = vec![0.0; p * p];
     let Some(chol) = sxx.cholesky() else { return zero };
     // Â = Syx Sxx⁻¹  ⇔  Sxx Âᵀ = Syxᵀ.
