@@ -43,9 +43,7 @@ pub fn solve(cols: &[&[f64]], p: usize) -> NormalSolution {
     let mut mean = vec![0.0; q];
     for (j, c) in cols.iter().enumerate() {
         if n > 0 {
-            let shift = c[0];
-            let s: f64 = c[..n].iter().map(|v| v - shift).sum();
-            mean[j] = shift + s / n as f64;
+            mean[j] = super::window::mean(&c[..n]);
         }
     }
     // Sums of products over the window (eq. 6): the full q × q cross-product matrix.

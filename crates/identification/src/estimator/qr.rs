@@ -164,12 +164,72 @@ fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], ro
         }
         let tau = -denom / beta;
         r[j * q + j] = beta;
-        for k in (j + 1)..q {
-            let ck = &mut tail[(k - j - 1) * rows..(k - j) * rows];
-            let w = r[j * q + k] + dot_k::<FMA>(v, ck);
-            let tw = tau * w;
-            r[j * q + k] -= tw;
-            axpy_k::<FMA>(-tw, v, ck);
+        // Trailing columns two at a time: one pass over v serves both dot products and both
+        // updates (fewer loads per flop than column by column).
+        let v: &[f64] = v;
+        let mut cols = tail.chunks_exact_mut(rows);
+        let mut k = j + 1;
+        loop {
+            match (cols.next(), cols.next()) {
+                (Some(c1), Some(c2)) => {
+                    let (d1, d2) = dot2_k::<FMA>(v, c1, c2);
+                    let tw1 = tau * (r[j * q + k] + d1);
+                    let tw2 = tau * (r[j * q + k + 1] + d2);
+                    r[j * q + k] -= tw1;
+                    r[j * q + k + 1] -= tw2;
+                    axpy2_k::<FMA>(-tw1, -tw2, v, c1, c2);
+                    k += 2;
+                }
+                (Some(c1), None) => {
+                    let tw = tau * (r[j * q + k] + dot_k::<FMA>(v, c1));
+                    r[j * q + k] -= tw;
+                    axpy_k::<FMA>(-tw, v, c1);
+                    break;
+                }
+                _ => break,
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn dot2_k<const FMA: bool>(v: &[f64], a: &[f64], b: &[f64]) -> (f64, f64) {
+    let n = v.len().min(a.len()).min(b.len());
+    let (v, a, b) = (&v[..n], &a[..n], &b[..n]);
+    let mut s1 = [0.0f64; 8];
+    let mut s2 = [0.0f64; 8];
+    let mut cv = v.chunks_exact(8);
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for ((xv, xa), xb) in (&mut cv).zip(&mut ca).zip(&mut cb) {
+        for l in 0..8 {
+            if FMA {
+                s1[l] = xv[l].mul_add(xa[l], s1[l]);
+                s2[l] = xv[l].mul_add(xb[l], s2[l]);
+            } else {
+                s1[l] += xv[l] * xa[l];
+                s2[l] += xv[l] * xb[l];
+            }
+        }
+    }
+    let (mut t1, mut t2) = (0.0, 0.0);
+    for ((x, y), z) in cv.remainder().iter().zip(ca.remainder()).zip(cb.remainder()) {
+        t1 += x * y;
+        t2 += x * z;
+    }
+    let fold = |s: [f64; 8]| ((s[0] + s[4]) + (s[1] + s[5])) + ((s[2] + s[6]) + (s[3] + s[7]));
+    (fold(s1) + t1, fold(s2) + t2)
+}
+
+#[inline(always)]
+fn axpy2_k<const FMA: bool>(alpha: f64, beta: f64, x: &[f64], a: &mut [f64], b: &mut [f64]) {
+    for ((xi, ai), bi) in x.iter().zip(a.iter_mut()).zip(b.iter_mut()) {
+        if FMA {
+            *ai = alpha.mul_add(*xi, *ai);
+            *bi = beta.mul_add(*xi, *bi);
+        } else {
+            *ai += alpha * xi;
+            *bi += beta * xi;
         }
     }
 }

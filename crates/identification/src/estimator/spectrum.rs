@@ -60,14 +60,22 @@ impl LineAnalysis {
     }
 }
 
-/// Twiddle factors `exp(-2πik/n)`, `k < n/2`, for [`fft_with`].
+/// Twiddle factors of every stage of an `n`-point radix-2 FFT, concatenated: the stage of
+/// length `len` uses `exp(-2πik/len)`, `k < len/2`, stored from offset `len/2 - 1` (so each
+/// stage reads its factors contiguously). `n - 1` entries of each of cos and sin.
 pub fn twiddles(n: usize) -> (Vec<f64>, Vec<f64>) {
-    (0..n / 2)
-        .map(|k| {
-            let ang = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
-            (ang.cos(), ang.sin())
-        })
-        .unzip()
+    let mut tc = Vec::with_capacity(n.saturating_sub(1));
+    let mut ts = Vec::with_capacity(n.saturating_sub(1));
+    let mut len = 2;
+    while len <= n {
+        for k in 0..len / 2 {
+            let ang = -2.0 * std::f64::consts::PI * k as f64 / len as f64;
+            tc.push(ang.cos());
+            ts.push(ang.sin());
+        }
+        len *= 2;
+    }
+    (tc, ts)
 }
 
 /// In-place iterative radix-2 complex FFT (decimation in time). `re.len()` must be a power of
@@ -80,9 +88,29 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
 /// [`fft`] with precomputed [`twiddles`] of the same length.
 pub fn fft_with(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
     let n = re.len();
-    if n < 2 || !n.is_power_of_two() || im.len() != n || tc.len() != n / 2 || ts.len() != n / 2 {
+    if n < 2 || !n.is_power_of_two() || im.len() != n || tc.len() != n - 1 || ts.len() != n - 1 {
         return;
     }
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU has the features the function is compiled for (checked above).
+            unsafe { fft_avx2(re, im, tc, ts) };
+            return;
+        }
+    }
+    fft_kernel(re, im, tc, ts);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn fft_avx2(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
+    fft_kernel(re, im, tc, ts);
+}
+
+#[inline(always)]
+fn fft_kernel(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
+    let n = re.len();
     let bits = n.trailing_zeros();
     for i in 0..n {
         let j = i.reverse_bits() >> (usize::BITS - bits);
@@ -91,21 +119,22 @@ pub fn fft_with(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
             im.swap(i, j);
         }
     }
-    // Twiddles are those of the largest stage; smaller stages stride through them.
     let mut len = 2;
     while len <= n {
-        let step = n / len;
         let h = len / 2;
-        for start in (0..n).step_by(len) {
-            for k in 0..h {
-                let (wr, wi) = (tc[k * step], ts[k * step]);
-                let (a, b) = (start + k, start + k + h);
-                let xr = re[b] * wr - im[b] * wi;
-                let xi = re[b] * wi + im[b] * wr;
-                re[b] = re[a] - xr;
-                im[b] = im[a] - xi;
-                re[a] += xr;
-                im[a] += xi;
+        let (wc, ws) = (&tc[h - 1..len - 1], &ts[h - 1..len - 1]);
+        for (rblk, iblk) in re.chunks_exact_mut(len).zip(im.chunks_exact_mut(len)) {
+            let (ra, rb) = rblk.split_at_mut(h);
+            let (ia, ib) = iblk.split_at_mut(h);
+            for (((((ar, ai), br), bi), wr), wi) in
+                ra.iter_mut().zip(ia.iter_mut()).zip(rb.iter_mut()).zip(ib.iter_mut()).zip(wc).zip(ws)
+            {
+                let xr = *br * wr - *bi * wi;
+                let xi = *br * wi + *bi * wr;
+                *br = *ar - xr;
+                *bi = *ai - xi;
+                *ar += xr;
+                *ai += xi;
             }
         }
         len *= 2;
@@ -119,7 +148,27 @@ struct Tables {
     ts: Vec<f64>,
 }
 
+thread_local! {
+    /// The tables of the last segment length used on this thread: every window of a run has
+    /// the same length, and building them costs ~5 trigonometric calls per sample.
+    static TABLES: std::cell::RefCell<Option<std::rc::Rc<Tables>>> = const { std::cell::RefCell::new(None) };
+}
+
 impl Tables {
+    fn cached(seg: usize) -> std::rc::Rc<Tables> {
+        TABLES.with(|cell| {
+            let mut slot = cell.borrow_mut();
+            match slot.as_ref() {
+                Some(t) if t.taper.len() == seg => t.clone(),
+                _ => {
+                    let t = std::rc::Rc::new(Tables::new(seg));
+                    *slot = Some(t.clone());
+                    t
+                }
+            }
+        })
+    }
+
     fn new(seg: usize) -> Self {
         let taper = (0..seg)
             .map(|k| {
@@ -258,7 +307,7 @@ pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64
     }
     let seg = (1usize << (usize::BITS - 1 - n.leading_zeros())).min(MAX_SEGMENT);
     let df = sample_rate_hz / seg as f64;
-    let tables = Tables::new(seg);
+    let tables = Tables::cached(seg);
     let (px, py) = welch_pair(&x[..n], &y[..n], &tables);
     let (pvx, pvy) = welch_pair(&vx[..n], &vy[..n], &tables);
     let bx = find_lines(&px);

@@ -55,58 +55,72 @@ pub struct Hac {
 /// singular values of the prewhitening VAR.
 const RHO_MAX: f64 = 0.97;
 
-/// HAC standard errors. `cols` are the window's regressors (`p`) then right-hand sides (`m`);
-/// `mean`, `scale` as in the factor; `coef[j * m + k]` the solution; `ginv_s` the inverse Gram
-/// of the scaled regressors.
+/// HAC standard errors. `cols` are the window's regressors (`p`, 1 to 8) then right-hand sides
+/// (`m`); `mean`, `scale` as in the factor; `coef[j * m + k]` the solution; `ginv_s` the inverse
+/// Gram of the scaled regressors. Outside those sizes every standard error is NaN.
 pub fn newey_west(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64]) -> Hac {
+    match p {
+        1 => nw::<1>(cols, mean, scale, coef, ginv_s),
+        2 => nw::<2>(cols, mean, scale, coef, ginv_s),
+        3 => nw::<3>(cols, mean, scale, coef, ginv_s),
+        4 => nw::<4>(cols, mean, scale, coef, ginv_s),
+        5 => nw::<5>(cols, mean, scale, coef, ginv_s),
+        6 => nw::<6>(cols, mean, scale, coef, ginv_s),
+        7 => nw::<7>(cols, mean, scale, coef, ginv_s),
+        8 => nw::<8>(cols, mean, scale, coef, ginv_s),
+        _ => {
+            let m = cols.len().saturating_sub(p);
+            Hac { se: vec![f64::NAN; p * m], residual_rms: vec![f64::NAN; m], lag: vec![0; m], lag_capped: false }
+        }
+    }
+}
+
+/// [`newey_west`] for `P` regressors: fixed-size rows so the per-sample loops unroll.
+fn nw<const P: usize>(cols: &[&[f64]], mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64]) -> Hac {
     let q = cols.len();
-    let m = q.saturating_sub(p);
+    let m = q.saturating_sub(P);
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
-    let mut out = Hac { se: vec![f64::NAN; p * m], residual_rms: vec![f64::NAN; m], lag: vec![0; m], lag_capped: false };
-    if n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < q {
+    let mut out = Hac { se: vec![f64::NAN; P * m], residual_rms: vec![f64::NAN; m], lag: vec![0; m], lag_capped: false };
+    if n <= P + 2 || coef.len() != P * m || ginv_s.len() != P * P || scale.len() < P || mean.len() < q {
         return out;
     }
-    // Residuals and scores g_t = a_t e_t (row-major n × p per right-hand side).
-    let mut g = vec![0.0; m * n * p];
-    let mut sse = vec![0.0; m];
-    let mut a = vec![0.0; p];
-    for t in 0..n {
-        for j in 0..p {
-            a[j] = cols[j][t] - mean[j];
-        }
-        for k in 0..m {
-            let mut e = cols[p + k][t] - mean[p + k];
-            for j in 0..p {
-                e -= a[j] * coef[j * m + k];
-            }
-            sse[k] += e * e;
-            let base = (k * n + t) * p;
-            for j in 0..p {
-                g[base + j] = a[j] / scale[j] * e;
-            }
-        }
-    }
-    let dof = n as f64 / (n - p - 1) as f64;
+    let dof = n as f64 / (n - P - 1) as f64;
+    let mut g: Vec<[f64; P]> = vec![[0.0; P]; n];
     for k in 0..m {
-        out.residual_rms[k] = (sse[k] / n as f64).sqrt();
-        let gk = &g[k * n * p..(k + 1) * n * p];
-        let var = var1(gk, n, p);
-        let u = prewhiten(gk, n, p, &var);
-        let nu = n - 1;
-        let (lag, capped) = andrews_lag(&u, nu, p);
+        // Residuals and scores g_t = a_t e_t of right-hand side k.
+        let b: [f64; P] = std::array::from_fn(|j| coef[j * m + k]);
+        let inv_scale: [f64; P] = std::array::from_fn(|j| 1.0 / scale[j]);
+        let f = &cols[P + k][..n];
+        let fm = mean[P + k];
+        let mut sse = 0.0;
+        for (t, gt) in g.iter_mut().enumerate() {
+            let a: [f64; P] = std::array::from_fn(|j| cols[j][t] - mean[j]);
+            let mut e = f[t] - fm;
+            for j in 0..P {
+                e -= a[j] * b[j];
+            }
+            sse += e * e;
+            for j in 0..P {
+                gt[j] = a[j] * inv_scale[j] * e;
+            }
+        }
+        out.residual_rms[k] = (sse / n as f64).sqrt();
+        let var = var1::<P>(&g);
+        let u = prewhiten::<P>(&g, &var);
+        let (lag, capped) = andrews_lag::<P>(&u);
         out.lag[k] = lag;
         out.lag_capped |= capped;
-        let s_u = bartlett(&u, nu, p, lag);
-        let s = recolour(&s_u, &var, p);
+        let s_u = bartlett::<P>(&u, lag);
+        let s = recolour::<P>(&s_u, &var);
         // Cov_z = G⁻¹ S G⁻¹ (scaled); b_j = z_j / scale_j.
-        for j in 0..p {
+        for j in 0..P {
             let mut v = 0.0;
-            for l in 0..p {
+            for l in 0..P {
                 let mut row = 0.0;
-                for r in 0..p {
-                    row += s[l * p + r] * ginv_s[r * p + j];
+                for r in 0..P {
+                    row += s[l][r] * ginv_s[r * P + j];
                 }
-                v += ginv_s[j * p + l] * row;
+                v += ginv_s[j * P + l] * row;
             }
             out.se[j * m + k] = (v.max(0.0) * dof).sqrt() / scale[j];
         }
@@ -114,83 +128,83 @@ pub fn newey_west(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: 
     out
 }
 
-/// Least-squares VAR(1) coefficient `Â` (row-major `p × p`) of the scores, singular values
-/// capped at [`RHO_MAX`]; zero if the lagged scores are degenerate.
-fn var1(g: &[f64], n: usize, p: usize) -> Vec<f64> {
-    let mut xx = vec![0.0; p * p];
-    let mut yx = vec![0.0; p * p];
-    for t in 1..n {
-        let (prev, cur) = (&g[(t - 1) * p..t * p], &g[t * p..(t + 1) * p]);
-        for i in 0..p {
-            let (pi, ci) = (prev[i], cur[i]);
-            let (rx, ry) = (&mut xx[i * p..(i + 1) * p], &mut yx[i * p..(i + 1) * p]);
-            for j in 0..p {
-                rx[j] += pi * prev[j];
-                ry[j] += ci * prev[j];
+/// Least-squares VAR(1) coefficient `Â` of the scores, singular values capped at
+/// [`RHO_MAX`]; zero if the lagged scores are degenerate.
+fn var1<const P: usize>(g: &[[f64; P]]) -> [[f64; P]; P] {
+    let mut xx = [[0.0; P]; P];
+    let mut yx = [[0.0; P]; P];
+    for w in g.windows(2) {
+        let (prev, cur) = (&w[0], &w[1]);
+        for i in 0..P {
+            for j in 0..P {
+                xx[i][j] += prev[i] * prev[j];
+                yx[i][j] += cur[i] * prev[j];
             }
         }
     }
-    let sxx = nalgebra::DMatrix::from_row_slice(p, p, &xx);
-    let syx = nalgebra::DMatrix::from_row_slice(p, p, &yx);
-    let zero = vec![0.0; p * p];
+    let zero = [[0.0; P]; P];
+    let sxx = nalgebra::DMatrix::from_fn(P, P, |i, j| xx[i][j]);
+    let syx = nalgebra::DMatrix::from_fn(P, P, |i, j| yx[i][j]);
     let Some(chol) = sxx.cholesky() else { return zero };
     // Â = Syx Sxx⁻¹  ⇔  Sxx Âᵀ = Syxᵀ.
     let at = chol.solve(&syx.transpose());
-    let mut a = vec![0.0; p * p];
-    for i in 0..p {
-        for j in 0..p {
-            a[i * p + j] = at[(j, i)];
+    let mut a = vec![0.0; P * P];
+    for i in 0..P {
+        for j in 0..P {
+            a[i * P + j] = at[(j, i)];
         }
     }
-    let Some(svd) = super::svd::SmallSvd::new(&a, p) else { return zero };
-    if svd.sigma.first().copied().unwrap_or(0.0) <= RHO_MAX {
-        return a;
-    }
-    let mut capped = vec![0.0; p * p];
-    for kk in 0..p {
-        let sk = svd.sigma[kk].min(RHO_MAX);
-        for i in 0..p {
-            for j in 0..p {
-                capped[i * p + j] += svd.u[i * p + kk] * sk * svd.v[j * p + kk];
-            }
+    let Some(svd) = super::svd::SmallSvd::new(&a, P) else { return zero };
+    let top = svd.sigma.first().copied().unwrap_or(0.0);
+    let mut out = [[0.0; P]; P];
+    for i in 0..P {
+        for j in 0..P {
+            out[i][j] = if top <= RHO_MAX {
+                a[i * P + j]
+            } else {
+                (0..P).map(|kk| svd.u[i * P + kk] * svd.sigma[kk].min(RHO_MAX) * svd.v[j * P + kk]).sum()
+            };
         }
     }
-    capped
+    out
 }
 
-/// `u_t = g_t - Â g_{t-1}`, `t = 1..n` (row-major `(n-1) × p`).
-fn prewhiten(g: &[f64], n: usize, p: usize, a: &[f64]) -> Vec<f64> {
-    let mut u = vec![0.0; (n - 1) * p];
-    for t in 1..n {
-        let prev = &g[(t - 1) * p..t * p];
-        for i in 0..p {
-            let mut v = g[t * p + i];
-            for j in 0..p {
-                v -= a[i * p + j] * prev[j];
-            }
-            u[(t - 1) * p + i] = v;
-        }
-    }
-    u
+/// `u_t = g_t - Â g_{t-1}`, `t = 1..n`.
+fn prewhiten<const P: usize>(g: &[[f64; P]], a: &[[f64; P]; P]) -> Vec<[f64; P]> {
+    g.windows(2)
+        .map(|w| {
+            let (prev, cur) = (&w[0], &w[1]);
+            std::array::from_fn(|i| {
+                let mut v = cur[i];
+                for j in 0..P {
+                    v -= a[i][j] * prev[j];
+                }
+                v
+            })
+        })
+        .collect()
 }
 
 /// Andrews (1991) AR(1) plug-in bandwidth for the Bartlett kernel; returns the truncation lag
 /// and whether it was clipped to `n/4`.
-fn andrews_lag(u: &[f64], n: usize, p: usize) -> (usize, bool) {
-    let (mut num, mut den) = (0.0, 0.0);
-    for j in 0..p {
-        let (mut tt, mut t10, mut t00) = (0.0, 0.0, 0.0);
-        for t in 1..n {
-            let (c, pr) = (u[t * p + j], u[(t - 1) * p + j]);
-            tt += c * c;
-            t10 += c * pr;
-            t00 += pr * pr;
+fn andrews_lag<const P: usize>(u: &[[f64; P]]) -> (usize, bool) {
+    let n = u.len();
+    let (mut tt, mut t10, mut t00) = ([0.0; P], [0.0; P], [0.0; P]);
+    for w in u.windows(2) {
+        for j in 0..P {
+            let (c, pr) = (w[1][j], w[0][j]);
+            tt[j] += c * c;
+            t10[j] += c * pr;
+            t00[j] += pr * pr;
         }
-        if t00 <= 0.0 {
+    }
+    let (mut num, mut den) = (0.0, 0.0);
+    for j in 0..P {
+        if t00[j] <= 0.0 || n < 2 {
             continue;
         }
-        let rho = (t10 / t00).clamp(-RHO_MAX, RHO_MAX);
-        let sig2 = ((tt - 2.0 * rho * t10 + rho * rho * t00) / (n - 1) as f64).max(0.0);
+        let rho = (t10[j] / t00[j]).clamp(-RHO_MAX, RHO_MAX);
+        let sig2 = ((tt[j] - 2.0 * rho * t10[j] + rho * rho * t00[j]) / (n - 1) as f64).max(0.0);
         let s4 = sig2 * sig2;
         num += 4.0 * rho * rho * s4 / ((1.0 - rho).powi(6) * (1.0 + rho).powi(2));
         den += s4 / (1.0 - rho).powi(4);
@@ -203,35 +217,34 @@ fn andrews_lag(u: &[f64], n: usize, p: usize) -> (usize, bool) {
 }
 
 /// `S = (1/(L+1)) Σ_t G_t G_tᵀ` with `G_t` the moving sum of the last `L + 1` rows of `u`.
-fn bartlett(u: &[f64], n: usize, p: usize, lag: usize) -> Vec<f64> {
-    let mut big_g = vec![0.0; p];
-    let mut s = vec![0.0; p * p];
+fn bartlett<const P: usize>(u: &[[f64; P]], lag: usize) -> [[f64; P]; P] {
+    let n = u.len();
+    let mut big_g = [0.0; P];
+    let mut s = [[0.0; P]; P];
     for t in 0..(n + lag) {
-        if t < n {
-            for j in 0..p {
-                big_g[j] += u[t * p + j];
+        if let Some(add) = u.get(t) {
+            for j in 0..P {
+                big_g[j] += add[j];
             }
         }
         if t > lag {
-            let old = t - lag - 1;
-            if old < n {
-                for j in 0..p {
-                    big_g[j] -= u[old * p + j];
+            if let Some(old) = u.get(t - lag - 1) {
+                for j in 0..P {
+                    big_g[j] -= old[j];
                 }
             }
         }
-        for i in 0..p {
-            let gi = big_g[i];
-            for j in i..p {
-                s[i * p + j] += gi * big_g[j];
+        for i in 0..P {
+            for j in i..P {
+                s[i][j] += big_g[i] * big_g[j];
             }
         }
     }
     let w = 1.0 / (lag + 1) as f64;
-    for i in 0..p {
-        for j in i..p {
-            s[i * p + j] *= w;
-            s[j * p + i] = s[i * p + j];
+    for i in 0..P {
+        for j in i..P {
+            s[i][j] *= w;
+            s[j][i] = s[i][j];
         }
     }
     s
@@ -239,16 +252,10 @@ fn bartlett(u: &[f64], n: usize, p: usize, lag: usize) -> Vec<f64> {
 
 /// `(I - Â)⁻¹ S_u (I - Â)⁻ᵀ`; `S_u` unchanged if `I - Â` cannot be inverted (it always can
 /// with the singular values of `Â` capped below one).
-fn recolour(s_u: &[f64], a: &[f64], p: usize) -> Vec<f64> {
-    let ia = nalgebra::DMatrix::from_fn(p, p, |i, j| if i == j { 1.0 } else { 0.0 } - a[i * p + j]);
-    let Some(inv) = ia.try_inverse() else { return s_u.to_vec() };
-    let su = nalgebra::DMatrix::from_row_slice(p, p, s_u);
+fn recolour<const P: usize>(s_u: &[[f64; P]; P], a: &[[f64; P]; P]) -> [[f64; P]; P] {
+    let ia = nalgebra::DMatrix::from_fn(P, P, |i, j| if i == j { 1.0 } else { 0.0 } - a[i][j]);
+    let Some(inv) = ia.try_inverse() else { return *s_u };
+    let su = nalgebra::DMatrix::from_fn(P, P, |i, j| s_u[i][j]);
     let s = &inv * su * inv.transpose();
-    let mut out = vec![0.0; p * p];
-    for i in 0..p {
-        for j in 0..p {
-            out[i * p + j] = s[(i, j)];
-        }
-    }
-    out
+    std::array::from_fn(|i| std::array::from_fn(|j| s[(i, j)]))
 }
