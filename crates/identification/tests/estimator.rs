@@ -576,6 +576,14 @@ fn bad_input_gives_clear_errors_and_never_panics() {
     c.window = 0;
     assert!(matches!(c.validate(), Err(IdentificationError::InvalidParameter { field, .. }) if field == "window"));
 
+    // Absurd sizes: a huge hop gives one window, a window too large to buffer is an error.
+    let ws = estimate_windows(&rec.signals(), &config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap();
+    assert_eq!(ws.len(), 1);
+    let e = StreamingEstimator::new(config(usize::MAX / 2, 1, ModelOrder::Kc, Solver::Qr)).unwrap_err();
+    println!("huge streaming window: {e}");
+    let mut huge_hop = StreamingEstimator::new(config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap();
+    assert_eq!((0..9_000).filter_map(|i| huge_hop.push(&rec.sample(i))).count(), 1);
+
     // Kcm without accelerations.
     let mut s = rec.signals();
     s.ax_m_s2 = None;

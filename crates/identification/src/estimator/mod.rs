@@ -374,7 +374,10 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     while start + config.window <= n {
         let cols = signals.design(config.model, start..start + config.window);
         out.push(analyse_window(&cols, start, None, config));
-        start += config.hop;
+        match start.checked_add(config.hop) {
+            Some(next) => start = next,
+            None => break,
+        }
     }
     Ok(out)
 }
@@ -574,6 +577,12 @@ fn excitation_flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalys
     }
 }
 
+/// A fraction as a percentage with enough digits to be read.
+fn pct(f: f64) -> String {
+    let p = 100.0 * f;
+    if p.abs() >= 0.1 { format!("{p:.2} %") } else { format!("{p:.1e} %") }
+}
+
 /// Noise fractions below this (60 dB) are at the floor of the spectral estimate.
 const EIV_FLOOR: f64 = 1e-6;
 
@@ -595,19 +604,19 @@ fn flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalysis, c: &Coe
         let (dd, dse) = (c.damping_n_s_m[(d, d)], c.damping_se[(d, d)]);
         if eta_x.is_finite() && eta_x > EIV_FLOOR && (eta_x > 0.01 || eta_x * kd.abs() > 0.5 * kse) {
             out.push(format!(
-                "stiffness may be biased by displacement noise (errors in variables): {v} has {:.1} dB SNR at its lines, attenuation ≈ {:.2} % of k{v}{v} against a standard error of {:.2} %",
+                "stiffness may be biased by displacement noise (errors in variables): {v} has {:.1} dB SNR at its lines, attenuation ≈ {} of k{v}{v} against a standard error of {}",
                 -10.0 * eta_x.log10(),
-                100.0 * eta_x,
-                100.0 * kse / kd.abs(),
+                pct(eta_x),
+                pct(kse / kd.abs()),
                 v = dir[d]
             ));
         }
         if eta_v.is_finite() && eta_v > EIV_FLOOR && (eta_v > 0.01 || eta_v * dd.abs() > 0.5 * dse) {
             out.push(format!(
-                "damping from differentiated noisy displacement may be biased: {v}' has {:.1} dB SNR at the lines, errors-in-variables attenuation ≈ {:.2} % of d{v}{v} against a standard error of {:.2} %",
+                "damping from differentiated noisy displacement may be biased: {v}' has {:.1} dB SNR at the lines, errors-in-variables attenuation ≈ {} of d{v}{v} against a standard error of {}",
                 -10.0 * eta_v.log10(),
-                100.0 * eta_v,
-                100.0 * dse / dd.abs(),
+                pct(eta_v),
+                pct(dse / dd.abs()),
                 v = dir[d]
             ));
         }

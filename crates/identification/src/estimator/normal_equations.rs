@@ -40,6 +40,18 @@ pub fn solve(cols: &[&[f64]], p: usize) -> NormalSolution {
     let q = cols.len();
     let m = q.saturating_sub(p);
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
+    if p == 0 || p > q || n == 0 {
+        return NormalSolution {
+            mean: vec![f64::NAN; q],
+            scale: vec![1.0; p],
+            raw_norm: vec![0.0; p],
+            coef: Vec::new(),
+            inverse_gram_scaled: Vec::new(),
+            condition_normal: f64::NAN,
+            singular_at: Some(0),
+            tss: vec![0.0; m],
+        };
+    }
     let mut mean = vec![0.0; q];
     for (j, c) in cols.iter().enumerate() {
         if n > 0 {

@@ -10,7 +10,7 @@
 //!
 //! **Method.** Welch-averaged periodogram (P. D. Welch, IEEE Trans. Audio Electroacoust. 15
 //! (1967) 70–73) with segments of the largest power of two not exceeding the window (at most
-//! 2¹⁶), 50 % overlap, a 4-term Blackman–Harris taper (sidelobes below −92 dB, main lobe ±4
+//! 2¹⁶), evenly spread with about 50 % overlap, a 4-term Blackman–Harris taper (sidelobes below −92 dB, main lobe ±4
 //! bins: F. J. Harris, Proc. IEEE 66 (1978) 51–83), each segment's taper-weighted mean removed. Two real
 //! signals share one complex radix-2 FFT (`z = x + i y`). A bin is a line when it is the
 //! largest within ±4 bins, within 70 dB of the strongest bin, and at least 30 dB above the
@@ -181,22 +181,27 @@ impl Tables {
     }
 }
 
+/// Segment starts spread evenly from the first to the last possible one, as many as give
+/// about 50 % overlap (at least two when the window is longer than a segment, so no sample is
+/// left out).
+fn segment_starts(n: usize, seg: usize) -> Vec<usize> {
+    if n < seg || seg < 2 {
+        return Vec::new();
+    }
+    let span = n - seg;
+    if span == 0 {
+        return vec![0];
+    }
+    let count = ((span as f64 / (seg / 2) as f64).round() as usize + 1).max(2);
+    (0..count).map(|i| (i * span + (count - 1) / 2) / (count - 1)).collect()
+}
+
 /// Welch power spectra (bins `0..=N/2`) of two real signals computed together.
 fn welch_pair(a: &[f64], b: &[f64], tables: &Tables) -> (Vec<f64>, Vec<f64>) {
     let seg = tables.taper.len();
     let taper = &tables.taper;
     let n = a.len().min(b.len());
-    let mut starts = Vec::new();
-    let mut s = 0;
-    while s + seg <= n {
-        starts.push(s);
-        s += seg / 2;
-    }
-    if let Some(&last) = starts.last() {
-        if last + seg < n {
-            starts.push(n - seg);
-        }
-    }
+    let starts = segment_starts(n, seg);
     let nb = seg / 2 + 1;
     let (mut pa, mut pb) = (vec![0.0; nb], vec![0.0; nb]);
     let mut re = vec![0.0; seg];

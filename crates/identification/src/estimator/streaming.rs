@@ -142,7 +142,7 @@ impl WindowFactors {
         self.queue.push(summary);
         if self.count == self.next_end {
             out.push((self.next_end - self.window, self.queue.combined()));
-            self.next_end += self.hop;
+            self.next_end = self.next_end.saturating_add(self.hop);
         }
         // Drop blocks that end before the next window starts.
         let first_needed = (self.next_end - self.window) / self.block;
@@ -153,11 +153,11 @@ impl WindowFactors {
     }
 
     /// Push rows given as columns of one length (the shortest is used). Returns
-    /// `(window start, window factor)` for every window completed.
+    /// `(window start, window factor)` for every window completed; nothing (and no rows taken)
+    /// if the number of columns is not the one given to [`WindowFactors::new`].
     pub fn push_rows(&mut self, cols: &[&[f64]]) -> Vec<(usize, BlockSummary)> {
         let mut out = Vec::new();
         if cols.len() != self.cols {
-            debug_assert_eq!(cols.len(), self.cols, "column count");
             return out;
         }
         let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
@@ -189,10 +189,9 @@ impl WindowFactors {
         out
     }
 
-    /// Push one row.
+    /// Push one row (ignored if its length is not the column count).
     pub fn push_row(&mut self, row: &[f64]) -> Option<(usize, BlockSummary)> {
         if row.len() != self.cols {
-            debug_assert_eq!(row.len(), self.cols, "column count");
             return None;
         }
         let view: Vec<&[f64]> = row.iter().map(std::slice::from_ref).collect();
@@ -221,7 +220,16 @@ impl StreamingEstimator {
         };
         let q = names.len();
         let w = config.window;
-        let ring = vec![vec![0.0; 2 * w]; q];
+        let mut ring = Vec::with_capacity(q);
+        for _ in 0..q {
+            let mut col: Vec<f64> = Vec::new();
+            let len = w.checked_mul(2).ok_or_else(|| IdentificationError::invalid("window", "too large"))?;
+            col.try_reserve_exact(len).map_err(|_| {
+                IdentificationError::invalid("window", format!("cannot allocate a ring buffer for a window of {w} samples"))
+            })?;
+            col.resize(len, 0.0);
+            ring.push(col);
+        }
         let factors = WindowFactors::new(w, config.hop, q)?;
         Ok(Self { config, ring, names, count: 0, factors })
     }
