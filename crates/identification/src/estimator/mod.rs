@@ -371,7 +371,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     }
     let mut out = Vec::new();
     let mut start = 0;
-    while start + config.window <= n {
+    while start <= n - config.window {
         let cols = signals.design(config.model, start..start + config.window);
         out.push(analyse_window(&cols, start, None, config));
         match start.checked_add(config.hop) {
