@@ -28,7 +28,7 @@ struct Data {
 
 /// A multi-tone record with a little deterministic pseudo-noise (no RNG dependency needed).
 fn data(n: usize) -> Data {
-    let mut cols = vec![Vec::with_capacity(n); 6];
+    let mut cols: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(n)).collect();
     let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
     let mut noise = move || {
         state ^= state << 13;
@@ -86,7 +86,7 @@ fn main() {
     let reps = 31;
 
     println!("least-squares stage, window {WINDOW} x 4 regressors (+ intercept) x 2 right-hand sides; numpy.linalg.lstsq = {NUMPY_MS} ms/window = {:.1} M samples/s", WINDOW as f64 / NUMPY_MS / 1e3);
-    println!("| {:<44} | {:>10} | {:>10} | {:>8} | {}", "method", "ms / call", "M samp/s", "vs numpy", "notes");
+    println!("| {:<44} | {:>10} | {:>10} | {:>8} | notes", "method", "ms / call", "M samp/s", "vs numpy");
     println!("|{:-<46}|{:-<12}|{:-<12}|{:-<10}|------", "", "", "", "");
 
     // 1. One-shot Householder QR of one window (factor, condition via R-SVD, solve).

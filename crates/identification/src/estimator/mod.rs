@@ -56,6 +56,10 @@
 //! Warnings that do not refuse (aliasing, errors-in-variables bias, poor fit, clipped HAC lag)
 //! go into [`WindowEstimate::flags`].
 
+// `!(a > b)` is written on purpose wherever NaN must fail the test; index loops mirror the
+// formulas they implement.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 mod explain;
 pub mod frequency;
 pub mod normal_equations;
@@ -423,7 +427,7 @@ pub(crate) fn analyse_window(
     let mut first_bad: Option<(usize, &str)> = None;
     for (name, c) in cols {
         if let Some(i) = c[..n].iter().position(|v| !v.is_finite()) {
-            if first_bad.map_or(true, |(j, _)| i < j) {
+            if first_bad.is_none_or(|(j, _)| i < j) {
                 first_bad = Some((i, name));
             }
         }

@@ -121,7 +121,7 @@ impl WindowFactors {
             block,
             cols,
             count: 0,
-            partial: vec![Vec::with_capacity(block); cols],
+            partial: (0..cols).map(|_| Vec::with_capacity(block)).collect(),
             queue: Queue::new(cols),
             next_end: window,
         })
