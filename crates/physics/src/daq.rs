@@ -644,6 +644,39 @@ impl Calibration {
     pub fn scan_order(&self) -> Vec<ChannelId> {
         self.channels.iter().map(|c| c.channel).collect()
     }
+
+    /// The same sensors on another acquisition schedule: a record made by a different DAQ (or
+    /// the same card at another rate) states its scan rate, its channel order and each
+    /// channel's conversion offset within a scan; gains, offsets and linear ranges stay.
+    /// `schedule` lists every channel once, in scan order, with its offset (s), each in
+    /// `[0, 1 / sample_rate_hz)`.
+    pub fn with_schedule(&self, sample_rate_hz: f64, schedule: &[(ChannelId, f64)]) -> Result<Self, PhysicsError> {
+        if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+            return Err(PhysicsError::invalid("schedule.sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz}")));
+        }
+        if schedule.len() != self.channels.len() {
+            return Err(PhysicsError::invalid(
+                "schedule",
+                format!("names {} channels; the calibration has {}", schedule.len(), self.channels.len()),
+            ));
+        }
+        let period = 1.0 / sample_rate_hz;
+        let mut channels = Vec::with_capacity(schedule.len());
+        for (k, &(channel, offset)) in schedule.iter().enumerate() {
+            if schedule[..k].iter().any(|(c, _)| *c == channel) {
+                return Err(PhysicsError::invalid(format!("schedule[{k}]"), format!("channel `{channel}` appears twice")));
+            }
+            if !(offset.is_finite() && (0.0..period).contains(&offset)) {
+                return Err(PhysicsError::invalid(
+                    format!("schedule[{k}] ({channel})"),
+                    format!("offset {offset} s must lie in [0, {period}) s, one scan period"),
+                ));
+            }
+            channels.push(ChannelCalibration { sample_offset_s: offset, ..self.channel(channel)?.clone() });
+        }
+        let interval = if schedule.len() > 1 { schedule[1].1 - schedule[0].1 } else { 0.0 };
+        Ok(Self { sample_rate_hz, channel_interval_s: interval, channels, ..self.clone() })
+    }
 }
 
 /// One multiplexed scan.
