@@ -12,11 +12,16 @@
 //!   method is asked for), uncertainties, refusals, the frequency-domain cross-check and the
 //!   streaming form.
 //! * [`ascii`]: the documented, versioned text format for records from any DAQ.
+//! * [`pipeline`]: a raw record and its rig in, windowed coefficients with their operating
+//!   point and dimensionless forms out: the one path the CLI, the nodes and replay share.
+//! * [`simulate`]: a seeded record from the simulated rig under an excitation plan.
 
 pub mod ascii;
 pub mod conditioning;
 pub mod error;
 pub mod estimator;
 pub mod excitation;
+pub mod pipeline;
+pub mod simulate;
 
 pub use error::IdentificationError;

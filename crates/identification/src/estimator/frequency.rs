@@ -33,7 +33,7 @@ use crate::IdentificationError;
 pub const MAX_LINES: usize = 64;
 
 /// Which direction a line moves the journal in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Axis {
     /// Only x (|Y| below 1 % of |X|).
     X,
@@ -44,7 +44,7 @@ pub enum Axis {
 }
 
 /// Phasors at one line and the dynamic stiffness they show.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LinePhasors {
     pub frequency_hz: f64,
     /// Displacement phasors, m (the channel is `Re(X e^{i w t})`).
@@ -64,7 +64,7 @@ pub struct LinePhasors {
 }
 
 /// Result of the frequency-domain cross-check.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrequencyEstimate {
     pub lines: Vec<LinePhasors>,
     /// Coefficients fitted to `H(w) = K - w² M + i w C` across lines, or why not.

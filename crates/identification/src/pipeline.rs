@@ -1,0 +1,287 @@
+//! The identification pipeline: a raw record and its rig in, windowed coefficients out, each
+//! window with the operating point it was measured at and its dimensionless coefficients.
+//! The same path serves the CLI, the nodes and offline re-analysis.
+//!
+//! Steps: conditioning (Zhou et al. 2004, section 3.1 steps 1-7, [`crate::conditioning`]);
+//! the paper's step 2 rule that a record whose probe left its linear range is invalid as a
+//! whole; windowed least squares ([`crate::estimator`]) over the samples free of filter edge
+//! effects; per window the measured operating point (static film load from eq. 2, bearing
+//! temperature and the oil law's viscosity, speed), the Sommerfeld number, Zhou's load
+//! parameter `F_Y`, the amplitude `d = max |r - mean r| / c`, Lund's and Zhou's
+//! dimensionless coefficients; and the frequency-domain cross-check at the excitation lines.
+
+use nalgebra::Matrix2;
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::daq::{Calibration, ChannelId};
+use oilfilm_physics::dimensionless::{self, DimensionlessCoefficients};
+use oilfilm_physics::film::Running;
+use serde::{Deserialize, Serialize};
+
+use crate::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RangeViolation, RawRecord};
+use crate::error::IdentificationError;
+use crate::estimator::{self, Coefficients, EstimatorConfig, FrequencyEstimate, Signals, WindowEstimate};
+
+/// The frame and sign convention every output states.
+pub const FRAME: &str = "x horizontal, y vertical up, journal turning from +x to +y; r = journal centre relative to bearing centre; \
+film force on the journal dF = -(K r + C r' + M r''); rows = force component, columns = motion component; SI units";
+
+/// Settings of the whole pipeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PipelineConfig {
+    pub conditioning: ConditioningConfig,
+    pub estimator: EstimatorConfig,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self { conditioning: ConditioningConfig::default(), estimator: EstimatorConfig::default() }
+    }
+}
+
+/// Where the speed of a record came from: the ten channels carry no tachometer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedSource {
+    /// Stated by the record (ASCII header `speed_rpm`, a bag's rig status).
+    Record,
+    /// Not stated: the rig file's operating speed was assumed.
+    RigFile,
+    /// Given by the user.
+    User,
+}
+
+/// The operating point a window was measured at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WindowOperatingPoint {
+    pub speed_rpm: f64,
+    /// Mean bearing temperature over the window, C.
+    pub temperature_c: f64,
+    /// The oil law's viscosity at that temperature, Pa s.
+    pub viscosity_pa_s: f64,
+    /// Static film force on the journal (eq. 2, mean over the window), N.
+    pub static_force_n: [f64; 2],
+    /// Its magnitude: the load the film carries, N.
+    pub load_n: f64,
+    pub sommerfeld: f64,
+    /// Zhou's load parameter `F_Y = f_y psi^2 / (mu U L)`.
+    pub load_parameter: f64,
+    /// Mean journal position relative to the bearing, m.
+    pub mean_position_m: [f64; 2],
+    /// Excitation amplitude `d = max |r - mean r| / c` (Zhou et al., section 3.3).
+    pub amplitude_d: f64,
+}
+
+/// One window's result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WindowReport {
+    pub t_start_s: f64,
+    pub t_end_s: f64,
+    pub operating: WindowOperatingPoint,
+    pub estimate: WindowEstimate,
+    /// Lund's groups (`k c / W`, `b c omega / W`), crate frame, when the window was solved.
+    pub lund: Option<DimensionlessCoefficients>,
+    /// Zhou's groups (`k psi^3 / (mu omega L)`, `d psi^3 / (mu L)`), crate frame.
+    pub zhou: Option<DimensionlessCoefficients>,
+}
+
+/// The identification of one record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Identification {
+    pub rig: String,
+    pub frame: String,
+    pub speed_source: SpeedSource,
+    /// Scans in the record and the range free of filter edge effects.
+    pub samples: usize,
+    pub valid: [usize; 2],
+    /// Probes out of their linear range; non-empty means the record was refused (step 2).
+    pub range_violations: Vec<RangeViolation>,
+    /// Why the record as a whole gave no windows, if it did not.
+    pub refusal: Option<String>,
+    pub windows: Vec<WindowReport>,
+    /// Frequency-domain estimate over the valid record at the lines the first window found.
+    pub frequency_domain: Option<FrequencyEstimate>,
+    /// Why there is no frequency-domain estimate, if there is none.
+    pub frequency_domain_note: Option<String>,
+}
+
+impl Identification {
+    /// Windows that were solved.
+    pub fn accepted(&self) -> impl Iterator<Item = (&WindowReport, &Coefficients)> {
+        self.windows.iter().filter_map(|w| w.estimate.result.as_ref().ok().map(|c| (w, c)))
+    }
+
+    /// Mean stiffness and damping over the solved windows, if any.
+    pub fn mean_coefficients(&self) -> Option<(Matrix2<f64>, Matrix2<f64>)> {
+        let mut n = 0.0;
+        let (mut k, mut c) = (Matrix2::zeros(), Matrix2::zeros());
+        for (_, co) in self.accepted() {
+            k += co.stiffness_n_m;
+            c += co.damping_n_s_m;
+            n += 1.0;
+        }
+        (n > 0.0).then(|| (k / n, c / n))
+    }
+}
+
+/// The mechanics eq. 2 needs, from a rig file.
+pub fn mechanics_of(rig: &RigConfig) -> Mechanics {
+    Mechanics {
+        housing_mass_kg: rig.housing.mass_kg,
+        exciter_angles_deg: rig.housing.exciter_angles_deg,
+        gravity_m_s2: rig.housing.gravity_m_s2,
+    }
+}
+
+/// The rig's calibration on the record's own schedule: the record's rate, channel order and
+/// per-channel conversion offsets (`offsets_s[k]` for `raw.channels[k]`).
+pub fn calibration_for(rig: &RigConfig, raw: &RawRecord, offsets_s: &[f64]) -> Result<Calibration, IdentificationError> {
+    if offsets_s.len() != raw.channels.len() {
+        return Err(IdentificationError::invalid(
+            "offsets_s",
+            format!("{} offsets for {} channels", offsets_s.len(), raw.channels.len()),
+        ));
+    }
+    let schedule: Vec<(ChannelId, f64)> = raw.channels.iter().copied().zip(offsets_s.iter().copied()).collect();
+    Ok(rig.daq.calibration().with_schedule(raw.sample_rate_hz, &schedule)?)
+}
+
+/// The rig DAQ's own schedule for a record in its scan order.
+pub fn rig_offsets(rig: &RigConfig, raw: &RawRecord) -> Result<Vec<f64>, IdentificationError> {
+    let cal = rig.daq.calibration();
+    raw.channels.iter().map(|&c| cal.sample_offset_s(c).map_err(IdentificationError::from)).collect()
+}
+
+/// Identifies one record. `calibration` carries the record's schedule ([`calibration_for`]).
+pub fn identify(
+    raw: &RawRecord,
+    calibration: &Calibration,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    speed_source: SpeedSource,
+    config: &PipelineConfig,
+) -> Result<Identification, IdentificationError> {
+    if !(speed_rpm.is_finite() && speed_rpm > 0.0) {
+        return Err(IdentificationError::invalid("speed_rpm", format!("must be finite and > 0, got {speed_rpm}")));
+    }
+    let conditioned = conditioning::condition(raw, calibration, &mechanics_of(rig), &config.conditioning)?;
+    identify_conditioned(&conditioned, rig, speed_rpm, speed_source, config)
+}
+
+/// Identifies an already conditioned record.
+pub fn identify_conditioned(
+    conditioned: &Conditioned,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    speed_source: SpeedSource,
+    config: &PipelineConfig,
+) -> Result<Identification, IdentificationError> {
+    let valid = conditioned.valid.clone();
+    let mut out = Identification {
+        rig: rig.name.clone(),
+        frame: FRAME.to_string(),
+        speed_source,
+        samples: conditioned.len(),
+        valid: [valid.start, valid.end],
+        range_violations: conditioned.range_violations.clone(),
+        refusal: None,
+        windows: Vec::new(),
+        frequency_domain: None,
+        frequency_domain_note: None,
+    };
+    if !conditioned.range_violations.is_empty() {
+        let reasons: Vec<String> = conditioned.range_violations.iter().map(ToString::to_string).collect();
+        out.refusal = Some(format!(
+            "record refused (Zhou et al. step 2: a probe out of its linear range invalidates the file): {}",
+            reasons.join("; ")
+        ));
+        return Ok(out);
+    }
+    let mut est = config.estimator.clone();
+    est.sample_rate_hz = 1.0 / median_step(&conditioned.t_s).unwrap_or(1.0 / est.sample_rate_hz);
+    let n_valid = valid.len();
+    if n_valid < est.model.min_samples() {
+        out.refusal = Some(format!(
+            "record too short: {n_valid} samples survive the filters' edge trimming, the {:?} model needs at least {}",
+            est.model,
+            est.model.min_samples()
+        ));
+        return Ok(out);
+    }
+    if est.window > n_valid {
+        // A record shorter than the configured window is one window (the paper's practice:
+        // one 50 000-sample record, one coefficient set).
+        est.window = n_valid;
+        est.hop = est.hop.min(n_valid).max(1);
+    }
+    let cut = |v: &[f64]| -> Vec<f64> { v[valid.clone()].to_vec() };
+    let (x, y, vx, vy, ax, ay, fx, fy) = (
+        cut(&conditioned.x_m),
+        cut(&conditioned.y_m),
+        cut(&conditioned.vx_m_s),
+        cut(&conditioned.vy_m_s),
+        cut(&conditioned.ax_m_s2),
+        cut(&conditioned.ay_m_s2),
+        cut(&conditioned.fx_n),
+        cut(&conditioned.fy_n),
+    );
+    let signals = Signals { x_m: &x, y_m: &y, vx_m_s: &vx, vy_m_s: &vy, ax_m_s2: Some(&ax), ay_m_s2: Some(&ay), fx_n: &fx, fy_n: &fy };
+    let estimates = estimator::estimate_windows(&signals, &est)?;
+    let geometry = rig.bearing;
+    for e in estimates {
+        let range = e.start..e.end;
+        let mean = |v: &[f64]| v[range.clone()].iter().sum::<f64>() / range.len() as f64;
+        let (mx, my) = (mean(&x), mean(&y));
+        let static_force_n = [mean(&fx), mean(&fy)];
+        let load_n = static_force_n[0].hypot(static_force_n[1]);
+        let temperature_c = conditioned.temperature_c[valid.start + range.start..valid.start + range.end].iter().sum::<f64>() / range.len() as f64;
+        let viscosity_pa_s = rig.oil.viscosity_pa_s(temperature_c)?;
+        let running = Running::from_rpm(speed_rpm, viscosity_pa_s);
+        let amplitude = x[range.clone()].iter().zip(&y[range.clone()]).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+        let (lund, zhou) = match &e.result {
+            Ok(c) if load_n > 0.0 => (
+                Some(dimensionless::lund(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running, load_n)),
+                Some(dimensionless::zhou(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running)),
+            ),
+            _ => (None, None),
+        };
+        out.windows.push(WindowReport {
+            t_start_s: conditioned.t_s[valid.start + e.start],
+            t_end_s: conditioned.t_s[valid.start + e.end - 1],
+            operating: WindowOperatingPoint {
+                speed_rpm,
+                temperature_c,
+                viscosity_pa_s,
+                static_force_n,
+                load_n,
+                sommerfeld: if load_n > 0.0 { dimensionless::sommerfeld(&geometry, &running, load_n) } else { f64::INFINITY },
+                load_parameter: dimensionless::zhou_load_parameter(&geometry, &running, load_n),
+                mean_position_m: [mx, my],
+                amplitude_d: amplitude / geometry.clearance_m,
+            },
+            estimate: e,
+            lund,
+            zhou,
+        });
+    }
+    // Frequency-domain cross-check at the lines the excitation put in the first window.
+    match out.windows.first().map(|w| w.estimate.frequencies_hz.clone()) {
+        Some(lines) if !lines.is_empty() => match estimator::frequency_domain(&signals, &lines, est.sample_rate_hz, est.model) {
+            Ok(f) => out.frequency_domain = Some(f),
+            Err(e) => out.frequency_domain_note = Some(format!("no frequency-domain estimate: {e}")),
+        },
+        _ => out.frequency_domain_note = Some("no excitation lines found: no frequency-domain estimate".into()),
+    }
+    Ok(out)
+}
+
+/// Median time step of a sampled time base.
+fn median_step(t: &[f64]) -> Option<f64> {
+    if t.len() < 2 {
+        return None;
+    }
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(f64::total_cmp);
+    let m = d[d.len() / 2];
+    (m.is_finite() && m > 0.0).then_some(m)
+}
