@@ -72,11 +72,10 @@ pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usi
             }
         }
         let alias = model == ModelOrder::Kcm && !parts.is_empty();
-        if dominated(lines, 0) && dominated(lines, 1) && 2 * lines.merged.len() < p {
+        if !alias && dominated(lines, 0) && dominated(lines, 1) && 2 * lines.merged.len() < p {
             parts.push(format!(
-                "{names} all lie in span{{cos, sin}} of {} (dimension {})",
-                fmt_hz(&lines.merged),
-                2 * lines.merged.len()
+                "{names} all lie in span{{cos, sin}} of {}",
+                fmt_hz(&lines.merged)
             ));
         }
         let advice = match model {

@@ -318,7 +318,11 @@ impl fmt::Display for Refusal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Refusal::RankDeficient { rank, needed, explanation } => {
-                write!(f, "cannot separate the coefficients (rank {rank} of {needed}): {explanation}")
+                if explanation.contains(&format!("rank {rank} of {needed}")) {
+                    write!(f, "cannot separate the coefficients: {explanation}")
+                } else {
+                    write!(f, "cannot separate the coefficients (rank {rank} of {needed}): {explanation}")
+                }
             }
             Refusal::IllConditioned { condition, limit, explanation } => write!(
                 f,

@@ -153,7 +153,8 @@ fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], ro
             continue; // column already zero below the diagonal: identity reflector
         }
         let alpha = r[j * q + j];
-        let norm = alpha.hypot(sigma.sqrt());
+        // Plain sqrt: an overflow here shows up as a non-finite factor, which is refused.
+        let norm = (alpha * alpha + sigma).sqrt();
         // beta = -sign(alpha) * norm keeps alpha - beta free of cancellation.
         let beta = if alpha > 0.0 { -norm } else { norm };
         let denom = alpha - beta;

@@ -59,6 +59,11 @@ impl BlockSummary {
     }
 
     /// Summarise the columns `cols` (all of one length; the shortest length is used).
+    ///
+    /// One pass over the data: each cache-sized chunk is centred on its own means while it is
+    /// copied, annihilated into the running factor, and the running factor is corrected for
+    /// the difference of means by one extra row, `sqrt(n_a n_c / (n_a + n_c)) (m_a - m_c)`
+    /// (the same identity as [`BlockSummary::merge`]).
     pub fn from_columns(cols: &[&[f64]]) -> Self {
         let q = cols.len();
         let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
@@ -66,22 +71,34 @@ impl BlockSummary {
         if n == 0 {
             return out;
         }
-        out.n = n;
-        for (j, c) in cols.iter().enumerate() {
-            out.mean[j] = mean(&c[..n]);
-        }
         let mut buf = vec![0.0; CHUNK_ROWS * q];
+        let mut chunk_mean = vec![0.0; q];
+        let mut row = vec![0.0; q];
         let mut start = 0;
         while start < n {
             let rows = CHUNK_ROWS.min(n - start);
             let block = &mut buf[..rows * q];
             for (j, c) in cols.iter().enumerate() {
-                let m = out.mean[j];
-                for (dst, src) in block[j * rows..(j + 1) * rows].iter_mut().zip(&c[start..start + rows]) {
-                    *dst = src - m;
+                let src = &c[start..start + rows];
+                let m = mean(src);
+                chunk_mean[j] = m;
+                for (dst, v) in block[j * rows..(j + 1) * rows].iter_mut().zip(src) {
+                    *dst = v - m;
                 }
             }
             out.r.absorb(block, rows);
+            let (na, nc) = (out.n as f64, rows as f64);
+            if out.n > 0 {
+                let w = (na * nc / (na + nc)).sqrt();
+                for j in 0..q {
+                    row[j] = w * (out.mean[j] - chunk_mean[j]);
+                }
+                out.r.absorb(&mut row, 1);
+            }
+            for j in 0..q {
+                out.mean[j] += (chunk_mean[j] - out.mean[j]) * nc / (na + nc);
+            }
+            out.n += rows;
             start += rows;
         }
         out
