@@ -524,10 +524,10 @@ pub fn condition(
     }
     let valid = trim..n - trim;
 
-    // Per channel: SI, range check on the raw column, deskew, low-pass.
+    // Per channel: SI, range check on the raw column, deskew; then the low-pass on all ten
+    // together (four lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
     let mut range_violations = Vec::new();
     let mut tmp = vec![0.0; n];
-    let mut scratch = Vec::new();
     let mut si: [Vec<f64>; CHANNEL_COUNT] = Default::default();
     for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
         let column = &raw.columns[col_of[ch.index()]];
@@ -548,9 +548,9 @@ pub fn condition(
             d.apply_into(&buf, &mut tmp)?;
             std::mem::swap(&mut buf, &mut tmp);
         }
-        lp.filtfilt_in_place(&mut buf, &mut scratch)?;
         si[ch.index()] = buf;
     }
+    lp.filtfilt_many_in_place(&mut si, &mut Vec::new())?;
     let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
 
     // Kinematics: in place, A becomes the mean and B the difference.
