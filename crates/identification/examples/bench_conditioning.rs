@@ -11,8 +11,8 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::{
-    calibrate, condition, deskew, differentiate, film_force, kinematics, lowpass, range_check,
-    ConditioningConfig, Mechanics, RawRecord,
+    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
+    range_check, ConditioningConfig, Mechanics, RawRecord,
 };
 use oilfilm_physics::daq::{ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
@@ -179,5 +179,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         black_box(condition(&raw, &cal, &mech, &conf).unwrap()); // validated above
     });
     report("condition (steps 1-7, all ten channels)", all, t);
+    let mut out = condition(&raw, &cal, &mech, &conf)?;
+    let t = best_of(repeats, || {
+        condition_into(&raw, &cal, &mech, &conf, &mut out).unwrap(); // validated above
+        black_box(&out);
+    });
+    report("condition_into (reusing the output buffers)", all, t);
     Ok(())
 }

@@ -48,6 +48,9 @@ use oilfilm_physics::daq::ChannelId;
 use super::first_non_finite;
 use crate::IdentificationError;
 
+/// Output samples per block of the interior loop (4 kB of output, L1-resident).
+const BLOCK: usize = 512;
+
 /// Largest stencil accepted (beyond this Lagrange weights grow and nothing is gained).
 pub const MAX_TAPS: usize = 16;
 
@@ -174,11 +177,15 @@ impl FractionalDelay {
         // Interior: n with 0 <= n + start and n + start + taps <= len.
         let lo = (-start).max(0) as usize;
         let hi_excl = (len as isize - start - taps as isize + 1).clamp(0, len as isize) as usize;
-        if lo < hi_excl {
-            let m = hi_excl - lo;
-            // `lo + start >= 0` and `lo + start + j + m <= len` by the bounds above.
-            let base = (lo as isize + start) as usize;
-            let dst = &mut out[lo..hi_excl];
+        // Interior, in blocks that stay in L1 while the `taps` passes of each block run.
+        // For output n the stencil is input[n + start ..][..taps]; `lo + start >= 0` and
+        // `hi_excl - 1 + start + taps <= len` by the bounds above.
+        let mut from = lo;
+        while from < hi_excl {
+            let to = (from + BLOCK).min(hi_excl);
+            let base = (from as isize + start) as usize;
+            let m = to - from;
+            let dst = &mut out[from..to];
             let w0 = self.weights[0];
             for (o, &x) in dst.iter_mut().zip(&input[base..base + m]) {
                 *o = w0 * x;
@@ -188,6 +195,7 @@ impl FractionalDelay {
                     *o += wj * x;
                 }
             }
+            from = to;
         }
         // Edges: shifted stencil inside [0, len).
         let mut w = [0.0; MAX_TAPS];

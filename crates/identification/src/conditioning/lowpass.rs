@@ -132,6 +132,7 @@ impl<const L: usize> Lanes<L> {
 
 /// One section over the `L` columns in place, forward or backward in time.
 #[inline(always)]
+#[allow(clippy::needless_range_loop)] // `i` indexes L columns at once
 fn section_pass<const L: usize>(
     s: &Section,
     st: &mut Lanes<L>,
