@@ -13,9 +13,10 @@
 //! ## Why Lagrange interpolation
 //! The signals of interest (0-80 Hz at 5 kHz, at most 0.1 rad/sample) sit deep in the band
 //! where the Lagrange fractional delay is *maximally flat*: its error vanishes with all
-//! derivatives up to order `N - 1` at DC (Laakso et al. 1996, eq. 42 ff.), i.e. it is exact
-//! for polynomials of degree `N - 1`, and for a centred stencil its magnitude never exceeds
-//! one. A windowed sinc of the same accuracy at 80 Hz would need many more taps. The
+//! derivatives up to order `N - 1` at DC (Laakso et al. 1996, section on maximally flat FIR
+//! design), i.e. it is exact for polynomials of degree `N - 1`; with the stencil centred as
+//! below its magnitude response never exceeds one (checked numerically here for 2..16 taps,
+//! every delay in [0, 1] and every frequency), so it never amplifies noise. A windowed sinc of the same accuracy at 80 Hz would need many more taps. The
 //! `N` taps sit on `n + s .. n + s + N - 1` with `s = ceil(-D - N/2)`, so the interpolation
 //! point lies within half a sample of the stencil centre (the best-conditioned position).
 //!

@@ -47,9 +47,9 @@
 //! Per section, a forward and a backward pass in place over the column, five multiplies
 //! and four adds per sample, arranged so that only one multiply and one subtract are on the
 //! recursion's loop-carried path. [`Butterworth::filtfilt_many_in_place`] runs four columns
-//! in lock-step so that their independent recursions overlap (about 2 ns per sample and
-//! channel for the default on one core, 2.5 times faster than one column at a time); the
-//! only scratch memory is the two reflections.
+//! in lock-step so that their independent recursions overlap (about 4 ns per sample and
+//! channel for the default on one core, 2.7 times faster than one column at a time, see
+//! `examples/bench_conditioning.rs`); the only scratch memory is the two reflections.
 
 use oilfilm_physics::daq::ChannelId;
 

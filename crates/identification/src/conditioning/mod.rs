@@ -50,9 +50,13 @@
 //! consumer calls to refuse it, as the paper's step 2 demands.
 //!
 //! ## Cost
-//! Each stage is a few tight passes over contiguous columns, with no allocation per
-//! sample: about 20 buffers of one column each per record. `examples/bench_conditioning.rs`
-//! prints the throughput per stage.
+//! Each stage is a few tight passes over contiguous columns, with no allocation per sample
+//! and no dynamic dispatch. [`condition`] allocates the 17 output columns and nothing else
+//! of size; [`condition_into`] reuses those of a previous result and allocates nothing.
+//! Measured on one core of the shared 2-core development machine for a 50 000-scan,
+//! 10-channel record (`examples/bench_conditioning.rs`, best of 15): `condition` about
+//! 6.4 ms (78 M samples/s), `condition_into` about 4.3 ms (115 M samples/s); the
+//! zero-phase low-pass is half of it.
 
 pub mod calibrate;
 pub mod deskew;
