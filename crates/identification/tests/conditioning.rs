@@ -6,8 +6,8 @@ use std::f64::consts::PI;
 
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::{
-    calibrate, condition, deskew, differentiate, film_force, kinematics, lowpass, range_check,
-    Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
+    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
+    range_check, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -465,6 +465,36 @@ fn lowpass_edges_keep_constants_and_ramps() {
     let mut b = ramp.clone();
     lp.filtfilt_in_place(&mut b, &mut Vec::new()).unwrap();
     assert_eq!(b, yr);
+}
+
+#[test]
+fn lowpass_many_columns_equal_one_by_one_bit_for_bit() {
+    // The four-lane path must be a pure speed-up: 7 columns = one group of 4, one of 2, one of 1.
+    let lp = lowpass::Butterworth::design(5, 150.0, FS).unwrap();
+    let n = 777;
+    let cols: Vec<Vec<f64>> = (0..7)
+        .map(|k| {
+            (0..n)
+                .map(|i| (k as f64 + 1.0) * ((i * (k + 3)) as f64 * 0.01).sin() + k as f64)
+                .collect()
+        })
+        .collect();
+    let mut many = cols.clone();
+    lp.filtfilt_many_in_place(&mut many, &mut Vec::new())
+        .unwrap();
+    for (k, (m, c)) in many.iter().zip(&cols).enumerate() {
+        let one = lp.filtfilt(c).unwrap();
+        assert_eq!(m, &one, "column {k}");
+        assert_ne!(m, c);
+    }
+    println!("7 columns of {n} samples: four-lane result identical to one-by-one");
+    let mut ragged = cols.clone();
+    ragged[5].pop();
+    let err = lp
+        .filtfilt_many_in_place(&mut ragged, &mut Vec::new())
+        .unwrap_err();
+    println!("{err}");
+    assert!(bad_input(err).0.contains("column 5"));
 }
 
 // ---------------------------------------------------------------------------------------
@@ -938,6 +968,62 @@ fn volts_and_si_records_condition_alike() {
     assert_eq!(a.valid, b.valid);
     assert_eq!(a.t_s, b.t_s);
     assert_eq!(a.t_s[1], 1.0 / FS);
+}
+
+#[test]
+fn condition_into_reuses_buffers_and_equals_condition() {
+    let cal = DaqConfig::zhou2004().calibration();
+    let sc = Scenario::new();
+    let cfg = ConditioningConfig::default();
+    let long = sc.si_record(4000, &cal);
+    let short = sc.si_record(1500, &cal);
+    let mut out = Conditioned::default();
+    condition_into(&long, &cal, &sc.mech, &cfg, &mut out).unwrap();
+    assert_eq!(out, condition(&long, &cal, &sc.mech, &cfg).unwrap());
+    // A second, shorter record into the same output: same result as fresh, and the same
+    // seventeen allocations (the pool hands them out in other roles, e.g. f1's becomes fx).
+    let buffers = |c: &Conditioned| {
+        let mut p: Vec<usize> = [
+            &c.t_s,
+            &c.x_m,
+            &c.y_m,
+            &c.tilt_x_m,
+            &c.tilt_y_m,
+            &c.vx_m_s,
+            &c.vy_m_s,
+            &c.ax_m_s2,
+            &c.ay_m_s2,
+            &c.housing_x_m,
+            &c.housing_y_m,
+            &c.housing_ax_m_s2,
+            &c.housing_ay_m_s2,
+            &c.fx_n,
+            &c.fy_n,
+            &c.temperature_c,
+            &c.static_load_n,
+        ]
+        .iter()
+        .map(|v| v.as_ptr() as usize)
+        .collect();
+        p.sort_unstable();
+        p
+    };
+    let before = buffers(&out);
+    condition_into(&short, &cal, &sc.mech, &cfg, &mut out).unwrap();
+    let fresh = condition(&short, &cal, &sc.mech, &cfg).unwrap();
+    let reused = buffers(&out) == before;
+    println!(
+        "reused output: {} samples, valid {:?}; same 17 allocations: {reused}",
+        out.len(),
+        out.valid
+    );
+    assert_eq!(out, fresh);
+    assert!(reused);
+    // On error the output is left empty, never half-written.
+    let mut bad = short.clone();
+    bad.columns[0][10] = f64::NAN;
+    assert!(condition_into(&bad, &cal, &sc.mech, &cfg, &mut out).is_err());
+    assert!(out.is_empty() && out.fx_n.is_empty() && out.range_violations.is_empty());
 }
 
 #[test]

@@ -4,7 +4,7 @@
 //!
 //! The column is converted in one vectorisable pass (multiplication by the reciprocal
 //! sensitivity, so a result may differ from [`Calibration::to_si`] in the last bit); the
-//! finiteness of the *input* is checked in a second branch-free pass, and a NaN or infinite
+//! finiteness of the output is checked in a second branch-free pass, and a NaN or infinite
 //! reading is a [`IdentificationError::BadInput`] naming the channel and the sample index.
 //! A real ADC never yields NaN (see `oilfilm_physics::daq`), so a NaN here means the record
 //! was damaged between the card and us; it is never carried into the numbers.
@@ -38,9 +38,6 @@ pub fn to_si_into(
             reason: format!("buffer has {} samples, input {}", out.len(), volts.len()),
         });
     }
-    if let Some(i) = first_non_finite(volts) {
-        return Err(non_finite_error(channel, i, volts[i], "volts"));
-    }
     let c = calibration.channel(channel)?;
     let offset = c.offset_v;
     // `Calibration` comes from a validated `DaqConfig` (sensitivity finite and non-zero), but a
@@ -56,9 +53,13 @@ pub fn to_si_into(
     for (o, &v) in out.iter_mut().zip(volts) {
         *o = (v - offset) * gain;
     }
-    // Finite input and a finite gain can still overflow (|v| near f64::MAX with a tiny
-    // sensitivity): check the output as well, it is one cheap pass.
+    // One check of the output covers the input too: a non-finite reading converts to a
+    // non-finite value. Only then is the cause looked for (NaN input, or an overflow of a
+    // huge finite reading with a tiny sensitivity).
     if let Some(i) = first_non_finite(out) {
+        if !volts[i].is_finite() {
+            return Err(non_finite_error(channel, i, volts[i], "volts"));
+        }
         return Err(IdentificationError::BadInput {
             what: format!("channel `{channel}`, sample {i}"),
             reason: format!(

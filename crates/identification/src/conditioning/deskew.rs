@@ -13,9 +13,10 @@
 //! ## Why Lagrange interpolation
 //! The signals of interest (0-80 Hz at 5 kHz, at most 0.1 rad/sample) sit deep in the band
 //! where the Lagrange fractional delay is *maximally flat*: its error vanishes with all
-//! derivatives up to order `N - 1` at DC (Laakso et al. 1996, eq. 42 ff.), i.e. it is exact
-//! for polynomials of degree `N - 1`, and for a centred stencil its magnitude never exceeds
-//! one. A windowed sinc of the same accuracy at 80 Hz would need many more taps. The
+//! derivatives up to order `N - 1` at DC (Laakso et al. 1996, section on maximally flat FIR
+//! design), i.e. it is exact for polynomials of degree `N - 1`; with the stencil centred as
+//! below its magnitude response never exceeds one (checked numerically here for 2..16 taps,
+//! every delay in [0, 1] and every frequency), so it never amplifies noise. A windowed sinc of the same accuracy at 80 Hz would need many more taps. The
 //! `N` taps sit on `n + s .. n + s + N - 1` with `s = ceil(-D - N/2)`, so the interpolation
 //! point lies within half a sample of the stencil centre (the best-conditioned position).
 //!
@@ -47,6 +48,9 @@ use oilfilm_physics::daq::ChannelId;
 
 use super::first_non_finite;
 use crate::IdentificationError;
+
+/// Output samples per block of the interior loop (4 kB of output, L1-resident).
+const BLOCK: usize = 512;
 
 /// Largest stencil accepted (beyond this Lagrange weights grow and nothing is gained).
 pub const MAX_TAPS: usize = 16;
@@ -174,11 +178,15 @@ impl FractionalDelay {
         // Interior: n with 0 <= n + start and n + start + taps <= len.
         let lo = (-start).max(0) as usize;
         let hi_excl = (len as isize - start - taps as isize + 1).clamp(0, len as isize) as usize;
-        if lo < hi_excl {
-            let m = hi_excl - lo;
-            // `lo + start >= 0` and `lo + start + j + m <= len` by the bounds above.
-            let base = (lo as isize + start) as usize;
-            let dst = &mut out[lo..hi_excl];
+        // Interior, in blocks that stay in L1 while the `taps` passes of each block run.
+        // For output n the stencil is input[n + start ..][..taps]; `lo + start >= 0` and
+        // `hi_excl - 1 + start + taps <= len` by the bounds above.
+        let mut from = lo;
+        while from < hi_excl {
+            let to = (from + BLOCK).min(hi_excl);
+            let base = (from as isize + start) as usize;
+            let m = to - from;
+            let dst = &mut out[from..to];
             let w0 = self.weights[0];
             for (o, &x) in dst.iter_mut().zip(&input[base..base + m]) {
                 *o = w0 * x;
@@ -188,6 +196,7 @@ impl FractionalDelay {
                     *o += wj * x;
                 }
             }
+            from = to;
         }
         // Edges: shifted stencil inside [0, len).
         let mut w = [0.0; MAX_TAPS];

@@ -62,6 +62,45 @@ pub fn eq2_into(
     Ok(())
 }
 
+/// Eq. 2 in place: `f1` becomes `fx` and `f2` becomes `fy` (used by
+/// [`super::condition_into`] to need no extra buffer).
+pub(crate) fn eq2_in_place(
+    f1_to_fx: &mut [f64],
+    f2_to_fy: &mut [f64],
+    f3: &[f64],
+    housing_ax: &[f64],
+    housing_ay: &[f64],
+    mechanics: &Mechanics,
+) -> Result<(), IdentificationError> {
+    mechanics.validate()?;
+    let n = f1_to_fx.len();
+    if [f2_to_fy.len(), f3.len(), housing_ax.len(), housing_ay.len()]
+        .iter()
+        .any(|&l| l != n)
+    {
+        return Err(IdentificationError::BadInput {
+            what: "eq. 2 columns".into(),
+            reason: "f1, f2, f3 and the housing accelerations differ in length".into(),
+        });
+    }
+    let m = mechanics.housing_mass_kg;
+    let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
+    let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
+    let mg = m * mechanics.gravity_m_s2;
+    let (fy, f3, hx, hy) = (
+        &mut f2_to_fy[..n],
+        &f3[..n],
+        &housing_ax[..n],
+        &housing_ay[..n],
+    );
+    for i in 0..n {
+        let (f1, f2) = (f1_to_fx[i], fy[i]);
+        f1_to_fx[i] = c1 * f1 + c2 * f2 - m * hx[i];
+        fy[i] = s1 * f1 + s2 * f2 + (f3[i] - mg) - m * hy[i];
+    }
+    Ok(())
+}
+
 /// Eq. 2, allocating `(fx, fy)`.
 pub fn eq2(
     f1: &[f64],

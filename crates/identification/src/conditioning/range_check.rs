@@ -33,9 +33,6 @@ pub fn check(
     units: RawUnits,
     calibration: &Calibration,
 ) -> Result<Option<RangeViolation>, IdentificationError> {
-    if let Some(i) = first_non_finite(column) {
-        return Err(non_finite_error(channel, i, column[i], units.name()));
-    }
     let c = calibration.channel(channel)?;
     let [lo_v, hi_v] = c.linear_range_v;
     let margin = 0.5 * calibration.lsb_v();
@@ -51,43 +48,50 @@ pub fn check(
     let b = (hi_v - offset) / sens;
     let range_si = [a.min(b), a.max(b)];
 
-    // `volts > lo && volts < hi`, as `Calibration::within_linear_range`; the counting loop has
-    // no branch so it vectorises, the index of the first offender is looked up only if needed.
-    let out_of_range = |v: f64| !(v > lo && v < hi);
-    let (count, first) = match units {
-        RawUnits::Volts => {
-            let count = column
-                .iter()
-                .map(|&v| out_of_range(v) as usize)
-                .sum::<usize>();
-            (count, column.iter().position(|&v| out_of_range(v)))
-        }
-        RawUnits::Si => {
-            let to_v = |si: f64| offset + sens * si;
-            let count = column
-                .iter()
-                .map(|&si| out_of_range(to_v(si)) as usize)
-                .sum::<usize>();
-            (count, column.iter().position(|&si| out_of_range(to_v(si))))
-        }
+    // `volts > lo && volts < hi`, as `Calibration::within_linear_range`. One branch-free
+    // counting pass (it vectorises); NaN and infinities fail the test, so they are counted
+    // too, and only when something is counted is the column searched again, for a
+    // non-finite sample (an error) or the first out-of-range one.
+    let to_v = |x: f64| match units {
+        RawUnits::Volts => x,
+        RawUnits::Si => offset + sens * x,
     };
-    Ok(match first {
-        Some(index) if count > 0 => {
-            let raw = column[index];
-            let value_si = match units {
-                RawUnits::Volts => (raw - offset) / sens,
-                RawUnits::Si => raw,
-            };
-            Some(RangeViolation {
-                channel,
-                index,
-                value_si,
-                range_si,
-                count,
-            })
-        }
-        _ => None,
-    })
+    let out_of_range = |x: f64| {
+        let v = to_v(x);
+        !(v > lo && v < hi)
+    };
+    let count = match units {
+        RawUnits::Volts => column
+            .iter()
+            .map(|&v| !(v > lo && v < hi) as usize)
+            .sum::<usize>(),
+        RawUnits::Si => column
+            .iter()
+            .map(|&x| out_of_range(x) as usize)
+            .sum::<usize>(),
+    };
+    if count == 0 {
+        return Ok(None);
+    }
+    if let Some(i) = first_non_finite(column) {
+        return Err(non_finite_error(channel, i, column[i], units.name()));
+    }
+    // count > 0, so some sample is out of range: `position` finds it.
+    let Some(index) = column.iter().position(|&x| out_of_range(x)) else {
+        return Ok(None);
+    };
+    let raw = column[index];
+    let value_si = match units {
+        RawUnits::Volts => (raw - offset) / sens,
+        RawUnits::Si => raw,
+    };
+    Ok(Some(RangeViolation {
+        channel,
+        index,
+        value_si,
+        range_si,
+        count,
+    }))
 }
 
 /// Checks every column of a record; violations in the record's channel order.

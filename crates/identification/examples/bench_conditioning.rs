@@ -1,0 +1,189 @@
+//! Throughput of the conditioning chain on a record the size of the paper's (50 000 scans of
+//! 10 channels at 5 kHz): each stage on its own, then the whole `condition` call.
+//!
+//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats]`
+//!
+//! "samples" are channel samples: a 50 000-scan record has 500 000. Each figure is the best
+//! of `repeats` runs (default 15), to show the code's speed rather than the machine's load.
+
+use std::f64::consts::PI;
+use std::hint::black_box;
+use std::time::Instant;
+
+use oilfilm_identification::conditioning::{
+    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
+    range_check, ConditioningConfig, Mechanics, RawRecord,
+};
+use oilfilm_physics::daq::{ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
+use oilfilm_physics::effects::Effects;
+
+/// Best wall time (s) of `repeats` runs of `f`.
+fn best_of(repeats: usize, mut f: impl FnMut()) -> f64 {
+    (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn report(name: &str, samples: usize, seconds: f64) {
+    println!(
+        "{name:<44} {samples:>9} samples  {:>9.3} ms  {:>8.1} M samples/s",
+        seconds * 1e3,
+        samples as f64 / seconds / 1e6
+    );
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let scans: usize = args
+        .next()
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(50_000);
+    let repeats: usize = args
+        .next()
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(15)
+        .max(1);
+
+    // A record through the DAQ model: a few sines per channel, default sensor noise.
+    let cfg = DaqConfig::zhou2004();
+    let fs = cfg.sample_rate_hz;
+    let mut daq = Daq::new(&cfg, &Effects::default(), 1)?;
+    let mut signals = |t: f64| {
+        let mut s = PhysicalSignals::zero();
+        let w = 2.0 * PI * t;
+        for (k, &ch) in ChannelId::ALL.iter().enumerate() {
+            let (c, a) = match ch {
+                ChannelId::F1 | ChannelId::F2 => (0.0, 400.0),
+                ChannelId::F3 => (9000.0, 30.0),
+                ChannelId::Temperature => (40.0, 0.2),
+                _ => (-20e-6, 30e-6),
+            };
+            let f = 7.0 + 8.0 * k as f64;
+            s.set(
+                ch,
+                c + a * ((w * f).sin() + 0.3 * (w * 80.0 + k as f64).sin()),
+            );
+        }
+        s
+    };
+    let recs: Vec<DaqScan> = (0..scans as u64)
+        .map(|i| daq.scan(i, i as f64 / fs, &mut signals))
+        .collect();
+    let raw = RawRecord::from_scans(&recs, fs)?;
+    let cal = daq.calibration().clone();
+    let conf = ConditioningConfig::default();
+    let mech = Mechanics {
+        housing_mass_kg: 60.0,
+        exciter_angles_deg: [45.0, 135.0],
+        gravity_m_s2: 9.81,
+    };
+    let n = raw.len();
+    let channels = raw.channels.len();
+    let all = n * channels;
+    println!(
+        "record: {n} scans x {channels} channels = {all} samples at {fs} Hz; best of {repeats} runs"
+    );
+
+    let t = best_of(repeats, || {
+        black_box(RawRecord::from_scans(black_box(&recs), fs).unwrap()); // same input as above
+    });
+    report("RawRecord::from_scans (transpose)", all, t);
+
+    let mut si: Vec<Vec<f64>> = vec![vec![0.0; n]; channels];
+    let t = best_of(repeats, || {
+        for ((ch, col), out) in raw.channels.iter().zip(&raw.columns).zip(si.iter_mut()) {
+            calibrate::to_si_into(*ch, col, &cal, out).unwrap(); // validated record
+        }
+    });
+    report("calibrate::to_si (step 3)", all, t);
+
+    let t = best_of(repeats, || {
+        black_box(range_check::check_record(&raw, &cal).unwrap()); // validated record
+    });
+    report("range_check::check (step 2)", all, t);
+
+    let delays: Vec<deskew::FractionalDelay> = raw
+        .channels
+        .iter()
+        .map(|&ch| {
+            deskew::FractionalDelay::for_offset(
+                cal.sample_offset_s(ch).unwrap(),
+                fs,
+                conf.deskew_taps,
+            )
+            .unwrap()
+        })
+        .collect();
+    let mut out = vec![0.0; n];
+    let t = best_of(repeats, || {
+        for (d, col) in delays.iter().zip(&si) {
+            d.apply_into(col, &mut out).unwrap(); // same lengths
+            black_box(&out);
+        }
+    });
+    report("deskew::FractionalDelay (step 4, 4 taps)", all, t);
+
+    let lp = lowpass::Butterworth::design(conf.lowpass_order, conf.lowpass_cutoff_hz, fs)?;
+    let mut scratch = Vec::new();
+    let t = best_of(repeats, || {
+        for col in &si {
+            lp.filtfilt_into(col, &mut out, &mut scratch).unwrap(); // same lengths
+            black_box(&out);
+        }
+    });
+    report("lowpass::filtfilt (step 1, order 4, one by one)", all, t);
+    let mut cols = si.clone();
+    let t = best_of(repeats, || {
+        // Filters the previous run's output again: same cost, values stay finite.
+        lp.filtfilt_many_in_place(&mut cols, &mut scratch).unwrap(); // equal lengths
+        black_box(&cols);
+    });
+    report("lowpass::filtfilt_many_in_place (4 lanes)", all, t);
+
+    let (mut mean, mut diff) = (vec![0.0; n], vec![0.0; n]);
+    let t = best_of(repeats, || {
+        kinematics::mean_and_difference_into(&si[0], &si[2], &mut mean, &mut diff).unwrap();
+        kinematics::mean_and_difference_into(&si[1], &si[3], &mut mean, &mut diff).unwrap();
+        black_box((&mean, &diff));
+    });
+    report("kinematics (step 5, 4 probe columns)", 4 * n, t);
+
+    let sg = differentiate::SavitzkyGolayDerivative::new(conf.differentiator_half_length, fs)?;
+    let mut acc = vec![0.0; n];
+    let t = best_of(repeats, || {
+        for col in &si[..4] {
+            sg.apply_into(col, &mut out).unwrap(); // same lengths
+            sg.apply_into(&out, &mut acc).unwrap();
+            black_box(&acc);
+        }
+    });
+    report("differentiate x2 (step 6, 4 columns, M = 5)", 4 * n, t);
+
+    let (mut fx, mut fy) = (vec![0.0; n], vec![0.0; n]);
+    let t = best_of(repeats, || {
+        film_force::eq2_into(
+            &si[6], &si[7], &si[8], &si[4], &si[5], &mech, &mut fx, &mut fy,
+        )
+        .unwrap();
+        black_box((&fx, &fy));
+    });
+    report("film_force::eq2 (step 7, 5 columns)", 5 * n, t);
+
+    let t = best_of(repeats, || {
+        black_box(condition(&raw, &cal, &mech, &conf).unwrap()); // validated above
+    });
+    report("condition (steps 1-7, all ten channels)", all, t);
+    let mut out = condition(&raw, &cal, &mech, &conf)?;
+    let t = best_of(repeats, || {
+        condition_into(&raw, &cal, &mech, &conf, &mut out).unwrap(); // validated above
+        black_box(&out);
+    });
+    report("condition_into (reusing the output buffers)", all, t);
+    Ok(())
+}
