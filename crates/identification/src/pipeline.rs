@@ -26,17 +26,11 @@ pub const FRAME: &str = "x horizontal, y vertical up, journal turning from +x to
 film force on the journal dF = -(K r + C r' + M r''); rows = force component, columns = motion component; SI units";
 
 /// Settings of the whole pipeline.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineConfig {
     pub conditioning: ConditioningConfig,
     pub estimator: EstimatorConfig,
-}
-
-impl Default for PipelineConfig {
-    fn default() -> Self {
-        Self { conditioning: ConditioningConfig::default(), estimator: EstimatorConfig::default() }
-    }
 }
 
 /// Where the speed of a record came from: the ten channels carry no tachometer.

@@ -155,6 +155,11 @@ pub struct EstimatorConfig {
     /// Sampling rate of the conditioned record, Hz.
     #[serde(default = "default_sample_rate")]
     pub sample_rate_hz: f64,
+    /// Refuse a solved window when a direct coefficient (kxx, kyy, dxx, dyy) has a standard
+    /// error above this fraction of its value: the excitation did not determine it (e.g. one
+    /// strong frequency plus a weak ripple line, which makes the design formally full rank).
+    #[serde(default = "default_max_relative_se")]
+    pub max_relative_se: f64,
 }
 
 fn default_model() -> ModelOrder {
@@ -169,6 +174,9 @@ fn default_max_condition() -> f64 {
 fn default_sample_rate() -> f64 {
     5000.0
 }
+fn default_max_relative_se() -> f64 {
+    0.25
+}
 
 impl Default for EstimatorConfig {
     /// Zhou et al. (2004): 50 000 samples at 5 kHz, back to back; stiffness and damping; QR;
@@ -182,6 +190,7 @@ impl Default for EstimatorConfig {
             solver: default_solver(),
             max_condition: default_max_condition(),
             sample_rate_hz: default_sample_rate(),
+            max_relative_se: default_max_relative_se(),
         }
     }
 }
@@ -199,6 +208,12 @@ impl EstimatorConfig {
             return Err(IdentificationError::invalid(
                 "sample_rate_hz",
                 format!("must be finite and positive, got {}", self.sample_rate_hz),
+            ));
+        }
+        if !(self.max_relative_se > 0.0) {
+            return Err(IdentificationError::invalid(
+                "max_relative_se",
+                format!("must be > 0 (a fraction of the coefficient; inf disables the check), got {}", self.max_relative_se),
             ));
         }
         if !(self.max_condition.is_finite() && self.max_condition >= 1.0) {
@@ -312,6 +327,9 @@ pub enum Refusal {
     TooShort { samples: usize, needed: usize },
     /// A sample is NaN or infinite; `index` is its index in the record (or stream).
     NonFinite { column: String, index: usize },
+    /// Solvable, but the excitation leaves a direct coefficient undetermined: its standard
+    /// error exceeds `limit` times its value.
+    Undetermined { coefficient: String, relative_se: f64, limit: f64, explanation: String },
 }
 
 impl fmt::Display for Refusal {
@@ -331,6 +349,12 @@ impl fmt::Display for Refusal {
             Refusal::TooShort { samples, needed } => write!(
                 f,
                 "window too short: {samples} samples, at least {needed} needed for the coefficients, their intercept and meaningful standard errors"
+            ),
+            Refusal::Undetermined { coefficient, relative_se, limit, explanation } => write!(
+                f,
+                "{coefficient} is not determined by this excitation: its standard error is {:.0} % of its value (limit {:.0} %): {explanation}",
+                100.0 * relative_se,
+                100.0 * limit
             ),
             Refusal::NonFinite { column, index } => write!(
                 f,
@@ -542,8 +566,45 @@ pub(crate) fn analyse_window(
     est.residual_rms_n = [hac.residual_rms[0], hac.residual_rms[1]];
     let coefficients = assemble(model, &coef, &hac.se);
     flags(&mut est.flags, model, &lines, &coefficients, &data, &hac);
+    if let Some(refusal) = undetermined(&coefficients, &lines, config.max_relative_se) {
+        if config.solver == Solver::NormalEquations {
+            // The paper's method answers whatever the data (it is kept for comparison); say
+            // what the honest solvers would have refused.
+            est.flags.push(format!("the QR/SVD solvers would refuse this window: {refusal}"));
+        } else {
+            est.result = Err(refusal);
+            return est;
+        }
+    }
     est.result = Ok(coefficients);
     est
+}
+
+/// The worst-determined direct coefficient, if its relative standard error is above `limit`.
+fn undetermined(c: &Coefficients, lines: &spectrum::LineAnalysis, limit: f64) -> Option<Refusal> {
+    let direct = [
+        ("kxx", c.stiffness_n_m[(0, 0)], c.stiffness_se[(0, 0)]),
+        ("kyy", c.stiffness_n_m[(1, 1)], c.stiffness_se[(1, 1)]),
+        ("dxx", c.damping_n_s_m[(0, 0)], c.damping_se[(0, 0)]),
+        ("dyy", c.damping_n_s_m[(1, 1)], c.damping_se[(1, 1)]),
+    ];
+    let (name, value, se) = direct
+        .iter()
+        .copied()
+        .max_by(|a, b| (a.2 / a.1.abs()).total_cmp(&(b.2 / b.1.abs())))?;
+    let relative_se = se / value.abs();
+    if relative_se.is_nan() || relative_se <= limit {
+        return None;
+    }
+    let explanation = if lines.merged.is_empty() {
+        "no excitation line stands out of the noise: excite the bearing (two-tone or multisine)".to_string()
+    } else {
+        format!(
+            "the motion's lines ({}) do not separate stiffness from damping in both directions, typically one strong frequency with only weak ripple or harmonics beside it: excite two strong frequencies (two-tone or multisine)",
+            explain::fmt_hz(&lines.merged)
+        )
+    };
+    Some(Refusal::Undetermined { coefficient: name.to_string(), relative_se, limit, explanation })
 }
 
 /// Coefficient matrices from the regression vector (`coef[j * 2 + k]`, regressor `j`, force `k`).
