@@ -4,6 +4,7 @@
 //! lives in `oilfilm-physics`.
 
 mod bench;
+mod records;
 mod report;
 
 use std::path::PathBuf;
@@ -30,19 +31,23 @@ enum Command {
     Rig(RigArgs),
     /// The film's static equilibrium and linear coefficients at an operating point.
     Coefficients(CoefficientArgs),
+    /// Simulate a record of the rig (any excitation, any injected effect) in the ASCII format.
+    Simulate(records::SimulateArgs),
+    /// Identify the coefficients of an ASCII record, window by window.
+    Identify(records::IdentifyArgs),
     /// Benchmarks that print a table (film coefficient set, rig simulation speed).
     Bench(bench::BenchArgs),
 }
 
 #[derive(Debug, clap::Args)]
-struct RigSource {
+pub struct RigSource {
     /// Rig configuration file (TOML). Default: the built-in Zhou et al. (2004) rig.
     #[arg(long, value_name = "FILE")]
     rig: Option<PathBuf>,
 }
 
 impl RigSource {
-    fn load(&self) -> Result<RigConfig> {
+    pub fn load(&self) -> Result<RigConfig> {
         match &self.rig {
             None => Ok(RigConfig::zhou2004()?),
             Some(path) => {
@@ -94,6 +99,8 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Rig(args) => run_rig(&args),
         Command::Coefficients(args) => run_coefficients(&args),
+        Command::Simulate(args) => records::run_simulate(&args),
+        Command::Identify(args) => records::run_identify(&args),
         Command::Bench(args) => bench::run(&args),
     }
 }

@@ -1,0 +1,317 @@
+//! `oilfilm simulate` and `oilfilm identify`: records in the ASCII format, out of the simulated
+//! rig and into the identification pipeline.
+
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use oilfilm_identification::ascii::{self, Units};
+use oilfilm_identification::estimator::{ModelOrder, Solver};
+use oilfilm_identification::excitation::ExcitationPlan;
+use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
+use oilfilm_identification::simulate::{self, SimulateOptions};
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::effects::{ChannelDelay, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
+
+use crate::RigSource;
+
+/// A progress line on stderr, only when stderr is a terminal.
+pub struct Progress {
+    label: String,
+    enabled: bool,
+    last: i64,
+}
+
+impl Progress {
+    pub fn new(label: &str) -> Self {
+        Self { label: label.to_string(), enabled: std::io::stderr().is_terminal(), last: -1 }
+    }
+
+    pub fn update(&mut self, fraction: f64) {
+        let pct = (fraction * 100.0).floor() as i64;
+        if self.enabled && pct != self.last {
+            self.last = pct;
+            let bar = (fraction * 30.0).round() as usize;
+            eprint!("\r{} [{:<30}] {pct:>3} %", self.label, "#".repeat(bar.min(30)));
+            let _ = std::io::stderr().flush();
+        }
+    }
+
+    pub fn finish(&mut self) {
+        if self.enabled {
+            eprintln!();
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Excitation {
+    /// Different frequency per exciter (identifies all 8 coefficients in one record).
+    TwoTone,
+    /// Schroeder multisine over the band, odd lines on exciter 1, even on exciter 2.
+    Multisine,
+    /// The paper's method: one sine, both exciters at one frequency (refused by `identify`).
+    Sine,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    #[command(flatten)]
+    source: RigSource,
+    /// Seconds of record (the paper: 10 s = 50 000 scans at 5 kHz).
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    /// Excitation preset (ignored with --plan).
+    #[arg(long, value_enum, default_value = "two-tone")]
+    excitation: Excitation,
+    /// Amplitude per exciter, N (rms for the multisine).
+    #[arg(long, default_value_t = 100.0)]
+    amplitude_n: f64,
+    /// Frequencies, Hz: two-tone f1,f2 (default 23,37); sine f (default 37); multisine band lo,hi (default 5,80).
+    #[arg(long, value_delimiter = ',')]
+    frequencies_hz: Vec<f64>,
+    /// An excitation plan (TOML, the `ExcitationPlan` format) instead of a preset.
+    #[arg(long, value_name = "FILE")]
+    plan: Option<PathBuf>,
+    /// Inject an effect (repeatable): fluid_inertia=KG, thermal_drift=C_PER_S,
+    /// synchronous_runout=M, channel_delay=CHANNEL:S, probe_saturation=CHANNEL:M,
+    /// support_friction=N, housing_mass_mismatch=KG.
+    #[arg(long = "inject", value_name = "EFFECT=VALUE")]
+    inject: Vec<String>,
+    /// Seed of the sensor noise (default: the rig file's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Write volts as the card read them (default) or SI values.
+    #[arg(long, value_enum, default_value = "volts")]
+    units: UnitsArg,
+    /// Output file (default: standard output).
+    #[arg(long, short, value_name = "FILE")]
+    output: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum UnitsArg {
+    Volts,
+    Si,
+}
+
+fn parse_injection(config: &mut RigConfig, spec: &str) -> Result<()> {
+    let (name, value) = spec.split_once('=').with_context(|| format!("--inject `{spec}`: expected EFFECT=VALUE"))?;
+    let number = |text: &str| -> Result<f64> { text.trim().parse::<f64>().with_context(|| format!("--inject `{spec}`: `{text}` is not a number")) };
+    let channel_value = || -> Result<(String, f64)> {
+        let (c, v) = value.split_once(':').with_context(|| format!("--inject `{spec}`: expected {name}=CHANNEL:VALUE"))?;
+        Ok((c.trim().to_string(), number(v)?))
+    };
+    let e = &mut config.effects;
+    match name.trim() {
+        "fluid_inertia" => e.fluid_inertia = Some(FluidInertia { added_mass_kg: number(value)? }),
+        "thermal_drift" => e.thermal_drift = Some(ThermalDrift { heating_rate_c_per_s: number(value)? }),
+        "synchronous_runout" => e.synchronous_runout = Some(SynchronousRunout { amplitude_m: number(value)?, phase_deg: 0.0 }),
+        "channel_delay" => {
+            let (channel, delay_s) = channel_value()?;
+            e.channel_delay = Some(ChannelDelay { channel, delay_s });
+        }
+        "probe_saturation" => {
+            let (channel, limit_m) = channel_value()?;
+            e.probe_saturation = Some(ProbeSaturation { channel, limit_m });
+        }
+        "support_friction" => e.support_friction = Some(SupportFriction { friction_force_n: number(value)? }),
+        "housing_mass_mismatch" => e.housing_mass_mismatch = Some(HousingMassMismatch { mass_error_kg: number(value)? }),
+        other => bail!("--inject: unknown effect `{other}` (fluid_inertia, thermal_drift, synchronous_runout, channel_delay, probe_saturation, support_friction, housing_mass_mismatch)"),
+    }
+    Ok(())
+}
+
+fn plan_of(args: &SimulateArgs) -> Result<ExcitationPlan> {
+    if let Some(path) = &args.plan {
+        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read plan {}", path.display()))?;
+        return toml::from_str(&text).with_context(|| format!("plan {}", path.display()));
+    }
+    let f = &args.frequencies_hz;
+    let a = args.amplitude_n;
+    Ok(match args.excitation {
+        Excitation::TwoTone => {
+            let (f1, f2) = if f.len() >= 2 { (f[0], f[1]) } else { (23.0, 37.0) };
+            ExcitationPlan::two_tone(f1, f2, a)
+        }
+        Excitation::Sine => ExcitationPlan::paper_sine(f.first().copied().unwrap_or(37.0), a),
+        Excitation::Multisine => {
+            let band = if f.len() >= 2 { [f[0], f[1]] } else { [5.0, 80.0] };
+            ExcitationPlan::multisine(band, 1.0, a)
+        }
+    })
+}
+
+pub fn run_simulate(args: &SimulateArgs) -> Result<()> {
+    let mut config = args.source.load()?;
+    for spec in &args.inject {
+        parse_injection(&mut config, spec)?;
+    }
+    if let Some(seed) = args.seed {
+        config.simulation.seed = seed;
+    }
+    config.validate()?;
+    let plan = plan_of(args)?;
+    let mut progress = Progress::new("simulating");
+    let record = simulate::simulate(&config, &plan, args.seconds, SimulateOptions::default(), &mut |f| progress.update(f))?;
+    progress.finish();
+    let units = match args.units {
+        UnitsArg::Volts => Units::Volts,
+        UnitsArg::Si => Units::Si,
+    };
+    let text = ascii::write(&record.to_ascii(&config, units)?)?;
+    match &args.output {
+        Some(path) => std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?,
+        None => std::io::stdout().write_all(text.as_bytes())?,
+    }
+    let k = record.truth.coefficients.stiffness_n_m;
+    let c = record.truth.coefficients.damping_n_s_m;
+    eprintln!(
+        "simulated {} scans of rig `{}` ({}); the film's own coefficients at this point: K = [{:.4e} {:.4e}; {:.4e} {:.4e}] N/m, C = [{:.4e} {:.4e}; {:.4e} {:.4e}] N s/m",
+        record.scans.len(),
+        config.name,
+        if config.effects.is_none() { "no injected effect".to_string() } else { format!("effects: {}", args.inject.join(", ")) },
+        k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], c[(0, 0)], c[(0, 1)], c[(1, 0)], c[(1, 1)]
+    );
+    Ok(())
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum ModelArg {
+    /// Stiffness and damping (8 coefficients).
+    Kc,
+    /// Stiffness, damping and added mass (12).
+    Kcm,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum SolverArg {
+    Qr,
+    Svd,
+    /// Zhou et al. eq. 6 (normal equations), for comparison only.
+    Paper,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct IdentifyArgs {
+    /// An ASCII record (see the README for the format).
+    file: PathBuf,
+    #[command(flatten)]
+    source: RigSource,
+    /// Shaft speed, rpm, if the record does not state it.
+    #[arg(long)]
+    speed_rpm: Option<f64>,
+    /// Samples per window (default 50 000, the paper's; a shorter record is one window).
+    #[arg(long)]
+    window: Option<usize>,
+    /// Samples between window starts (default: the window).
+    #[arg(long)]
+    hop: Option<usize>,
+    #[arg(long, value_enum, default_value = "kc")]
+    model: ModelArg,
+    #[arg(long, value_enum, default_value = "qr")]
+    solver: SolverArg,
+    /// Skip the de-skew stage (only to see what the multiplex skew does).
+    #[arg(long)]
+    no_deskew: bool,
+    /// Print JSON instead of tables.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
+    let rig = args.source.load()?;
+    let name = args.file.display().to_string();
+    let text = std::fs::read_to_string(&args.file).with_context(|| format!("cannot read {name}"))?;
+    let record = ascii::read(&text, &name)?;
+    let raw = simulate::raw_from_ascii(&record)?;
+    let offsets: Vec<f64> = (0..record.header.channels.len())
+        .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
+        .collect::<Result<_>>()?;
+    let calibration = pipeline::calibration_for(&rig, &raw, &offsets).with_context(|| format!("{name}: the rig's calibration on the record's schedule"))?;
+    let (speed_rpm, source) = match (args.speed_rpm, record.header.speed_rpm) {
+        (Some(v), _) => (v, SpeedSource::User),
+        (None, Some(v)) => (v, SpeedSource::Record),
+        (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
+    };
+    let mut config = PipelineConfig::default();
+    config.estimator.window = args.window.unwrap_or(config.estimator.window);
+    config.estimator.hop = args.hop.unwrap_or(config.estimator.window);
+    config.estimator.sample_rate_hz = record.header.sample_rate_hz;
+    config.estimator.model = match args.model {
+        ModelArg::Kc => ModelOrder::Kc,
+        ModelArg::Kcm => ModelOrder::Kcm,
+    };
+    config.estimator.solver = match args.solver {
+        SolverArg::Qr => Solver::Qr,
+        SolverArg::Svd => Solver::Svd,
+        SolverArg::Paper => Solver::NormalEquations,
+    };
+    config.conditioning.deskew = !args.no_deskew;
+    let id = pipeline::identify(&raw, &calibration, &rig, speed_rpm, source, &config).with_context(|| format!("identifying {name}"))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&id)?);
+    } else {
+        print_identification(&name, &id);
+    }
+    Ok(())
+}
+
+fn print_identification(name: &str, id: &Identification) {
+    println!("record: {name} ({} scans, {} usable after filter edges), rig `{}`", id.samples, id.valid[1] - id.valid[0], id.rig);
+    println!("frame: {}", id.frame);
+    println!("conditioning low-pass: {:.1} Hz (adapted to the excitation lines)", id.lowpass_cutoff_hz);
+    if id.speed_source == SpeedSource::RigFile {
+        println!("speed: not stated by the record; the rig file's operating speed was assumed");
+    }
+    if let Some(r) = &id.refusal {
+        println!("REFUSED: {r}");
+        return;
+    }
+    for (i, w) in id.windows.iter().enumerate() {
+        let o = &w.operating;
+        println!();
+        println!(
+            "window {i}: {:.3}-{:.3} s | {:.0} rpm, {:.2} C, mu {:.5} Pa s, load {:.0} N, S {:.4}, F_Y {:.4}, d {:.4}",
+            w.t_start_s, w.t_end_s, o.speed_rpm, o.temperature_c, o.viscosity_pa_s, o.load_n, o.sommerfeld, o.load_parameter, o.amplitude_d
+        );
+        let e = &w.estimate;
+        println!("  condition {:.2}, rank {}, residual rms [{:.3}, {:.3}] N, lines {:?} Hz", e.condition_number, e.rank, e.residual_rms_n[0], e.residual_rms_n[1], e.frequencies_hz.iter().map(|f| (f * 100.0).round() / 100.0).collect::<Vec<_>>());
+        match &e.result {
+            Err(r) => println!("  REFUSED: {r}"),
+            Ok(c) => {
+                let names = ["xx", "xy", "yx", "yy"];
+                println!("  {:<6} {:>14} {:>12} {:>9} | {:>14} {:>12} {:>9}", "", "K (N/m)", "SE", "Zhou K", "C (N s/m)", "SE", "Zhou D");
+                for (k, (i, j)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
+                    let zk = w.zhou.as_ref().map_or(f64::NAN, |z| z.stiffness[(i, j)]);
+                    let zd = w.zhou.as_ref().map_or(f64::NAN, |z| z.damping[(i, j)]);
+                    println!(
+                        "  {:<6} {:>14.5e} {:>12.3e} {:>9.4} | {:>14.5e} {:>12.3e} {:>9.4}",
+                        names[k], c.stiffness_n_m[(i, j)], c.stiffness_se[(i, j)], zk, c.damping_n_s_m[(i, j)], c.damping_se[(i, j)], zd
+                    );
+                }
+                if let (Some(m), Some(s)) = (&c.added_mass_kg, &c.added_mass_se) {
+                    println!("  added mass M [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])", m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)], s[(0, 0)], s[(0, 1)], s[(1, 0)], s[(1, 1)]);
+                }
+            }
+        }
+        for f in &e.flags {
+            println!("  note: {f}");
+        }
+    }
+    if let Some(f) = &id.frequency_domain {
+        if let Ok(c) = &f.result {
+            let (k, d) = (c.stiffness_n_m, c.damping_n_s_m);
+            println!();
+            println!(
+                "frequency-domain cross-check at {} lines: K [{:.4e} {:.4e}; {:.4e} {:.4e}], C [{:.4e} {:.4e}; {:.4e} {:.4e}]",
+                f.lines.len(), k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], d[(0, 0)], d[(0, 1)], d[(1, 0)], d[(1, 1)]
+            );
+        } else if let Err(r) = &f.result {
+            println!("frequency-domain cross-check refused: {r}");
+        }
+    }
+    if let Some(n) = &id.frequency_domain_note {
+        println!("{n}");
+    }
+}
