@@ -202,7 +202,7 @@ fn adapted_cutoff(first: &Identification, configured_hz: f64) -> Option<f64> {
     let lines = &first.frequency_domain.as_ref()?.lines;
     let amplitude = |l: &estimator::LinePhasors| (l.x_m.norm_sqr() + l.y_m.norm_sqr()).sqrt();
     let strongest = lines.iter().map(amplitude).fold(0.0, f64::max);
-    if !(strongest > 0.0) {
+    if strongest.is_nan() || strongest <= 0.0 {
         return None;
     }
     let top = lines.iter().filter(|l| amplitude(l) >= STRONG_LINE_FRACTION * strongest).map(|l| l.frequency_hz).fold(0.0, f64::max);

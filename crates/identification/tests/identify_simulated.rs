@@ -130,8 +130,7 @@ fn adapting_the_band_to_the_excitation_tames_errors_in_variables_at_the_rigs_own
     let rec = simulate::simulate(&rig, &plan, 10.0, SimulateOptions::default(), &mut |_| {}).unwrap();
     let raw = rec.raw().unwrap();
     let cal = pipeline::calibration_for(&rig, &raw, &pipeline::rig_offsets(&rig, &raw).unwrap()).unwrap();
-    let mut fixed = PipelineConfig::default();
-    fixed.adaptive_lowpass = false;
+    let fixed = PipelineConfig { adaptive_lowpass: false, ..Default::default() };
     let a = pipeline::identify(&raw, &cal, &rig, rec.speed_rpm, SpeedSource::Record, &PipelineConfig::default()).unwrap();
     let f = pipeline::identify(&raw, &cal, &rig, rec.speed_rpm, SpeedSource::Record, &fixed).unwrap();
     println!("adaptive cutoff {:.1} Hz, fixed {:.1} Hz", a.lowpass_cutoff_hz, f.lowpass_cutoff_hz);
