@@ -25,6 +25,18 @@ pub struct BenchArgs {
 
 #[derive(Debug, clap::Subcommand)]
 enum BenchWhat {
+    /// Conditioning + windowed estimation throughput beside the equivalent Python pipeline
+    /// (scipy/numpy, run in .venv), the least-squares stage against numpy.linalg.lstsq, and
+    /// the paper's method against ours on the same simulated rig.
+    Pipeline {
+        /// Seconds of simulated record for the throughput rows.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        /// Python interpreter with numpy and scipy (default: .venv/bin/python, made by
+        /// tests/python/setup-venv.sh).
+        #[arg(long)]
+        python: Option<std::path::PathBuf>,
+    },
     /// Film coefficient set at the Zhou point and rig simulation speed.
     Physics {
         /// Repeats of the coefficient set (the median is reported).
@@ -39,6 +51,7 @@ enum BenchWhat {
 pub fn run(args: &BenchArgs) -> Result<()> {
     match args.what {
         BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
+        BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
     }
 }
 

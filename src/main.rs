@@ -4,6 +4,7 @@
 //! lives in `oilfilm-physics`.
 
 mod bench;
+mod bench_pipeline;
 mod records;
 mod report;
 
