@@ -67,7 +67,7 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
         ScaledFactor::new(&BlockSummary::from_columns(&view), 4).and_then(|f| f.solve(Solver::Qr))
     };
     anyhow::ensure!(factor(0).is_some(), "the first window does not solve");
-    let t_ls = best_of(5, || (0..n_windows).map(|w| factor(w).is_some()).all(|ok| ok));
+    let t_ls = best_of(5, || (0..n_windows).all(|w| factor(w).is_some()));
     let signals = Signals { x_m: cols[0], y_m: cols[1], vx_m_s: cols[2], vy_m_s: cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: cols[4], fy_n: cols[5] };
     estimator::estimate_windows(&signals, &est)?;
     let t_full_est = best_of(3, || black_box(estimator::estimate_windows(&signals, &est).is_ok()));
