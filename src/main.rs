@@ -63,8 +63,8 @@ impl RigSource {
 struct RigArgs {
     #[command(flatten)]
     source: RigSource,
-    /// Seconds of record to simulate.
-    #[arg(long, default_value_t = 2.0)]
+    /// Seconds of record to simulate (the paper's records: 10 s).
+    #[arg(long, default_value_t = 10.0)]
     seconds: f64,
     /// Exciter amplitude, N (exciter 1 at 23 Hz, exciter 2 at 37 Hz).
     #[arg(long, default_value_t = 100.0)]
@@ -137,12 +137,14 @@ fn run_rig(args: &RigArgs) -> Result<()> {
     let config = args.source.load()?;
     let running = config.running()?;
     let point = report::operating_point(&config, &running)?;
-    let record = report::simulate_two_tone(&config, args.seconds, args.amplitude_n)?;
+    let (record, simulated) = report::simulate_two_tone(&config, args.seconds, args.amplitude_n)?;
+    let identified = report::identify_record(&config, &simulated)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "operating_point": point, "record": record }))?);
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "operating_point": point, "record": record, "identification": identified }))?);
     } else {
         report::print_operating_point(&point);
         report::print_record(&record);
+        report::print_identified(&identified);
     }
     Ok(())
 }

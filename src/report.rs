@@ -8,7 +8,9 @@ use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::dimensionless;
 use oilfilm_physics::film::Running;
 use oilfilm_physics::operating_point::{self, EquilibriumOptions};
-use oilfilm_physics::rig::RigInput;
+use oilfilm_identification::excitation::ExcitationPlan;
+use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
+use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::simulation::SimulatedRig;
 use serde::Serialize;
 
@@ -148,27 +150,23 @@ pub struct RecordReport {
     pub real_time_factor: f64,
 }
 
-pub fn simulate_two_tone(config: &RigConfig, seconds: f64, amplitude_n: f64) -> Result<RecordReport> {
+/// Simulates `seconds` of a two-tone record (f1 at 23 Hz, f2 at 37 Hz) through the DAQ chain
+/// and summarises every channel in SI; the record comes back for identification.
+pub fn simulate_two_tone(config: &RigConfig, seconds: f64, amplitude_n: f64) -> Result<(RecordReport, SimulatedRecord)> {
     let (f_a, f_b) = (23.0, 37.0);
     let built = Instant::now();
-    let mut sim = SimulatedRig::new(config, 0.0)?;
+    // Building the rig (equilibrium, force map) is timed apart from stepping it.
+    SimulatedRig::new(config, 0.0)?;
     let setup_s = built.elapsed().as_secs_f64();
     let started = Instant::now();
+    let rec = simulate::simulate(config, &ExcitationPlan::two_tone(f_a, f_b, amplitude_n), seconds, SimulateOptions { keep_states: true }, &mut |_| {})?;
+    let wall = (started.elapsed().as_secs_f64() - setup_s).max(1e-9);
     let calibration = config.daq.calibration();
-    let period = sim.period_s();
-    let n = (seconds / period).round() as usize;
     let order = config.daq.scan_order();
+    let n = rec.scans.len();
     let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, f64::INFINITY, f64::NEG_INFINITY); order.len()];
-    let r0 = Vector2::new(sim.operating_point().journal.x_m, sim.operating_point().journal.y_m);
-    let mut dmax: f64 = 0.0;
-    for i in 1..=n {
-        let t = i as f64 * period;
-        let ramp = (t / 0.1).min(1.0);
-        let w = 2.0 * std::f64::consts::PI;
-        let input = RigInput { exciter_n: [amplitude_n * ramp * (w * f_a * t).sin(), amplitude_n * ramp * (w * f_b * t).sin()] };
-        let s = sim.step(&input, t)?;
-        dmax = dmax.max((s.truth.relative_m - r0).norm());
-        for (k, (&ch, &v)) in order.iter().zip(&s.scan.volts).enumerate() {
+    for scan in &rec.scans {
+        for (k, (&ch, &v)) in order.iter().zip(&scan.volts).enumerate() {
             let x = calibration.to_si(ch, v)?;
             let a = &mut acc[k];
             a.0 += x;
@@ -177,7 +175,8 @@ pub fn simulate_two_tone(config: &RigConfig, seconds: f64, amplitude_n: f64) -> 
             a.3 = a.3.max(x);
         }
     }
-    let wall = started.elapsed().as_secs_f64();
+    let r0 = Vector2::new(rec.truth.journal.x_m, rec.truth.journal.y_m);
+    let dmax = rec.states.as_deref().unwrap_or(&[]).iter().map(|s| (s.relative_m - r0).norm()).fold(0.0, f64::max);
     let channels = order
         .iter()
         .zip(acc)
@@ -186,7 +185,7 @@ pub fn simulate_two_tone(config: &RigConfig, seconds: f64, amplitude_n: f64) -> 
             ChannelSummary { channel: ch.name(), unit: ch.unit(), mean, rms_about_mean: (s2 / n as f64 - mean * mean).max(0.0).sqrt(), min: lo, max: hi }
         })
         .collect();
-    Ok(RecordReport {
+    let report = RecordReport {
         seconds,
         scans: n,
         excitation: format!("two-tone: f1 {amplitude_n} N at {f_a} Hz, f2 {amplitude_n} N at {f_b} Hz"),
@@ -195,7 +194,8 @@ pub fn simulate_two_tone(config: &RigConfig, seconds: f64, amplitude_n: f64) -> 
         setup_s,
         simulation_wall_s: wall,
         real_time_factor: seconds / wall,
-    })
+    };
+    Ok((report, rec))
 }
 
 pub fn print_record(r: &RecordReport) {
@@ -210,4 +210,70 @@ pub fn print_record(r: &RecordReport) {
         "simulated {:.2} s in {:.3} s wall: {:.1}x real time (rig set-up {:.3} s)",
         r.seconds, r.simulation_wall_s, r.real_time_factor, r.setup_s
     );
+}
+
+/// The simulated record identified by the pipeline, against the film model's coefficients.
+#[derive(Debug, Serialize)]
+pub struct IdentifiedReport {
+    pub windows: usize,
+    pub refusal: Option<String>,
+    pub lowpass_cutoff_hz: f64,
+    pub identified_stiffness_n_m: Option<Rows>,
+    pub identified_damping_n_s_m: Option<Rows>,
+    pub stiffness_se: Option<Rows>,
+    pub damping_se: Option<Rows>,
+    pub model_stiffness_n_m: Rows,
+    pub model_damping_n_s_m: Rows,
+    pub flags: Vec<String>,
+    pub identify_ms: f64,
+}
+
+pub fn identify_record(config: &RigConfig, rec: &SimulatedRecord) -> Result<IdentifiedReport> {
+    let started = Instant::now();
+    let raw = rec.raw()?;
+    let cal = pipeline::calibration_for(config, &raw, &pipeline::rig_offsets(config, &raw)?)?;
+    let id = pipeline::identify(&raw, &cal, config, rec.speed_rpm, SpeedSource::Record, &PipelineConfig::default())?;
+    let identify_ms = started.elapsed().as_secs_f64() * 1e3;
+    let first = id.windows.first().and_then(|w| w.estimate.result.as_ref().ok());
+    let refusal = id.refusal.clone().or_else(|| id.windows.first().and_then(|w| w.estimate.result.as_ref().err().map(|r| r.to_string())));
+    Ok(IdentifiedReport {
+        windows: id.windows.len(),
+        refusal,
+        lowpass_cutoff_hz: id.lowpass_cutoff_hz,
+        identified_stiffness_n_m: first.map(|c| (&c.stiffness_n_m).into()),
+        identified_damping_n_s_m: first.map(|c| (&c.damping_n_s_m).into()),
+        stiffness_se: first.map(|c| (&c.stiffness_se).into()),
+        damping_se: first.map(|c| (&c.damping_se).into()),
+        model_stiffness_n_m: (&rec.truth.coefficients.stiffness_n_m).into(),
+        model_damping_n_s_m: (&rec.truth.coefficients.damping_n_s_m).into(),
+        flags: id.windows.iter().flat_map(|w| w.estimate.flags.clone()).collect(),
+        identify_ms,
+    })
+}
+
+pub fn print_identified(r: &IdentifiedReport) {
+    println!();
+    println!("identified from the record ({} window(s), low-pass {:.1} Hz, {:.1} ms) against the simulated film's own coefficients:", r.windows, r.lowpass_cutoff_hz, r.identify_ms);
+    if let Some(reason) = &r.refusal {
+        println!("  REFUSED: {reason}");
+        return;
+    }
+    let (Some(k), Some(c), Some(sk), Some(sc)) = (&r.identified_stiffness_n_m, &r.identified_damping_n_s_m, &r.stiffness_se, &r.damping_se) else {
+        return;
+    };
+    println!("  {:<4} {:>13} {:>11} {:>13} {:>8} | {:>13} {:>11} {:>13} {:>8}", "", "K identified", "SE", "K film", "diff", "C identified", "SE", "C film", "diff");
+    for (n, (i, j)) in ["xx", "xy", "yx", "yy"].iter().zip([(0, 0), (0, 1), (1, 0), (1, 1)]) {
+        let (ki, kf) = (k.0[i][j], r.model_stiffness_n_m.0[i][j]);
+        let (ci, cf) = (c.0[i][j], r.model_damping_n_s_m.0[i][j]);
+        println!(
+            "  {n:<4} {ki:>13.5e} {:>11.3e} {kf:>13.5e} {:>+7.2}% | {ci:>13.5e} {:>11.3e} {cf:>13.5e} {:>+7.2}%",
+            sk.0[i][j],
+            100.0 * (ki - kf) / kf.abs(),
+            sc.0[i][j],
+            100.0 * (ci - cf) / cf.abs()
+        );
+    }
+    for f in &r.flags {
+        println!("  note: {f}");
+    }
 }
