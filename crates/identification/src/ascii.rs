@@ -102,6 +102,8 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::Write;
 
+use oilfilm_physics::daq::ChannelId;
+
 use crate::error::IdentificationError;
 
 /// The format version this module reads and writes.
@@ -110,23 +112,29 @@ pub const FORMAT_VERSION: u32 = 1;
 /// The text of the format line, without the version.
 pub const FORMAT_TAG: &str = "oilfilm-ascii";
 
-/// The ten channels, in the recommended (and the paper's listing) order.
-pub const CHANNEL_NAMES: [&str; 10] = [
-    "probe_a_x",
-    "probe_a_y",
-    "probe_b_x",
-    "probe_b_y",
-    "frame_x",
-    "frame_y",
-    "f1",
-    "f2",
-    "f3",
-    "temperature",
-];
-
+/// The ten channels, in the recommended (and the paper's listing) order: the DAQ's own
+/// channel names ([`ChannelId::ALL`]), so the file format and the rig cannot drift apart.
+pub const CHANNEL_NAMES: [&str; 10] = {
+    let all = ChannelId::ALL;
+    let mut names = [""; 10];
+    let mut i = 0;
+    while i < 10 {
+        names[i] = all[i].name();
+        i += 1;
+    }
+    names
+};
 /// SI unit of each channel of [`CHANNEL_NAMES`] (same order) when `units: si`.
-pub const CHANNEL_UNITS_SI: [&str; 10] = ["m", "m", "m", "m", "m", "m", "N", "N", "N", "degC"];
-
+pub const CHANNEL_UNITS_SI: [&str; 10] = {
+    let all = ChannelId::ALL;
+    let mut units = [""; 10];
+    let mut i = 0;
+    while i < 10 {
+        units[i] = all[i].unit();
+        i += 1;
+    }
+    units
+};
 /// Header keys, in the order [`write`] prints them.
 const KEYS: [&str; 7] = [
     "rig",

@@ -122,7 +122,7 @@ impl ChannelId {
     ];
 
     /// The snake_case name (identical to the serde name).
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             ChannelId::ProbeAX => "probe_a_x",
             ChannelId::ProbeAY => "probe_a_y",
@@ -138,7 +138,7 @@ impl ChannelId {
     }
 
     /// SI unit of the channel's physical value: `"m"`, `"N"` or `"degC"`.
-    pub fn unit(self) -> &'static str {
+    pub const fn unit(self) -> &'static str {
         match self {
             ChannelId::ProbeAX
             | ChannelId::ProbeAY

@@ -861,14 +861,7 @@ impl FiniteBearing {
     fn solve_state(&mut self, state: &FilmState, running: &Running) -> Result<f64, PhysicsError> {
         let c = self.geometry.clearance_m;
         check_state(state, c)?;
-        PhysicsError::check_finite("running.omega_rad_s", running.omega_rad_s)?;
-        PhysicsError::check_finite("running.viscosity_pa_s", running.viscosity_pa_s)?;
-        if running.viscosity_pa_s < 0.0 {
-            return Err(PhysicsError::invalid(
-                "running.viscosity_pa_s",
-                format!("must not be negative, got {}", running.viscosity_pa_s),
-            ));
-        }
+        running.validate()?;
         let (ex, ey) = (state.x_m / c, state.y_m / c);
         let omega = running.omega_rad_s;
         let w1 = omega * ex - 2.0 * state.vy_m_s / c;

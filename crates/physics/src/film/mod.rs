@@ -61,6 +61,19 @@ impl Running {
     pub fn from_rpm(rpm: f64, viscosity_pa_s: f64) -> Self {
         Self { omega_rad_s: rpm * std::f64::consts::PI / 30.0, viscosity_pa_s }
     }
+
+    /// Finite speed (either sign) and finite, non-negative viscosity; errors name the field.
+    pub fn validate(&self) -> Result<(), PhysicsError> {
+        PhysicsError::check_finite("running.omega_rad_s", self.omega_rad_s)?;
+        PhysicsError::check_finite("running.viscosity_pa_s", self.viscosity_pa_s)?;
+        if self.viscosity_pa_s < 0.0 {
+            return Err(PhysicsError::invalid(
+                "running.viscosity_pa_s",
+                format!("must not be negative, got {}", self.viscosity_pa_s),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Film force on the journal (N) and its Jacobian with respect to `(x, y, vx, vy)`.

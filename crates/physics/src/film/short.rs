@@ -142,7 +142,7 @@ impl ShortBearing {
     fn prepare(&self, state: &FilmState, running: &Running) -> Result<Kinematics, PhysicsError> {
         let c = self.geometry.clearance_m;
         let eps = check_state(state, c)?;
-        check_running(running)?;
+        running.validate()?;
         let omega = running.omega_rad_s;
         let r = Vector2::new(state.x_m / c, state.y_m / c);
         let w = Vector2::new(omega * r.x - 2.0 * state.vy_m_s / c, omega * r.y + 2.0 * state.vx_m_s / c);
@@ -165,17 +165,6 @@ struct Kinematics {
     u: Vector2<f64>,
 }
 
-fn check_running(running: &Running) -> Result<(), PhysicsError> {
-    PhysicsError::check_finite("running.omega_rad_s", running.omega_rad_s)?;
-    PhysicsError::check_finite("running.viscosity_pa_s", running.viscosity_pa_s)?;
-    if running.viscosity_pa_s < 0.0 {
-        return Err(PhysicsError::invalid(
-            "running.viscosity_pa_s",
-            format!("must not be negative, got {}", running.viscosity_pa_s),
-        ));
-    }
-    Ok(())
-}
 
 /// Unit vector `u = (cos beta, sin beta)` at the start of the active arc `[beta, beta + pi]`.
 ///
