@@ -48,55 +48,51 @@ pub fn eq2_into(
             });
         }
     }
+    fx.copy_from_slice(f1);
+    fy.copy_from_slice(f2);
+    applied_in_place(fx, fy, f3, mechanics)?;
+    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics)
+}
+
+
+
+/// The applied part of eq. 2, in place: `f1`, `f2` become the exciters' force plus the
+/// bellows' load minus the housing's weight, `(c1 f1 + c2 f2, s1 f1 + s2 f2 + f3 - m g)`.
+/// Linear in the sensor columns, so it commutes with the (linear, time-invariant) low-pass:
+/// conditioning forms it before filtering and filters two columns instead of three.
+pub(crate) fn applied_in_place(f1_to_fx: &mut [f64], f2_to_fy: &mut [f64], f3: &[f64], mechanics: &Mechanics) -> Result<(), IdentificationError> {
+    mechanics.validate()?;
+    let n = f1_to_fx.len();
+    if f2_to_fy.len() != n || f3.len() != n {
+        return Err(IdentificationError::BadInput { what: "eq. 2 columns".into(), reason: "f1, f2 and f3 differ in length".into() });
+    }
     let m = mechanics.housing_mass_kg;
     let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
     let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
     let mg = m * mechanics.gravity_m_s2;
-    // Re-sliced to the common length so the loop carries no bounds checks.
-    let (f2, f3, hx, hy) = (&f2[..n], &f3[..n], &housing_ax[..n], &housing_ay[..n]);
-    let (fx, fy) = (&mut fx[..n], &mut fy[..n]);
+    let (fy, f3) = (&mut f2_to_fy[..n], &f3[..n]);
     for i in 0..n {
-        fx[i] = c1 * f1[i] + c2 * f2[i] - m * hx[i];
-        fy[i] = s1 * f1[i] + s2 * f2[i] + (f3[i] - mg) - m * hy[i];
+        let (f1, f2) = (f1_to_fx[i], fy[i]);
+        f1_to_fx[i] = c1 * f1 + c2 * f2;
+        fy[i] = s1 * f1 + s2 * f2 + (f3[i] - mg);
     }
     Ok(())
 }
 
-/// Eq. 2 in place: `f1` becomes `fx` and `f2` becomes `fy` (used by
-/// [`super::condition_into`] to need no extra buffer).
-pub(crate) fn eq2_in_place(
-    f1_to_fx: &mut [f64],
-    f2_to_fy: &mut [f64],
-    f3: &[f64],
-    housing_ax: &[f64],
-    housing_ay: &[f64],
-    mechanics: &Mechanics,
-) -> Result<(), IdentificationError> {
-    mechanics.validate()?;
-    let n = f1_to_fx.len();
-    if [f2_to_fy.len(), f3.len(), housing_ax.len(), housing_ay.len()]
-        .iter()
-        .any(|&l| l != n)
-    {
+/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`.
+pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<(), IdentificationError> {
+    let n = fx.len();
+    if fy.len() != n || housing_ax.len() != n || housing_ay.len() != n {
         return Err(IdentificationError::BadInput {
             what: "eq. 2 columns".into(),
-            reason: "f1, f2, f3 and the housing accelerations differ in length".into(),
+            reason: "the forces and the housing accelerations differ in length".into(),
         });
     }
     let m = mechanics.housing_mass_kg;
-    let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
-    let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
-    let mg = m * mechanics.gravity_m_s2;
-    let (fy, f3, hx, hy) = (
-        &mut f2_to_fy[..n],
-        &f3[..n],
-        &housing_ax[..n],
-        &housing_ay[..n],
-    );
+    let (fy, hx, hy) = (&mut fy[..n], &housing_ax[..n], &housing_ay[..n]);
     for i in 0..n {
-        let (f1, f2) = (f1_to_fx[i], fy[i]);
-        f1_to_fx[i] = c1 * f1 + c2 * f2 - m * hx[i];
-        fy[i] = s1 * f1 + s2 * f2 + (f3[i] - mg) - m * hy[i];
+        fx[i] -= m * hx[i];
+        fy[i] -= m * hy[i];
     }
     Ok(())
 }

@@ -620,14 +620,21 @@ pub fn condition_into(
         }
         si[ch.index()] = buf;
     }
-    lp.filtfilt_many_in_place(&mut si, &mut Vec::new())?;
+    // The low-pass is linear and time-invariant, so it commutes with the linear combinations
+    // the later steps form: take the mean and difference of the bearing ends and the applied
+    // part of eq. 2 first, then filter the eight columns that carry dynamics (two lock-step
+    // passes of four lanes instead of three for ten raw channels). The bellows' load and the
+    // temperature keep their de-skewed samples: only their means are used.
     let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
-
-    // Kinematics: in place, A becomes the mean and B the difference.
     let (mut x_m, mut tilt_x_m) = (a_x, b_x);
     let (mut y_m, mut tilt_y_m) = (a_y, b_y);
     kinematics::mean_and_difference_in_place(&mut x_m, &mut tilt_x_m)?;
     kinematics::mean_and_difference_in_place(&mut y_m, &mut tilt_y_m)?;
+    let (mut fx_n, mut fy_n) = (f1, f2);
+    film_force::applied_in_place(&mut fx_n, &mut fy_n, &f3, mechanics)?;
+    let mut dynamic = [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n];
+    lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new())?;
+    let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
     // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`).
     let mut housing_ax_m_s2 = next();
@@ -637,16 +644,8 @@ pub fn condition_into(
     sg.apply_into(&frame_y, &mut tmp)?;
     sg.apply_into(&tmp, &mut housing_ay_m_s2)?;
 
-    // Eq. 2, in place: the f1 and f2 buffers become fx and fy.
-    let (mut fx_n, mut fy_n) = (f1, f2);
-    film_force::eq2_in_place(
-        &mut fx_n,
-        &mut fy_n,
-        &f3,
-        &housing_ax_m_s2,
-        &housing_ay_m_s2,
-        mechanics,
-    )?;
+    // Eq. 2's inertial part: the film force on the journal.
+    film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // r' and r''.
