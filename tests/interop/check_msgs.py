@@ -12,7 +12,7 @@ deserialize_message gives the same values back, and writes
 same value through serde. Values are finite (JSON has no NaN).
 
 It also copies the dependency definitions the bag schemas need (std_msgs/Header,
-builtin_interfaces/Time) from the installed share directories into tests/data/msg-deps/.
+builtin_interfaces/Time) from the installed share directories into crates/msgs/upstream/.
 
 Note: Fast-CDR does not zero alignment padding, so padding bytes in cdr_hex may be any
 value; the Rust test compares every other byte.
@@ -293,7 +293,7 @@ def main():
                 json.dump(doc, f, indent=1, ensure_ascii=False)
                 f.write("\n")
     if not args.check:
-        deps = os.path.join(os.path.dirname(args.out), "msg-deps")
+        deps = os.path.join(ROOT, "crates", "msgs", "upstream")
         for pkg, typ in [("std_msgs", "Header"), ("builtin_interfaces", "Time")]:
             src = os.path.join(get_package_share_directory(pkg), "msg", f"{typ}.msg")
             dst = os.path.join(deps, pkg, "msg", f"{typ}.msg")
