@@ -16,7 +16,9 @@
 pub mod cdr;
 pub mod spec;
 
-pub use cdr::{decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage};
+pub use cdr::{
+    decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage,
+};
 
 /// Declares a message struct and derives its CDR form and field table, in field order.
 #[macro_export]
@@ -89,20 +91,32 @@ impl Time {
         }
         let whole = seconds.floor();
         if whole < f64::from(i32::MIN) {
-            return Self { sec: i32::MIN, nanosec: 0 };
+            return Self {
+                sec: i32::MIN,
+                nanosec: 0,
+            };
         }
         if whole > f64::from(i32::MAX) {
-            return Self { sec: i32::MAX, nanosec: 999_999_999 };
+            return Self {
+                sec: i32::MAX,
+                nanosec: 999_999_999,
+            };
         }
         let ns = ((seconds - whole) * 1e9).round();
         // Rounding can reach a whole second.
         if ns >= 1e9 {
             match (whole as i32).checked_add(1) {
                 Some(sec) => Self { sec, nanosec: 0 },
-                None => Self { sec: i32::MAX, nanosec: 999_999_999 },
+                None => Self {
+                    sec: i32::MAX,
+                    nanosec: 999_999_999,
+                },
             }
         } else {
-            Self { sec: whole as i32, nanosec: ns as u32 }
+            Self {
+                sec: whole as i32,
+                nanosec: ns as u32,
+            }
         }
     }
 

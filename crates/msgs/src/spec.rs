@@ -37,8 +37,8 @@ pub struct SpecError {
 
 /// The primitive types of .msg files.
 pub const PRIMITIVES: &[&str] = &[
-    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64",
-    "uint64", "string", "wstring",
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32",
+    "uint32", "int64", "uint64", "string", "wstring",
 ];
 
 /// The base type of a field type: `float64[4]` -> `float64`, `string<=8[]` -> `string`.
@@ -52,7 +52,10 @@ pub fn parse_msg(text: &str, package: &str) -> Result<MsgSpec, SpecError> {
     let mut spec = MsgSpec::default();
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
-        let err = |what: String| SpecError { line: line_no, what };
+        let err = |what: String| SpecError {
+            line: line_no,
+            what,
+        };
         let trimmed = raw.trim();
         if trimmed.is_empty() || trimmed.starts_with('#') {
             continue;
@@ -70,14 +73,18 @@ pub fn parse_msg(text: &str, package: &str) -> Result<MsgSpec, SpecError> {
             format!("{package}/{ty}")
         };
         // A constant: NAME=value (a string constant's value is the rest of the line).
-        let name_end = rest.find(|c: char| c == '=' || c.is_whitespace() || c == '#').unwrap_or(rest.len());
+        let name_end = rest
+            .find(|c: char| c == '=' || c.is_whitespace() || c == '#')
+            .unwrap_or(rest.len());
         let name = &rest[..name_end];
         let after = rest[name_end..].trim_start();
         if name.is_empty() || !name.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
             return Err(err(format!("`{trimmed}`: bad name")));
         }
         if !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(err(format!("`{name}`: names are letters, digits and underscores")));
+            return Err(err(format!(
+                "`{name}`: names are letters, digits and underscores"
+            )));
         }
         if let Some(v) = after.strip_prefix('=') {
             let value = if base == "string" || base == "wstring" {
@@ -88,7 +95,11 @@ pub fn parse_msg(text: &str, package: &str) -> Result<MsgSpec, SpecError> {
             if value.is_empty() {
                 return Err(err(format!("constant `{name}` has no value")));
             }
-            spec.constants.push(ConstantSpec { name: name.into(), ty, value });
+            spec.constants.push(ConstantSpec {
+                name: name.into(),
+                ty,
+                value,
+            });
         } else {
             if name.chars().any(|c| c.is_ascii_uppercase()) {
                 return Err(err(format!("field `{name}`: field names are lower case")));
@@ -129,7 +140,8 @@ pub fn schema_text<'a>(
     naming: SchemaNaming,
     lookup: &dyn Fn(&str, &str) -> Option<&'a str>,
 ) -> Result<String, String> {
-    let (pkg, ty) = split_type(root).ok_or_else(|| format!("`{root}` is not pkg/Type or pkg/msg/Type"))?;
+    let (pkg, ty) =
+        split_type(root).ok_or_else(|| format!("`{root}` is not pkg/Type or pkg/msg/Type"))?;
     let mut seen = HashSet::new();
     let mut out = String::new();
     append(pkg, ty, naming, lookup, &mut seen, &mut out, 0)?;
@@ -167,7 +179,8 @@ fn append<'a>(
         .filter(|b| !PRIMITIVES.contains(&b.as_str()))
         .collect();
     for dep in deps {
-        let (dp, dt) = split_type(&dep).ok_or_else(|| format!("`{dep}` in {pkg}/msg/{ty} is not pkg/Type"))?;
+        let (dp, dt) =
+            split_type(&dep).ok_or_else(|| format!("`{dep}` in {pkg}/msg/{ty} is not pkg/Type"))?;
         if !seen.insert(format!("{dp}/{dt}")) {
             continue;
         }

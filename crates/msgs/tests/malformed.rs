@@ -5,7 +5,10 @@ use oilfilm_msgs::{CoefficientEstimate, DaqFrame, Header, RigStatus, Time};
 
 fn sample_daq() -> DaqFrame {
     DaqFrame {
-        header: Header { stamp: Time { sec: 3, nanosec: 4 }, frame_id: "oilfilm_bearing".into() },
+        header: Header {
+            stamp: Time { sec: 3, nanosec: 4 },
+            frame_id: "oilfilm_bearing".into(),
+        },
         sequence: 5,
         channel_names: vec!["f1".into(), "f2".into()],
         channel_units: vec!["N".into(), "N".into()],
@@ -52,7 +55,10 @@ fn errors_name_the_field() {
     let e = decode::<DaqFrame>(&bytes).expect_err("zero-length string");
     assert_eq!(e.field, "header.frame_id", "{e}");
 
-    let s = RigStatus { message: "x".into(), ..Default::default() };
+    let s = RigStatus {
+        message: "x".into(),
+        ..Default::default()
+    };
     let mut bytes = encode(&s);
     let nul = bytes.len() - 1;
     bytes[nul] = b'y';
@@ -72,7 +78,10 @@ fn header_and_trailing_bytes_are_checked() {
     let bytes = encode(&RigStatus::default());
     let mut be = bytes.clone();
     be[1] = 0x00;
-    assert!(decode::<RigStatus>(&be).expect_err("big endian").to_string().contains("big-endian"));
+    assert!(decode::<RigStatus>(&be)
+        .expect_err("big endian")
+        .to_string()
+        .contains("big-endian"));
     let mut long = bytes.clone();
     long.extend([0, 0, 0]);
     decode_exact::<RigStatus>(&long).expect("3 bytes of trailing padding are accepted");
@@ -83,10 +92,34 @@ fn header_and_trailing_bytes_are_checked() {
 
 #[test]
 fn time_from_seconds() {
-    assert_eq!(Time::from_seconds(1.5), Time { sec: 1, nanosec: 500_000_000 });
-    assert_eq!(Time::from_seconds(-1.7), Time { sec: -2, nanosec: 300_000_000 });
+    assert_eq!(
+        Time::from_seconds(1.5),
+        Time {
+            sec: 1,
+            nanosec: 500_000_000
+        }
+    );
+    assert_eq!(
+        Time::from_seconds(-1.7),
+        Time {
+            sec: -2,
+            nanosec: 300_000_000
+        }
+    );
     assert_eq!(Time::from_seconds(f64::NAN), Time::default());
     assert_eq!(Time::from_seconds(1e12).sec, i32::MAX);
-    assert_eq!(Time::from_seconds(0.9999999999), Time { sec: 1, nanosec: 0 });
-    assert!((Time { sec: -2, nanosec: 300_000_000 }.as_seconds() + 1.7).abs() < 1e-12);
+    assert_eq!(
+        Time::from_seconds(0.9999999999),
+        Time { sec: 1, nanosec: 0 }
+    );
+    assert!(
+        (Time {
+            sec: -2,
+            nanosec: 300_000_000
+        }
+        .as_seconds()
+            + 1.7)
+            .abs()
+            < 1e-12
+    );
 }
