@@ -1,0 +1,321 @@
+//! Rust mirror types of the `oilfilm_msgs` ROS 2 interface package (`msgs/` at the
+//! repository root), with their CDR encoding ([`cdr`]) and bag schema text ([`spec`]).
+//!
+//! The `.msg` files are the single source of truth. Each type here is declared once, in
+//! .msg field order, by [`ros_message!`], which derives the struct (serde
+//! `Serialize`/`Deserialize` with the .msg field names, so a serde CDR serializer such as
+//! the transport's produces the same bytes), its CDR writer and reader and its field table
+//! ([`RosMessage::fields`]). The tests check that table against the parsed .msg files and the
+//! bytes against what rclpy serialises.
+//!
+//! Conventions of every message: x horizontal, y vertical up; r = journal centre relative to
+//! the bearing centre; force = film force on the journal; Lund's
+//! `dF = -(K r + C r' + M r'')`; 2x2 matrices row-major `[xx, xy, yx, yy]`; SI units named
+//! in the field.
+
+pub mod cdr;
+pub mod spec;
+
+pub use cdr::{
+    decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage,
+};
+
+/// Declares a message struct and derives its CDR form and field table, in field order.
+#[macro_export]
+macro_rules! ros_message {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident = $type_name:literal, definition = $definition:expr; {
+            $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
+        }
+        constants { $( $cname:ident : $cty:ty = $cval:literal as $cros:literal ),* $(,)? }
+    ) => {
+        $(#[$meta])*
+        #[derive(Debug, Clone, PartialEq, Default, ::serde::Serialize, ::serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct $name {
+            $( $(#[$fmeta])* pub $field: $ty, )*
+        }
+
+        impl $name {
+            $( pub const $cname: $cty = $cval; )*
+        }
+
+        impl $crate::cdr::CdrField for $name {
+            fn ros_type() -> String {
+                let full: &str = $type_name;
+                // `pkg/msg/Type` is written `pkg/Type` as a field type.
+                full.replacen("/msg/", "/", 1)
+            }
+            const MIN_BYTES: usize = 0 $( + <$ty as $crate::cdr::CdrField>::MIN_BYTES )*;
+            fn write(&self, w: &mut $crate::cdr::CdrWriter) {
+                $( $crate::cdr::CdrField::write(&self.$field, w); )*
+            }
+            fn read(r: &mut $crate::cdr::CdrReader, field: &str) -> Result<Self, $crate::cdr::CdrError> {
+                Ok(Self {
+                    $( $field: <$ty as $crate::cdr::CdrField>::read(r, stringify!($field))
+                        .map_err(|e| if field.is_empty() { e } else { e.within(field) })?, )*
+                })
+            }
+        }
+
+        impl $crate::cdr::RosMessage for $name {
+            const TYPE_NAME: &'static str = $type_name;
+            const DEFINITION: &'static str = $definition;
+            fn fields() -> Vec<(&'static str, String)> {
+                vec![ $( (stringify!($field), <$ty as $crate::cdr::CdrField>::ros_type()) ),* ]
+            }
+            const CONSTANTS: &'static [(&'static str, &'static str, &'static str)] =
+                &[ $( (stringify!($cname), $cros, stringify!($cval)) ),* ];
+        }
+    };
+}
+
+ros_message! {
+    /// `builtin_interfaces/msg/Time`: seconds and nanoseconds (in [0, 1e9)) since the epoch
+    /// of the clock.
+    pub struct Time = "builtin_interfaces/msg/Time",
+        definition = include_str!("../upstream/builtin_interfaces/msg/Time.msg"); {
+        pub sec: i32,
+        pub nanosec: u32,
+    }
+    constants {}
+}
+
+impl Time {
+    /// The time `seconds` (finite) as ROS does it: nanosec in [0, 1e9), sec = floor;
+    /// saturates outside the `int32` seconds range, NaN gives zero.
+    pub fn from_seconds(seconds: f64) -> Self {
+        if seconds.is_nan() {
+            return Self::default();
+        }
+        let whole = seconds.floor();
+        if whole < f64::from(i32::MIN) {
+            return Self {
+                sec: i32::MIN,
+                nanosec: 0,
+            };
+        }
+        if whole > f64::from(i32::MAX) {
+            return Self {
+                sec: i32::MAX,
+                nanosec: 999_999_999,
+            };
+        }
+        let ns = ((seconds - whole) * 1e9).round();
+        // Rounding can reach a whole second.
+        if ns >= 1e9 {
+            match (whole as i32).checked_add(1) {
+                Some(sec) => Self { sec, nanosec: 0 },
+                None => Self {
+                    sec: i32::MAX,
+                    nanosec: 999_999_999,
+                },
+            }
+        } else {
+            Self {
+                sec: whole as i32,
+                nanosec: ns as u32,
+            }
+        }
+    }
+
+    pub fn as_seconds(&self) -> f64 {
+        f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+    }
+}
+
+ros_message! {
+    /// `std_msgs/msg/Header`: a stamp and the frame the data is in.
+    pub struct Header = "std_msgs/msg/Header",
+        definition = include_str!("../upstream/std_msgs/msg/Header.msg"); {
+        pub stamp: Time,
+        pub frame_id: String,
+    }
+    constants {}
+}
+
+/// The frame id our nodes put in `header.frame_id`: the rig's bearing frame (x horizontal,
+/// y up, origin at the bearing centre).
+pub const BEARING_FRAME_ID: &str = "oilfilm_bearing";
+
+ros_message! {
+    /// `oilfilm_msgs/msg/ExciterCommand`: waveform spec and force setpoints for the two
+    /// exciters (index 0: f1 at 45 deg, index 1: f2 at 135 deg). See `msgs/msg/ExciterCommand.msg`.
+    pub struct ExciterCommand = "oilfilm_msgs/msg/ExciterCommand",
+        definition = include_str!("../../../msgs/msg/ExciterCommand.msg"); {
+        pub header: Header,
+        pub sequence: u64,
+        pub waveform: [u8; 2],
+        pub amplitude_n: [f64; 2],
+        pub frequency_hz: [f64; 2],
+        pub phase_rad: [f64; 2],
+        pub rms_n: [f64; 2],
+        pub period_s: [f64; 2],
+        pub band_low_hz: [f64; 2],
+        pub band_high_hz: [f64; 2],
+        pub line_set: [u8; 2],
+        pub chirp_start_hz: [f64; 2],
+        pub chirp_end_hz: [f64; 2],
+        pub sweep_s: [f64; 2],
+        pub ramp_s: f64,
+        pub amplitude_scale: f64,
+        pub setpoint_rate_hz: f64,
+        pub force_1_n: Vec<f64>,
+        pub force_2_n: Vec<f64>,
+        pub max_force_n: f64,
+        pub band_limit_low_hz: f64,
+        pub band_limit_high_hz: f64,
+        pub stop: bool,
+    }
+    constants {
+        WAVEFORM_OFF: u8 = 0 as "uint8",
+        WAVEFORM_SINE: u8 = 1 as "uint8",
+        WAVEFORM_MULTISINE: u8 = 2 as "uint8",
+        WAVEFORM_CHIRP: u8 = 3 as "uint8",
+        LINES_ALL: u8 = 0 as "uint8",
+        LINES_ODD: u8 = 1 as "uint8",
+        LINES_EVEN: u8 = 2 as "uint8",
+    }
+}
+
+ros_message! {
+    /// `oilfilm_msgs/msg/DaqFrame`: a block of multiplexed scans as acquired, scan-major
+    /// values. See `msgs/msg/DaqFrame.msg`.
+    pub struct DaqFrame = "oilfilm_msgs/msg/DaqFrame",
+        definition = include_str!("../../../msgs/msg/DaqFrame.msg"); {
+        pub header: Header,
+        pub sequence: u64,
+        pub first_scan: u64,
+        pub sample_rate_hz: f64,
+        pub units: u8,
+        pub channel_names: Vec<String>,
+        pub channel_units: Vec<String>,
+        pub channel_offsets_s: Vec<f64>,
+        pub scan_count: u32,
+        pub values: Vec<f64>,
+        pub rig: String,
+    }
+    constants {
+        UNITS_SI: u8 = 0 as "uint8",
+        UNITS_VOLTS: u8 = 1 as "uint8",
+    }
+}
+
+ros_message! {
+    /// `oilfilm_msgs/msg/ConditionedFrame`: de-skewed x, y, x', y', x'', y'', fx, fy per
+    /// sample with validity. See `msgs/msg/ConditionedFrame.msg`.
+    pub struct ConditionedFrame = "oilfilm_msgs/msg/ConditionedFrame",
+        definition = include_str!("../../../msgs/msg/ConditionedFrame.msg"); {
+        pub header: Header,
+        pub sequence: u64,
+        pub first_sample: u64,
+        pub sample_rate_hz: f64,
+        pub x_m: Vec<f64>,
+        pub y_m: Vec<f64>,
+        pub x_dot_m_s: Vec<f64>,
+        pub y_dot_m_s: Vec<f64>,
+        pub x_ddot_m_s2: Vec<f64>,
+        pub y_ddot_m_s2: Vec<f64>,
+        pub fx_n: Vec<f64>,
+        pub fy_n: Vec<f64>,
+        pub valid: Vec<bool>,
+        pub flags: Vec<String>,
+    }
+    constants {}
+}
+
+ros_message! {
+    /// `oilfilm_msgs/msg/CoefficientEstimate`: one window's 8 or 12 coefficients with
+    /// standard errors, dimensionless forms, diagnostics and operating point, or the refusal
+    /// reason. See `msgs/msg/CoefficientEstimate.msg`.
+    pub struct CoefficientEstimate = "oilfilm_msgs/msg/CoefficientEstimate",
+        definition = include_str!("../../../msgs/msg/CoefficientEstimate.msg"); {
+        pub header: Header,
+        pub sequence: u64,
+        pub window_start: Time,
+        pub window_end: Time,
+        pub window_start_sample: u64,
+        pub window_end_sample: u64,
+        pub model: u8,
+        pub solved: bool,
+        pub refusal_reason: String,
+        pub stiffness_n_m: [f64; 4],
+        pub damping_n_s_m: [f64; 4],
+        pub stiffness_se_n_m: [f64; 4],
+        pub damping_se_n_s_m: [f64; 4],
+        pub added_mass_kg: Vec<f64>,
+        pub added_mass_se_kg: Vec<f64>,
+        pub stiffness_lund: [f64; 4],
+        pub damping_lund: [f64; 4],
+        pub stiffness_zhou: [f64; 4],
+        pub damping_zhou: [f64; 4],
+        pub condition_number: f64,
+        pub rank: u32,
+        pub residual_rms_n: [f64; 2],
+        pub excitation_frequencies_hz: Vec<f64>,
+        pub flags: Vec<String>,
+        pub speed_rad_s: f64,
+        pub bearing_temperature_degc: f64,
+        pub viscosity_pa_s: f64,
+        pub static_force_n: [f64; 2],
+        pub load_n: f64,
+        pub journal_position_m: [f64; 2],
+        pub sommerfeld_number: f64,
+        pub load_parameter_fy: f64,
+        pub amplitude_d: f64,
+    }
+    constants {
+        MODEL_KC: u8 = 0 as "uint8",
+        MODEL_KCM: u8 = 1 as "uint8",
+    }
+}
+
+ros_message! {
+    /// `oilfilm_msgs/msg/RigStatus`: speed, static load, bearing temperature, state.
+    /// See `msgs/msg/RigStatus.msg`.
+    pub struct RigStatus = "oilfilm_msgs/msg/RigStatus",
+        definition = include_str!("../../../msgs/msg/RigStatus.msg"); {
+        pub header: Header,
+        pub speed_rad_s: f64,
+        pub static_load_n: f64,
+        pub bearing_temperature_degc: f64,
+        pub state: u8,
+        pub message: String,
+    }
+    constants {
+        STATE_IDLE: u8 = 0 as "uint8",
+        STATE_RUNNING: u8 = 1 as "uint8",
+        STATE_EXCITING: u8 = 2 as "uint8",
+        STATE_FAULT: u8 = 3 as "uint8",
+    }
+}
+
+/// The .msg text of a type this crate knows (`pkg`, `Type`): ours and their dependencies.
+pub fn definition(package: &str, type_name: &str) -> Option<&'static str> {
+    Some(match (package, type_name) {
+        ("builtin_interfaces", "Time") => Time::DEFINITION,
+        ("std_msgs", "Header") => Header::DEFINITION,
+        ("oilfilm_msgs", "ExciterCommand") => ExciterCommand::DEFINITION,
+        ("oilfilm_msgs", "DaqFrame") => DaqFrame::DEFINITION,
+        ("oilfilm_msgs", "ConditionedFrame") => ConditionedFrame::DEFINITION,
+        ("oilfilm_msgs", "CoefficientEstimate") => CoefficientEstimate::DEFINITION,
+        ("oilfilm_msgs", "RigStatus") => RigStatus::DEFINITION,
+        _ => return None,
+    })
+}
+
+/// The `ros2msg` schema text of one of our types (`oilfilm_msgs/msg/DaqFrame`) as rosbag2
+/// writes it into a bag (see [`spec::schema_text`]).
+pub fn schema_text(type_name: &str, naming: spec::SchemaNaming) -> Result<String, String> {
+    spec::schema_text(type_name, naming, &definition)
+}
+
+/// Which of our topics' types a name is, for tools (`pkg/msg/Type`).
+pub const MESSAGE_TYPES: &[&str] = &[
+    ExciterCommand::TYPE_NAME,
+    DaqFrame::TYPE_NAME,
+    ConditionedFrame::TYPE_NAME,
+    CoefficientEstimate::TYPE_NAME,
+    RigStatus::TYPE_NAME,
+];
