@@ -1,18 +1,49 @@
 #!/usr/bin/env bash
 # Runs every test of oilfilm. This is the README's test command and what CI runs.
-# It installs what it needs itself, so it works on a clean clone.
+# It installs what it needs itself (Python venv with rclpy and the rosidl pieces from PyPI),
+# so it works on a clean clone.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+passed=0
+failed=0
 
 echo "== toolchain"
 cargo --version
 rustc --version
 
-echo "== build (tests are built optimised: see [profile.test] in Cargo.toml)"
-cargo build --workspace --all-targets --profile test
-
-echo "== Rust tests"
+echo "== Rust tests (built optimised: see [profile.test] in Cargo.toml)"
+mkdir -p target
+set +e
 cargo test --workspace --profile test -- --nocapture 2>&1 | tee target/test-output.txt
-grep -E "^test result:" target/test-output.txt | awk '
+rust_status=${PIPESTATUS[0]}
+set -e
+read -r rp rf rs < <(grep -E "^test result:" target/test-output.txt | awk '
   { for (i = 1; i <= NF; i++) { if ($i ~ /passed;/) p += $(i-1); if ($i ~ /failed;/) f += $(i-1); if ($i ~ /ignored;/) s += $(i-1) } }
-  END { printf "rust: %d passed, %d failed, %d skipped\n", p, f, s }'
+  END { printf "%d %d %d\n", p, f, s }')
+passed=$((passed + rp))
+failed=$((failed + rf))
+if [ "$rust_status" -ne 0 ] && [ "$rf" -eq 0 ]; then
+  # A build failure or a crash counts as a failure even if no test reported one.
+  failed=$((failed + 1))
+fi
+
+echo "== ROS 2 interop (rclpy and rosidl from PyPI, in .venv-ros)"
+interop() {
+  local name=$1
+  shift
+  echo "-- $name"
+  if "$@"; then
+    passed=$((passed + 1))
+    echo "ok: $name"
+  else
+    failed=$((failed + 1))
+    echo "FAILED: $name"
+  fi
+}
+interop "oilfilm_msgs builds with rosidl; rclpy serialises every message as the golden CDR fixtures say" bash tests/interop/run-check-msgs.sh --check
+interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopback)" bash tests/interop/run-rclpy-roundtrip.sh
+
+echo
+echo "all: $passed passed, $failed failed, $rs skipped"
+[ "$failed" -eq 0 ]
