@@ -40,7 +40,7 @@ use std::f64::consts::{PI, SQRT_2};
 use nalgebra::{Complex, DMatrix, DVector, Matrix2, Vector2};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::dimensionless::{self, DimensionlessCoefficients};
-use oilfilm_physics::film::Running;
+use oilfilm_physics::film::{FilmModelConfig, Running};
 use oilfilm_physics::operating_point::{self, EquilibriumOptions, OperatingPoint};
 use serde::{Deserialize, Serialize};
 
@@ -809,6 +809,8 @@ fn seed_for(rig: &RigConfig, offset: u64, index: usize) -> u64 {
 pub struct FyTrend {
     pub name: String,
     pub fit: QuadraticFit,
+    /// The measured `F_Y` range the fit covers.
+    pub fy_range: [f64; 2],
     /// The fit at the smallest and largest measured `F_Y`.
     pub fit_at_min_fy: f64,
     pub fit_at_max_fy: f64,
@@ -901,6 +903,7 @@ fn run_load_study_from(rig: &RigConfig, cfg: &CampaignConfig, first: usize, tota
         trends.push(FyTrend {
             name: (*name).to_string(),
             fit,
+            fy_range: [fy_min, fy_max],
             fit_at_min_fy: lo,
             fit_at_max_fy: hi,
             slope_sign: sign(hi - lo),
@@ -1375,6 +1378,8 @@ identified - model: mean |diff| {:.3} ({:.1} %), max {:.3} ({:.1} %)",
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Campaign {
     pub rig: String,
+    /// The film model behind both the simulation and the "model" coefficients.
+    pub film_model: String,
     pub frame: String,
     pub convention: String,
     pub config: CampaignConfig,
@@ -1391,8 +1396,16 @@ pub fn run_campaign(rig: &RigConfig, cfg: &CampaignConfig, progress: &mut dyn Fn
     let load_study = run_load_study_from(rig, cfg, 0, total, progress)?;
     let amplitude_study = run_amplitude_study_from(rig, cfg, cfg.load.points.len(), total, progress)?;
     let findings = findings(&load_study, &amplitude_study)?;
+    let film_model = match rig.film {
+        FilmModelConfig::Short => "Ocvirk short-bearing pi-film (closed form)".to_string(),
+        FilmModelConfig::Finite { n_theta, n_z, tabulate } => format!(
+            "finite-difference Reynolds film, {n_theta} x {n_z} grid per pad{}",
+            if tabulate { " (the rig integrates its force map)" } else { "" }
+        ),
+    };
     Ok(Campaign {
         rig: rig.name.clone(),
+        film_model,
         frame: pipeline::FRAME.into(),
         convention: CONVENTION.into(),
         config: cfg.clone(),
