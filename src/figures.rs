@@ -276,7 +276,7 @@ fn relative_variation(c: &Campaign, sweep: &AmplitudeSweep, fig: u32, path: &Pat
     let halves = body.split_evenly((1, 2));
     for (h, (first, what)) in halves.iter().zip([(0usize, "(a) stiffness"), (4, "(b) damping")]) {
         let mut chart = ChartBuilder::on(h)
-            .caption(what.to_string(), (FONT, 18))
+            .caption(what, (FONT, 18))
             .margin(12)
             .x_label_area_size(48)
             .y_label_area_size(64)

@@ -35,6 +35,9 @@
 //! 5. Simulate ramp + settling + the analysed seconds, drop the ramp and settling scans, and
 //!    identify the rest as one window ([`pipeline::identify`]).
 
+// `!(a < b)` is written on purpose wherever NaN must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::f64::consts::{PI, SQRT_2};
 
 use nalgebra::{Complex, DMatrix, DVector, Matrix2, Vector2};
@@ -247,18 +250,12 @@ impl Default for AmplitudeStudyConfig {
 }
 
 /// The whole campaign's settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CampaignConfig {
     pub record: RecordSettings,
     pub load: LoadStudyConfig,
     pub amplitude: AmplitudeStudyConfig,
-}
-
-impl Default for CampaignConfig {
-    fn default() -> Self {
-        Self { record: RecordSettings::default(), load: LoadStudyConfig::default(), amplitude: AmplitudeStudyConfig::default() }
-    }
 }
 
 impl CampaignConfig {
@@ -1289,8 +1286,8 @@ pub fn findings(load: &LoadStudy, amplitude: &AmplitudeStudy) -> Result<Findings
 
     let pct = |x: f64| format!("{:+.1} %", 100.0 * x);
     let pct_se = |x: f64, se: Option<f64>| match se {
-        Some(e) => format!("{:.1} +- {:.1} %", 100.0 * x, 100.0 * e),
-        None => format!("{:.1} %", 100.0 * x),
+        Some(e) => format!("{:.2} +- {:.2} %", 100.0 * x, 100.0 * e),
+        None => format!("{:.2} %", 100.0 * x),
     };
     let fy: Vec<f64> = load.points.iter().filter(|p| p.identified.is_some()).map(|p| p.load_parameter).collect();
     let fy_min = fy.iter().copied().fold(f64::INFINITY, f64::min);
