@@ -6,6 +6,8 @@
 mod bench;
 mod bench_pipeline;
 mod records;
+mod campaign;
+mod figures;
 mod report;
 
 use std::path::PathBuf;
@@ -38,6 +40,25 @@ enum Command {
     Identify(records::IdentifyArgs),
     /// Benchmarks that print a table (film coefficient set, rig simulation speed).
     Bench(bench::BenchArgs),
+    /// Zhou et al. (2004)'s two studies on the simulated rig: coefficients against the load
+    /// parameter (Figs 5-6) and against the excitation amplitude (Figs 7-10), with fits,
+    /// the film model's coefficients, JSON of every number and SVG figures.
+    Campaign(CampaignArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct CampaignArgs {
+    #[command(flatten)]
+    source: RigSource,
+    /// Directory for campaign.json and the figures (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "out/campaign")]
+    out: PathBuf,
+    /// About a tenth of the work: 5 load points, 4 amplitude steps per load parameter, 4 s records.
+    #[arg(long)]
+    quick: bool,
+    /// Print the campaign's JSON on stdout instead of the summary tables (files are written either way).
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -103,6 +124,7 @@ fn main() -> Result<()> {
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Campaign(args) => campaign::run(&args.source.load()?, &args.out, args.quick, args.json),
     }
 }
 

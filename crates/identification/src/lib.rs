@@ -15,8 +15,12 @@
 //! * [`pipeline`]: a raw record and its rig in, windowed coefficients with their operating
 //!   point and dimensionless forms out: the one path the CLI, the nodes and replay share.
 //! * [`simulate`]: a seeded record from the simulated rig under an excitation plan.
+//! * [`campaign`]: the paper's two studies on the simulated rig (coefficients against the load
+//!   parameter and against the excitation amplitude), with its fits and the checks of its
+//!   findings.
 
 pub mod ascii;
+pub mod campaign;
 pub mod conditioning;
 pub mod error;
 pub mod estimator;
