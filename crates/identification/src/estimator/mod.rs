@@ -13,8 +13,10 @@
 //! * **reports the condition number** of the centred, column-scaled regressors and refuses
 //!   windows whose excitation cannot separate the coefficients ([`Refusal`]), saying why;
 //! * gives **standard errors that hold** when the residuals are coloured, as filtered and
-//!   differentiated rig signals always are: Newey–West HAC with Andrews' bandwidth
-//!   ([`uncertainty`], Newey & West, Econometrica 55 (1987) 703–708);
+//!   differentiated rig signals always are: the fixed-regressor covariance with the residual's
+//!   spectral density at the regressors' frequencies ([`uncertainty`]; Grenander, Ann. Math.
+//!   Statist. 25 (1954) 252–272). Newey–West HAC is kept there for comparison: on the rig's
+//!   blue residuals it overstated the scatter by up to 1.7×;
 //! * finds the **excitation lines** in the motion ([`spectrum`]) and uses them both to explain
 //!   refusals and for a frequency-domain cross-check ([`frequency`]);
 //! * runs as a **stream** whose overlapping windows reuse the factors of hop-sized blocks
@@ -561,8 +563,8 @@ pub(crate) fn analyse_window(
         }
     };
 
-    // 5. Residuals and HAC standard errors.
-    let hac = uncertainty::newey_west(&data, p, &mean, &scale, &coef, &ginv);
+    // 5. Residuals and standard errors (fixed-regressor spectral form, see `uncertainty`).
+    let hac = uncertainty::spectral(&data, p, &mean, &scale, &coef, &ginv);
     est.residual_rms_n = [hac.residual_rms[0], hac.residual_rms[1]];
     let coefficients = assemble(model, &coef, &hac.se);
     flags(&mut est.flags, model, &lines, &coefficients, &data, &hac);
@@ -691,7 +693,7 @@ fn flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalysis, c: &Coe
         }
     }
     if hac.lag_capped {
-        out.push("residual correlation outlasts a quarter of the window: the HAC lag was clipped and standard errors may be optimistic".to_string());
+        out.push("the window is so short that the residual spectrum's lag window was clipped to a quarter of it: standard errors may be optimistic".to_string());
     }
     let p = model.regressors();
     for (k, name) in ["fx", "fy"].iter().enumerate() {
