@@ -325,6 +325,22 @@ pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64
     LineAnalysis { lines: [lx, ly], merged, line_fraction, velocity_noise_fraction, resolution_hz: df }
 }
 
+/// Fraction of the variance of `a` (direction x) and `b` (direction y) outside the lines
+/// `lines` found for their direction, by the same Welch analysis as [`analyse`]: the noise
+/// fraction of two further regressors (the accelerations of the added-mass model). NaN where
+/// it cannot be estimated (window too short, no power, or the analysis found nothing).
+pub fn noise_fraction(a: &[f64], b: &[f64], lines: &LineAnalysis, sample_rate_hz: f64) -> [f64; 2] {
+    let n = a.len().min(b.len());
+    if n < MIN_SEGMENT || !(sample_rate_hz > 0.0) || !(lines.resolution_hz > 0.0) {
+        return [f64::NAN; 2];
+    }
+    let seg = (1usize << (usize::BITS - 1 - n.leading_zeros())).min(MAX_SEGMENT);
+    let tables = Tables::cached(seg);
+    let (pa, pb) = welch_pair(&a[..n], &b[..n], &tables);
+    let bins = |d: usize| -> Vec<f64> { lines.lines[d].iter().map(|f| f / lines.resolution_hz).collect() };
+    [1.0 - fraction_in(&pa, &bins(0)), 1.0 - fraction_in(&pb, &bins(1))]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
