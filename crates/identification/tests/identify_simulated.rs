@@ -135,8 +135,18 @@ fn adapting_the_band_to_the_excitation_tames_errors_in_variables_at_the_rigs_own
     let f = pipeline::identify(&raw, &cal, &rig, rec.speed_rpm, SpeedSource::Record, &fixed).unwrap();
     println!("adaptive cutoff {:.1} Hz, fixed {:.1} Hz", a.lowpass_cutoff_hz, f.lowpass_cutoff_hz);
     let (ek_a, ec_a) = report("adaptive band", &rec, &a);
-    let (ek_f, ec_f) = report("fixed 200 Hz band", &rec, &f);
     assert!((a.lowpass_cutoff_hz - 1.5 * 37.0).abs() < 1.0, "cutoff {} should follow the 37 Hz line", a.lowpass_cutoff_hz);
     assert!(ek_a < 0.05 && ec_a < 0.05, "adaptive band: errors {ek_a:.3} / {ec_a:.3}");
-    assert!(ek_f > 3.0 * ek_a && ec_f > ec_a, "the fixed band should show the errors-in-variables bias: K {ek_f:.3} vs {ek_a:.3}, C {ec_f:.3} vs {ec_a:.3}");
+    // What bias is left is said, with its size: the errors-in-variables flag names kyy.
+    let flags = &a.windows[0].estimate.flags;
+    assert!(flags.iter().any(|f| f.contains("errors in variables") && f.contains("kyy")), "the remaining bias must be flagged: {flags:?}");
+    // The wide band is worse: either far more biased, or (as with the spectral standard
+    // errors) refused because the noise leaves a direct coefficient undetermined.
+    match f.windows[0].estimate.result.as_ref() {
+        Err(refusal) => println!("fixed 200 Hz band: refused: {refusal}"),
+        Ok(_) => {
+            let (ek_f, ec_f) = report("fixed 200 Hz band", &rec, &f);
+            assert!(ek_f > 3.0 * ek_a && ec_f > ec_a, "the fixed band should show the errors-in-variables bias: K {ek_f:.3} vs {ek_a:.3}, C {ec_f:.3} vs {ec_a:.3}");
+        }
+    }
 }

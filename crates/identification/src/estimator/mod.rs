@@ -604,7 +604,7 @@ fn undetermined(c: &Coefficients, lines: &spectrum::LineAnalysis, limit: f64) ->
         "no excitation line stands out of the noise: excite the bearing (two-tone or multisine)".to_string()
     } else {
         format!(
-            "the motion's lines ({}) do not separate stiffness from damping in both directions, typically one strong frequency with only weak ripple or harmonics beside it: excite two strong frequencies (two-tone or multisine)",
+            "the motion's lines ({}) do not separate stiffness from damping in both directions: either one strong frequency has only weak ripple or harmonics beside it (excite two strong frequencies: two-tone or multisine), or sensor noise over the regression band swamps the excitation (keep the low-pass near the excitation band, excite harder)",
             explain::fmt_hz(&lines.merged)
         )
     };
