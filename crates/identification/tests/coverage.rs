@@ -46,60 +46,18 @@
 //! Expected values (300 seeds of this design, same physics): |bias| ≤ 0.34 SE (dxx), SD/SE
 //! 0.98–1.07, coverage 0.92–0.95. Run time about 22 s in the test profile.
 
+mod simulated_rig;
+
+use simulated_rig::*;
+
 use nalgebra::Matrix2;
-use oilfilm_identification::estimator::Coefficients;
 use oilfilm_identification::excitation::ExcitationPlan;
-use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
-use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
-use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::film::FilmModelConfig;
+use oilfilm_identification::pipeline::{Identification, PipelineConfig};
+use oilfilm_identification::simulate::{self, SimulateOptions};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 const NAMES: [&str; 8] = ["kxx", "kxy", "kyx", "kyy", "dxx", "dxy", "dyx", "dyy"];
-
-/// The Zhou rig with Ocvirk's short-bearing film (closed form with an exact Jacobian: a 10 s
-/// record simulates in a fraction of a second).
-fn short_rig() -> RigConfig {
-    let mut rig = RigConfig::zhou2004().unwrap();
-    rig.film = FilmModelConfig::Short;
-    rig
-}
-
-fn set_probe_noise(rig: &mut RigConfig, rms_m: f64) {
-    for c in rig.daq.channels.iter_mut() {
-        if c.channel.is_displacement_probe() {
-            c.noise_rms = rms_m;
-        }
-    }
-}
-
-/// RMS of the dynamic relative displacement (x and y together) on a noise-free pass, past the
-/// excitation's ramp.
-fn displacement_rms(rig: &RigConfig, plan: &ExcitationPlan, seconds: f64) -> f64 {
-    let mut quiet = rig.clone();
-    set_probe_noise(&mut quiet, 0.0);
-    let rec = simulate::simulate(&quiet, plan, seconds, SimulateOptions { keep_states: true }, &mut |_| {}).unwrap();
-    let s = rec.states.unwrap();
-    let s = &s[s.len() / 5..];
-    let n = s.len() as f64;
-    let (mx, my) = (s.iter().map(|v| v.relative_m.x).sum::<f64>() / n, s.iter().map(|v| v.relative_m.y).sum::<f64>() / n);
-    (s.iter().map(|v| (v.relative_m.x - mx).powi(2) + (v.relative_m.y - my).powi(2)).sum::<f64>() / n).sqrt()
-}
-
-fn identify(rig: &RigConfig, rec: &SimulatedRecord, config: &PipelineConfig) -> Identification {
-    let raw = rec.raw().unwrap();
-    let cal = pipeline::calibration_for(rig, &raw, &pipeline::rig_offsets(rig, &raw).unwrap()).unwrap();
-    pipeline::identify(&raw, &cal, rig, rec.speed_rpm, SpeedSource::Record, config).unwrap()
-}
-
-fn solved(id: &Identification) -> &Coefficients {
-    assert_eq!(id.windows.len(), 1, "a 10 s record is one window");
-    match &id.windows[0].estimate.result {
-        Ok(c) => c,
-        Err(r) => panic!("window refused: {r}"),
-    }
-}
 
 fn flat(k: &Matrix2<f64>, c: &Matrix2<f64>) -> [f64; 8] {
     [k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], c[(0, 0)], c[(0, 1)], c[(1, 0)], c[(1, 1)]]
@@ -173,7 +131,7 @@ fn standard_errors_cover_the_truth_about_95_percent_of_seeded_repeats() {
     let rms = displacement_rms(&base, &plan, seconds);
     let mut rig = base.clone();
     // 40 dB: per-axis probe noise such that x and y together carry 1 % of the motion's rms.
-    let probe_noise = 0.01 * rms / std::f64::consts::SQRT_2;
+    let probe_noise = forty_db_noise(rms);
     set_probe_noise(&mut rig, probe_noise);
     let lsb_v = 2.0 * rig.daq.full_scale_v / 2f64.powi(rig.daq.adc_bits as i32);
     let lsb_m = lsb_v / rig.daq.channels.iter().find(|c| c.channel.is_bearing_probe()).unwrap().sensitivity_v_per_unit;

@@ -5,6 +5,10 @@
 //! signal (measured on a noise-free pass of the same record); force, load and temperature
 //! sensors keep the rig file's realistic noise.
 
+mod simulated_rig;
+
+use simulated_rig::*;
+
 use nalgebra::Matrix2;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
@@ -12,38 +16,14 @@ use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::film::FilmModelConfig;
 
-/// Sets every displacement probe's noise to `rms_m`.
-fn set_probe_noise(rig: &mut RigConfig, rms_m: f64) {
-    for c in rig.daq.channels.iter_mut() {
-        if c.channel.is_displacement_probe() {
-            c.noise_rms = rms_m;
-        }
-    }
-}
-
-/// The rms of the dynamic relative displacement (x and y together) of a noise-free pass.
-fn displacement_rms(rig: &RigConfig, plan: &ExcitationPlan, seconds: f64) -> f64 {
-    let mut quiet = rig.clone();
-    set_probe_noise(&mut quiet, 0.0);
-    let rec = simulate::simulate(&quiet, plan, seconds, SimulateOptions { keep_states: true }, &mut |_| {}).unwrap();
-    let states = rec.states.unwrap();
-    let skip = states.len() / 5; // past the ramp
-    let s = &states[skip..];
-    let n = s.len() as f64;
-    let (mx, my) = (s.iter().map(|v| v.relative_m.x).sum::<f64>() / n, s.iter().map(|v| v.relative_m.y).sum::<f64>() / n);
-    (s.iter().map(|v| (v.relative_m.x - mx).powi(2) + (v.relative_m.y - my).powi(2)).sum::<f64>() / n).sqrt()
-}
-
 /// Simulates at 40 dB SNR and identifies.
 fn run(rig: &RigConfig, plan: &ExcitationPlan, seconds: f64, config: &PipelineConfig) -> (SimulatedRecord, Identification) {
     let rms = displacement_rms(rig, plan, seconds);
     let mut noisy = rig.clone();
     // Per-axis noise so that |noise| over x and y together is 1 % of |signal|: 40 dB.
-    set_probe_noise(&mut noisy, 0.01 * rms / std::f64::consts::SQRT_2);
+    set_probe_noise(&mut noisy, forty_db_noise(rms));
     let rec = simulate::simulate(&noisy, plan, seconds, SimulateOptions::default(), &mut |_| {}).unwrap();
-    let raw = rec.raw().unwrap();
-    let cal = pipeline::calibration_for(&noisy, &raw, &pipeline::rig_offsets(&noisy, &raw).unwrap()).unwrap();
-    let id = pipeline::identify(&raw, &cal, &noisy, rec.speed_rpm, SpeedSource::Record, config).unwrap();
+    let id = identify(&noisy, &rec, config);
     (rec, id)
 }
 

@@ -5,51 +5,14 @@
 //!    displacement regressor is so noisy that the 12-coefficient fit is biased by errors in
 //!    variables far more than by skew (tens of kg); the estimator flags that.
 
-use oilfilm_identification::estimator::{Coefficients, ModelOrder};
+mod simulated_rig;
+
+use simulated_rig::*;
+
+use oilfilm_identification::estimator::ModelOrder;
 use oilfilm_identification::excitation::ExcitationPlan;
-use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
-use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
-use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::film::FilmModelConfig;
-
-fn short_rig() -> RigConfig {
-    let mut rig = RigConfig::zhou2004().unwrap();
-    rig.film = FilmModelConfig::Short;
-    rig
-}
-
-fn set_probe_noise(rig: &mut RigConfig, rms_m: f64) {
-    for c in rig.daq.channels.iter_mut() {
-        if c.channel.is_displacement_probe() {
-            c.noise_rms = rms_m;
-        }
-    }
-}
-
-/// RMS of the dynamic relative displacement on a noise-free pass.
-fn displacement_rms(rig: &RigConfig, plan: &ExcitationPlan, seconds: f64) -> f64 {
-    let mut quiet = rig.clone();
-    set_probe_noise(&mut quiet, 0.0);
-    let rec = simulate::simulate(&quiet, plan, seconds, SimulateOptions { keep_states: true }, &mut |_| {}).unwrap();
-    let s = rec.states.unwrap();
-    let s = &s[s.len() / 5..];
-    let n = s.len() as f64;
-    let (mx, my) = (s.iter().map(|v| v.relative_m.x).sum::<f64>() / n, s.iter().map(|v| v.relative_m.y).sum::<f64>() / n);
-    (s.iter().map(|v| (v.relative_m.x - mx).powi(2) + (v.relative_m.y - my).powi(2)).sum::<f64>() / n).sqrt()
-}
-
-fn identify(rig: &RigConfig, rec: &SimulatedRecord, config: &PipelineConfig) -> Identification {
-    let raw = rec.raw().unwrap();
-    let cal = pipeline::calibration_for(rig, &raw, &pipeline::rig_offsets(rig, &raw).unwrap()).unwrap();
-    pipeline::identify(&raw, &cal, rig, rec.speed_rpm, SpeedSource::Record, config).unwrap()
-}
-
-fn solved(id: &Identification) -> &Coefficients {
-    match &id.windows[0].estimate.result {
-        Ok(c) => c,
-        Err(r) => panic!("window refused: {r}"),
-    }
-}
+use oilfilm_identification::pipeline::PipelineConfig;
+use oilfilm_identification::simulate::{self, SimulateOptions};
 
 #[test]
 fn de_skew_removes_the_apparent_added_mass_that_multiplex_skew_creates() {
@@ -58,7 +21,7 @@ fn de_skew_removes_the_apparent_added_mass_that_multiplex_skew_creates() {
     // stiffness from mass.
     let plan = ExcitationPlan::multisine([5.0, 80.0], 1.0, 40.0);
     let mut rig = base.clone();
-    set_probe_noise(&mut rig, 0.01 * displacement_rms(&base, &plan, 10.0) / std::f64::consts::SQRT_2);
+    set_probe_noise(&mut rig, forty_db_noise(displacement_rms(&base, &plan, 10.0)));
     let rec = simulate::simulate(&rig, &plan, 10.0, SimulateOptions::default(), &mut |_| {}).unwrap();
     let mut config = PipelineConfig::default();
     config.estimator.model = ModelOrder::Kcm;
