@@ -367,13 +367,21 @@ impl Butterworth {
                 reason: format!("{} samples, column 0 has {n}", c.len()),
             });
         }
-        let mut groups = columns.chunks_exact_mut(4);
+        // Eight lanes in lock-step: the recursion of each lane waits on its own previous
+        // output, so independent lanes fill the multiply-add pipeline (latency hiding).
+        let mut groups = columns.chunks_exact_mut(8);
         for g in &mut groups {
+            if let [a, b, c, d, e, f, g2, h] = g {
+                self.filtfilt_lanes::<8>([a, b, c, d, e, f, g2, h], scratch);
+            }
+        }
+        let mut rest = groups.into_remainder().chunks_exact_mut(4);
+        for g in &mut rest {
             if let [a, b, c, d] = g {
                 self.filtfilt_lanes::<4>([a, b, c, d], scratch);
             }
         }
-        for g in groups.into_remainder().chunks_mut(2) {
+        for g in rest.into_remainder().chunks_mut(2) {
             match g {
                 [a, b] => self.filtfilt_lanes::<2>([a, b], scratch),
                 [a] => self.filtfilt_lanes::<1>([a], scratch),
