@@ -734,11 +734,7 @@ fn run_record(
 ) -> Result<RecordResult, IdentificationError> {
     let mut r = rig_at(rig, spec.speed_rpm, spec.load_n, spec.temperature_c)?;
     r.simulation.seed = spec.seed;
-    for ch in r.daq.channels.iter_mut() {
-        if ch.channel.is_displacement_probe() {
-            ch.noise_rms = design.probe_noise_rms_m;
-        }
-    }
+    r.daq.set_displacement_probe_noise(design.probe_noise_rms_m);
     let mut plan = ExcitationPlan::two_tone(design.frequencies_hz[0], design.frequencies_hz[1], design.amplitude_n);
     plan.ramp_s = settings.ramp_s;
     let dropped_s = settings.ramp_s + settings.settle_s;

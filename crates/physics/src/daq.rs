@@ -297,6 +297,14 @@ fn field_path(prefix: &str, rest: &str) -> String {
 }
 
 impl DaqConfig {
+    /// Sets the sensor noise of all six displacement probes (bearing and frame) to `rms_m`:
+    /// how tests and studies put a record at a chosen signal-to-noise ratio.
+    pub fn set_displacement_probe_noise(&mut self, rms_m: f64) {
+        for c in self.channels.iter_mut().filter(|c| c.channel.is_displacement_probe()) {
+            c.noise_rms = rms_m;
+        }
+    }
+
     /// The rig of Zhou et al. (2004), section 2.3, with documented sensor choices.
     ///
     /// Card: 5000 scans/s; channel interval 10 us (the PCI-9114 at its 100 kS/s aggregate

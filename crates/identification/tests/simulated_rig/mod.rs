@@ -19,11 +19,7 @@ pub fn short_rig() -> RigConfig {
 
 /// Sets every displacement probe's (bearing and frame) noise to `rms_m`.
 pub fn set_probe_noise(rig: &mut RigConfig, rms_m: f64) {
-    for c in rig.daq.channels.iter_mut() {
-        if c.channel.is_displacement_probe() {
-            c.noise_rms = rms_m;
-        }
-    }
+    rig.daq.set_displacement_probe_noise(rms_m);
 }
 
 /// RMS of the dynamic relative displacement (x and y together) on a noise-free pass, past the
