@@ -147,6 +147,7 @@ def conditioned_cases():
     m.fx_n = [10.5, -20.25, 30.0]
     m.fy_n = [-40.0, 50.125, -60.0]
     m.valid = [True, False, True]
+    m.bearing_temperature_degc = 41.25
     m.flags = ["lowpass_hz=55.5", "deskewed"]
     k = ConditionedFrame()
     k.header = header(100, 300)

@@ -220,6 +220,7 @@ ros_message! {
         pub fx_n: Vec<f64>,
         pub fy_n: Vec<f64>,
         pub valid: Vec<bool>,
+        pub bearing_temperature_degc: f64,
         pub flags: Vec<String>,
     }
     constants {}

@@ -140,7 +140,10 @@ fn empty_float64_sequence_takes_no_padding() {
     want.extend([0; 8]); // sequence (16..24)
     want.extend([0; 8]); // first_sample (24..32)
     want.extend([0; 8]); // sample_rate_hz (32..40)
-    want.extend([0; 4 * 10]); // 8 empty float64[], valid, flags: 10 counts (40..80)
+    want.extend([0; 4 * 9]); // 8 empty float64[] and valid: 9 counts (40..76)
+    want.extend([0; 4]); // pad to 80 for the float64
+    want.extend([0; 8]); // bearing_temperature_degc (80..88)
+    want.extend([0; 4]); // flags: its count (88..92)
     assert_eq!(encode(&empty), want);
     assert_eq!(
         decode_exact::<ConditionedFrame>(&want).expect("decode"),
@@ -158,7 +161,9 @@ fn empty_float64_sequence_takes_no_padding() {
     assert!(layout.fastcdr_length > want.len());
     let layout = encode_with_padding(&one);
     let (bytes, padding) = (layout.bytes, layout.padding);
-    assert_eq!(bytes.len(), want.len() + 4 + 8);
+    // + 4 padding + 8 element, - the 4 bytes of padding before bearing_temperature_degc,
+    // which is now 8-aligned without it.
+    assert_eq!(bytes.len(), want.len() + 4 + 8 - 4);
     assert!(padding.contains(&(4 + 44..4 + 48)), "padding {padding:?}");
     assert_eq!(&bytes[4 + 48..4 + 56], &1.0f64.to_le_bytes());
 }
