@@ -270,42 +270,13 @@ pub fn identify_conditioned(
     );
     let signals = Signals { x_m: &x, y_m: &y, vx_m_s: &vx, vy_m_s: &vy, ax_m_s2: Some(&ax), ay_m_s2: Some(&ay), fx_n: &fx, fy_n: &fy };
     let estimates = estimator::estimate_windows(&signals, &est)?;
-    let geometry = rig.bearing;
     for e in estimates {
         let range = e.start..e.end;
-        let mean = |v: &[f64]| v[range.clone()].iter().sum::<f64>() / range.len() as f64;
-        let (mx, my) = (mean(&x), mean(&y));
-        let static_force_n = [mean(&fx), mean(&fy)];
-        let load_n = static_force_n[0].hypot(static_force_n[1]);
-        let temperature_c = conditioned.temperature_c[valid.start + range.start..valid.start + range.end].iter().sum::<f64>() / range.len() as f64;
-        let viscosity_pa_s = rig.oil.viscosity_pa_s(temperature_c)?;
-        let running = Running::from_rpm(speed_rpm, viscosity_pa_s);
-        let amplitude = x[range.clone()].iter().zip(&y[range.clone()]).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
-        let (lund, zhou) = match &e.result {
-            Ok(c) if load_n > 0.0 => (
-                Some(dimensionless::lund(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running, load_n)),
-                Some(dimensionless::zhou(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running)),
-            ),
-            _ => (None, None),
-        };
-        out.windows.push(WindowReport {
-            t_start_s: conditioned.t_s[valid.start + e.start],
-            t_end_s: conditioned.t_s[valid.start + e.end - 1],
-            operating: WindowOperatingPoint {
-                speed_rpm,
-                temperature_c,
-                viscosity_pa_s,
-                static_force_n,
-                load_n,
-                sommerfeld: if load_n > 0.0 { dimensionless::sommerfeld(&geometry, &running, load_n) } else { f64::INFINITY },
-                load_parameter: dimensionless::zhou_load_parameter(&geometry, &running, load_n),
-                mean_position_m: [mx, my],
-                amplitude_d: amplitude / geometry.clearance_m,
-            },
-            estimate: e,
-            lund,
-            zhou,
-        });
+        let temperature = &conditioned.temperature_c[valid.start + range.start..valid.start + range.end];
+        let temperature_c = temperature.iter().sum::<f64>() / range.len() as f64;
+        let t_start_s = conditioned.t_s[valid.start + e.start];
+        let t_end_s = conditioned.t_s[valid.start + e.end - 1];
+        out.windows.push(window_report(&signals, e, temperature_c, rig, speed_rpm, [t_start_s, t_end_s])?);
     }
     // Frequency-domain cross-check at the lines the excitation put in the first window.
     match out.windows.first().map(|w| w.estimate.frequencies_hz.clone()) {
@@ -316,6 +287,62 @@ pub fn identify_conditioned(
         _ => out.frequency_domain_note = Some("no excitation lines found: no frequency-domain estimate".into()),
     }
     Ok(out)
+}
+
+/// One window's report: its estimate with the operating point it was measured at (static
+/// film force and mean position over the window, viscosity from `temperature_c` through the
+/// rig's oil law, Sommerfeld number, `F_Y`, amplitude `d`) and, when solved, Lund's and
+/// Zhou's groups. `signals` is the record the estimate's `start..end` indexes; `times_s` the
+/// window's first and last sample times. The live estimator node and [`identify`] share it.
+pub fn window_report(
+    signals: &Signals,
+    estimate: WindowEstimate,
+    temperature_c: f64,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    times_s: [f64; 2],
+) -> Result<WindowReport, IdentificationError> {
+    let range = estimate.start..estimate.end;
+    if range.is_empty() || range.end > signals.len() {
+        return Err(IdentificationError::invalid(
+            "estimate",
+            format!("window {}..{} is empty or outside the record of {} samples", range.start, range.end, signals.len()),
+        ));
+    }
+    let geometry = rig.bearing;
+    let mean = |v: &[f64]| v[range.clone()].iter().sum::<f64>() / range.len() as f64;
+    let (x, y) = (signals.x_m, signals.y_m);
+    let (mx, my) = (mean(x), mean(y));
+    let static_force_n = [mean(signals.fx_n), mean(signals.fy_n)];
+    let load_n = static_force_n[0].hypot(static_force_n[1]);
+    let viscosity_pa_s = rig.oil.viscosity_pa_s(temperature_c)?;
+    let running = Running::from_rpm(speed_rpm, viscosity_pa_s);
+    let amplitude = x[range.clone()].iter().zip(&y[range.clone()]).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+    let (lund, zhou) = match &estimate.result {
+        Ok(c) if load_n > 0.0 => (
+            Some(dimensionless::lund(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running, load_n)),
+            Some(dimensionless::zhou(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running)),
+        ),
+        _ => (None, None),
+    };
+    Ok(WindowReport {
+        t_start_s: times_s[0],
+        t_end_s: times_s[1],
+        operating: WindowOperatingPoint {
+            speed_rpm,
+            temperature_c,
+            viscosity_pa_s,
+            static_force_n,
+            load_n,
+            sommerfeld: if load_n > 0.0 { dimensionless::sommerfeld(&geometry, &running, load_n) } else { f64::INFINITY },
+            load_parameter: dimensionless::zhou_load_parameter(&geometry, &running, load_n),
+            mean_position_m: [mx, my],
+            amplitude_d: amplitude / geometry.clearance_m,
+        },
+        estimate,
+        lund,
+        zhou,
+    })
 }
 
 /// Median time step of a sampled time base.

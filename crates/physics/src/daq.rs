@@ -184,7 +184,7 @@ impl ChannelId {
     }
 
     /// Comma-separated list of all names, for error messages.
-    fn all_names() -> String {
+    pub fn all_names() -> String {
         Self::ALL
             .iter()
             .map(|c| c.name())

@@ -709,3 +709,27 @@ pub fn condition_into(
     };
     Ok(())
 }
+
+/// Samples at each end of a conditioned record that the stages' edge effects spoil (the
+/// de-skew interpolator's half-length, the low-pass settling to 1e-7 and twice the
+/// differentiator's half-length): [`condition`] marks `edge..n - edge` valid. A streaming
+/// conditioner that conditions a block with this many extra samples on each side gets the
+/// whole block valid.
+pub fn edge_samples(
+    calibration: &Calibration,
+    config: &ConditioningConfig,
+    sample_rate_hz: f64,
+) -> Result<usize, IdentificationError> {
+    config.validate(sample_rate_hz)?;
+    let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, sample_rate_hz)?;
+    let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, sample_rate_hz)?;
+    let mut deskew_trim = 0;
+    if config.deskew {
+        for &ch in &ChannelId::ALL {
+            let offset = calibration.sample_offset_s(ch)?;
+            let d = deskew::FractionalDelay::for_offset(offset, sample_rate_hz, config.deskew_taps)?;
+            deskew_trim = deskew_trim.max(d.edge_samples());
+        }
+    }
+    Ok(deskew_trim + lp.settling_samples() + 2 * sg.half_length())
+}
