@@ -1,0 +1,317 @@
+//! The conditioner node's core: DAQ frames in, conditioned frames out, through the very
+//! conditioning chain offline identification uses (`oilfilm_identification::conditioning`,
+//! Zhou et al. 2004 section 3.1 steps 1-7).
+//!
+//! Streaming zero-phase filtering: the chain is non-causal (forward-backward low-pass,
+//! centred derivatives, de-skew interpolation), so each output block of `block_scans`
+//! samples is conditioned together with `edge` raw samples on either side, where `edge` is
+//! what the chain itself trims from a record ([`conditioning::edge_samples`]). Blocks sit at
+//! fixed scan indices of the stream, so the output depends only on the input scans, never on
+//! how they were cut into frames or when they arrived: live and replayed graphs give the
+//! same bits. Latency is one block plus `edge` scans.
+//!
+//! A gap (a frame whose first scan is not the next one), a change of schedule, rate or rig
+//! restarts the stream: the filters start again, `edge` scans after the gap, and the output
+//! frame says so in its flags. A block in which a probe left its linear range (paper step 2)
+//! or the chain refused the data is published with every sample invalid and the reason in
+//! its flags; nothing is silently turned into numbers.
+
+use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
+use oilfilm_identification::pipeline::{calibration_for, mechanics_of};
+use oilfilm_msgs::{ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::daq::ChannelId;
+use serde::{Deserialize, Serialize};
+
+use crate::error::NodeError;
+use crate::stamp::Stamp;
+use crate::topics;
+
+/// The conditioner node's parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConditionerParams {
+    /// Rig file (TOML); empty: the built-in Zhou et al. (2004) rig. Its calibration converts
+    /// volts, its housing mass and exciter angles enter eq. 2.
+    pub rig: String,
+    /// Low-pass cutoff, Hz. Set it to about 1.5 x the highest excitation line: every hertz
+    /// above lets differentiated probe noise bias the coefficients (errors in variables).
+    pub lowpass_cutoff_hz: f64,
+    pub lowpass_order: i64,
+    pub differentiator_half_length: i64,
+    /// Remove the multiplex skew (false only to demonstrate what skew does).
+    pub deskew: bool,
+    pub deskew_taps: i64,
+    /// Samples per conditioned frame.
+    pub block_scans: i64,
+}
+
+impl Default for ConditionerParams {
+    fn default() -> Self {
+        let c = ConditioningConfig::default();
+        Self {
+            rig: String::new(),
+            lowpass_cutoff_hz: c.lowpass_cutoff_hz,
+            lowpass_order: c.lowpass_order as i64,
+            differentiator_half_length: c.differentiator_half_length as i64,
+            deskew: c.deskew,
+            deskew_taps: c.deskew_taps as i64,
+            block_scans: 1000,
+        }
+    }
+}
+
+impl ConditionerParams {
+    /// The conditioning chain's settings (checked against the rate when the stream starts).
+    pub fn conditioning(&self) -> Result<ConditioningConfig, NodeError> {
+        let count = |name: &str, v: i64| usize::try_from(v).map_err(|_| NodeError::parameter(name, format!("must be >= 0, got {v}")));
+        Ok(ConditioningConfig {
+            lowpass_cutoff_hz: self.lowpass_cutoff_hz,
+            lowpass_order: count("lowpass_order", self.lowpass_order)?,
+            differentiator_half_length: count("differentiator_half_length", self.differentiator_half_length)?,
+            deskew: self.deskew,
+            deskew_taps: count("deskew_taps", self.deskew_taps)?,
+        })
+    }
+
+    pub fn validate(&self) -> Result<(), NodeError> {
+        if !(1..=1_000_000).contains(&self.block_scans) {
+            return Err(NodeError::parameter("block_scans", format!("must be in 1..=1000000, got {}", self.block_scans)));
+        }
+        self.conditioning()?;
+        Ok(())
+    }
+}
+
+/// The stream being conditioned.
+struct Stream {
+    rate_hz: f64,
+    units: u8,
+    channels: Vec<ChannelId>,
+    offsets_s: Vec<f64>,
+    rig: String,
+    calibration: oilfilm_physics::daq::Calibration,
+    /// Scan index of `columns[*][0]`.
+    first_scan: u64,
+    /// The stream's first scan and its rig time: every stamp is computed from these, so
+    /// rounding never accumulates.
+    origin_scan: u64,
+    origin_stamp: Stamp,
+    /// Raw columns, scan order.
+    columns: Vec<Vec<f64>>,
+    /// Next scan to publish.
+    next_out: u64,
+    edge: usize,
+    /// Why the stream (re)started, for the first frame's flags.
+    start_note: Option<String>,
+}
+
+impl Stream {
+    fn end_scan(&self) -> u64 {
+        self.first_scan + self.columns.first().map_or(0, Vec::len) as u64
+    }
+}
+
+/// The conditioner's state.
+pub struct ConditionerCore {
+    rig: RigConfig,
+    mechanics: Mechanics,
+    config: ConditioningConfig,
+    block: usize,
+    stream: Option<Stream>,
+    work: Conditioned,
+    sequence: u64,
+}
+
+impl ConditionerCore {
+    pub fn new(rig: RigConfig, params: &ConditionerParams) -> Result<Self, NodeError> {
+        params.validate()?;
+        Ok(Self {
+            mechanics: mechanics_of(&rig),
+            rig,
+            config: params.conditioning()?,
+            block: params.block_scans as usize,
+            stream: None,
+            work: Conditioned::default(),
+            sequence: 0,
+        })
+    }
+
+    /// Scans each conditioned block needs on either side (once a stream has started).
+    pub fn edge_scans(&self) -> Option<usize> {
+        self.stream.as_ref().map(|s| s.edge)
+    }
+
+    /// Takes one DAQ frame; returns the conditioned frames it completes. `Err` for a frame
+    /// that cannot be used (it is skipped; the stream goes on).
+    pub fn push(&mut self, frame: &DaqFrame) -> Result<Vec<ConditionedFrame>, NodeError> {
+        let (channels, n_scans) = self.check(frame)?;
+        let restart = match &self.stream {
+            None => Some("stream started".to_string()),
+            Some(s) if s.rate_hz != frame.sample_rate_hz || s.channels != channels || s.offsets_s != frame.channel_offsets_s || s.units != frame.units || s.rig != frame.rig => {
+                Some(format!("stream restarted at scan {}: the DAQ's rate, schedule, units or rig changed", frame.first_scan))
+            }
+            Some(s) if s.end_scan() != frame.first_scan => Some(format!(
+                "stream restarted at scan {}: {} (expected scan {})",
+                frame.first_scan,
+                if frame.first_scan > s.end_scan() { format!("{} scans missing", frame.first_scan - s.end_scan()) } else { "scans repeated or out of order".to_string() },
+                s.end_scan()
+            )),
+            Some(_) => None,
+        };
+        if let Some(note) = restart {
+            self.start_stream(frame, channels, note)?;
+        }
+        let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
+        let width = stream.channels.len();
+        for (c, col) in stream.columns.iter_mut().enumerate() {
+            col.extend((0..n_scans).map(|k| frame.values[k * width + c]));
+        }
+        let mut out = Vec::new();
+        loop {
+            let Some(stream) = self.stream.as_ref() else { break };
+            if stream.end_scan() < stream.next_out + (self.block + stream.edge) as u64 {
+                break;
+            }
+            out.push(self.condition_block());
+        }
+        Ok(out)
+    }
+
+    fn check(&self, frame: &DaqFrame) -> Result<(Vec<ChannelId>, usize), NodeError> {
+        let bad = |reason: String| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason };
+        if !(frame.sample_rate_hz.is_finite() && frame.sample_rate_hz > 0.0) {
+            return Err(bad(format!("sample_rate_hz must be finite and > 0, got {}", frame.sample_rate_hz)));
+        }
+        let width = frame.channel_names.len();
+        if frame.channel_offsets_s.len() != width {
+            return Err(bad(format!("{} channel_offsets_s for {width} channel_names", frame.channel_offsets_s.len())));
+        }
+        let n = frame.scan_count as usize;
+        if frame.values.len() != n.saturating_mul(width) {
+            return Err(bad(format!("{} values, but scan_count {n} x {width} channels = {}", frame.values.len(), n.saturating_mul(width))));
+        }
+        if frame.units != DaqFrame::UNITS_SI && frame.units != DaqFrame::UNITS_VOLTS {
+            return Err(bad(format!("units = {} is neither UNITS_SI (0) nor UNITS_VOLTS (1)", frame.units)));
+        }
+        if frame.rig != self.rig.name {
+            return Err(bad(format!("frame from rig `{}`, but this conditioner has the calibration of rig `{}` (parameter `rig`)", frame.rig, self.rig.name)));
+        }
+        let channels = frame
+            .channel_names
+            .iter()
+            .map(|name| ChannelId::parse(name).map_err(|_| bad(format!("unknown channel `{name}` (expected {})", ChannelId::all_names()))))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((channels, n))
+    }
+
+    fn start_stream(&mut self, frame: &DaqFrame, channels: Vec<ChannelId>, note: String) -> Result<(), NodeError> {
+        let probe = RawRecord {
+            sample_rate_hz: frame.sample_rate_hz,
+            start_time_s: 0.0,
+            channels: channels.clone(),
+            units: RawUnits::Volts,
+            columns: vec![Vec::new(); channels.len()],
+        };
+        let calibration = calibration_for(&self.rig, &probe, &frame.channel_offsets_s)?;
+        let edge = conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?;
+        self.stream = Some(Stream {
+            rate_hz: frame.sample_rate_hz,
+            units: frame.units,
+            offsets_s: frame.channel_offsets_s.clone(),
+            rig: frame.rig.clone(),
+            calibration,
+            first_scan: frame.first_scan,
+            origin_scan: frame.first_scan,
+            origin_stamp: Stamp::from_time(&frame.header.stamp),
+            columns: vec![Vec::new(); channels.len()],
+            channels,
+            next_out: frame.first_scan + edge as u64,
+            edge,
+            start_note: Some(note),
+        });
+        Ok(())
+    }
+
+    /// Conditions the block at `next_out` (the caller checked the scans are there).
+    fn condition_block(&mut self) -> ConditionedFrame {
+        let block = self.block;
+        // Checked by the caller.
+        let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
+        let begin = (s.next_out - s.first_scan) as usize - s.edge;
+        let end = begin + block + 2 * s.edge;
+        let raw = RawRecord {
+            sample_rate_hz: s.rate_hz,
+            start_time_s: 0.0,
+            channels: s.channels.clone(),
+            units: if s.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
+            columns: s.columns.iter().map(|c| c[begin..end].to_vec()).collect(),
+        };
+        let stamp = s.origin_stamp.after_samples((s.next_out - s.origin_scan) as i64, s.rate_hz);
+        let mut frame = ConditionedFrame {
+            header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
+            sequence: self.sequence,
+            first_sample: s.next_out,
+            sample_rate_hz: s.rate_hz,
+            ..Default::default()
+        };
+        self.sequence += 1;
+        frame.flags.push(format!("lowpass_hz={}", self.config.lowpass_cutoff_hz));
+        if self.config.deskew {
+            frame.flags.push("deskewed".into());
+        }
+        if let Some(note) = s.start_note.take() {
+            frame.flags.push(note);
+        }
+        let edge = s.edge;
+        match conditioning::condition_into(&raw, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
+            Ok(()) => {
+                let w = &self.work;
+                let r = edge..edge + block;
+                if w.valid != r {
+                    frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
+                }
+                let cut = |v: &[f64]| v[r.clone()].to_vec();
+                frame.x_m = cut(&w.x_m);
+                frame.y_m = cut(&w.y_m);
+                frame.x_dot_m_s = cut(&w.vx_m_s);
+                frame.y_dot_m_s = cut(&w.vy_m_s);
+                frame.x_ddot_m_s2 = cut(&w.ax_m_s2);
+                frame.y_ddot_m_s2 = cut(&w.ay_m_s2);
+                frame.fx_n = cut(&w.fx_n);
+                frame.fy_n = cut(&w.fy_n);
+                frame.bearing_temperature_degc = w.temperature_c[r.clone()].iter().sum::<f64>() / block as f64;
+                if w.range_violations.is_empty() {
+                    frame.valid = vec![true; block];
+                } else {
+                    frame.valid = vec![false; block];
+                    for v in &w.range_violations {
+                        frame.flags.push(format!("rejected (Zhou et al. step 2): {v}"));
+                    }
+                }
+            }
+            Err(e) => {
+                let nan = vec![f64::NAN; block];
+                frame.x_m = nan.clone();
+                frame.y_m = nan.clone();
+                frame.x_dot_m_s = nan.clone();
+                frame.y_dot_m_s = nan.clone();
+                frame.x_ddot_m_s2 = nan.clone();
+                frame.y_ddot_m_s2 = nan.clone();
+                frame.fx_n = nan.clone();
+                frame.fy_n = nan;
+                frame.bearing_temperature_degc = f64::NAN;
+                frame.valid = vec![false; block];
+                frame.flags.push(format!("rejected: {e}"));
+            }
+        }
+        s.next_out += block as u64;
+        // Keep `edge` scans before the next block.
+        let keep_from = (s.next_out - s.first_scan) as usize - edge;
+        for c in &mut s.columns {
+            c.drain(..keep_from);
+        }
+        s.first_scan += keep_from as u64;
+        frame
+    }
+}

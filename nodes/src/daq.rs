@@ -1,0 +1,306 @@
+//! The DAQ node's core: frames of multiplexed scans from a source, with the rig's status.
+//!
+//! Sources: the simulated rig ([`SimDaqCore`]: the physics crate's rig and DAQ chain driven
+//! by the exciter's setpoints), an ASCII record replayed and a live TCP stream in ASCII
+//! format v1 ([`crate::replay`]). Every source publishes [`DaqFrame`]s of `block_scans`
+//! scans, stamped on the rig's clock, and a [`RigStatus`] after each frame; the status
+//! stamp is the rig clock "now" (the start of the next scan), which the exciter follows.
+
+use std::collections::VecDeque;
+
+use oilfilm_identification::simulate::limits_of;
+use oilfilm_msgs::{DaqFrame, ExciterCommand, Header, RigStatus, BEARING_FRAME_ID};
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::daq::{Calibration, ChannelId};
+use oilfilm_physics::rig::RigInput;
+use oilfilm_physics::simulation::SimulatedRig;
+use serde::{Deserialize, Serialize};
+
+use crate::error::NodeError;
+use crate::stamp::Stamp;
+
+/// The DAQ node's parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaqParams {
+    /// Rig file (TOML); empty: the built-in Zhou et al. (2004) rig.
+    pub rig: String,
+    /// `sim` (the simulated rig), `ascii` (replay `file`) or `tcp` (connect to `address`).
+    pub source: String,
+    /// ASCII record to replay (source `ascii`).
+    pub file: String,
+    /// `host:port` of the acquisition process (source `tcp`).
+    pub address: String,
+    /// Scans per published frame.
+    pub block_scans: i64,
+    /// Pace: 1 = real time, 4 = four times faster, 0 = as fast as the consumers allow.
+    pub rate_factor: f64,
+    /// Stop after this many seconds of rig time (0: run until stopped or the file ends).
+    pub duration_s: f64,
+    /// Rig time of scan 0, ns since the epoch (0: the wall clock at start).
+    pub start_stamp_ns: i64,
+    /// Sim: how long to wait for exciter setpoints before running a block with zero force,
+    /// s of wall time (the rig goes on turning when the exciter node is absent).
+    pub command_timeout_s: f64,
+    /// Shaft speed, rpm, stated in rig/status (sim: the rig file's when 0; replay: the
+    /// file's `speed_rpm` header when 0).
+    pub speed_rpm: f64,
+}
+
+impl Default for DaqParams {
+    fn default() -> Self {
+        Self {
+            rig: String::new(),
+            source: "sim".into(),
+            file: String::new(),
+            address: String::new(),
+            block_scans: 500,
+            rate_factor: 1.0,
+            duration_s: 0.0,
+            start_stamp_ns: 0,
+            command_timeout_s: 2.0,
+            speed_rpm: 0.0,
+        }
+    }
+}
+
+impl DaqParams {
+    pub fn validate(&self) -> Result<(), NodeError> {
+        if !matches!(self.source.as_str(), "sim" | "ascii" | "tcp") {
+            return Err(NodeError::parameter("source", format!("`{}` is not a source (sim, ascii, tcp)", self.source)));
+        }
+        if self.source == "ascii" && self.file.is_empty() {
+            return Err(NodeError::parameter("file", "source `ascii` needs the record's path"));
+        }
+        if self.source == "tcp" && self.address.is_empty() {
+            return Err(NodeError::parameter("address", "source `tcp` needs host:port"));
+        }
+        if !(1..=1_000_000).contains(&self.block_scans) {
+            return Err(NodeError::parameter("block_scans", format!("must be in 1..=1000000, got {}", self.block_scans)));
+        }
+        if !(self.rate_factor.is_finite() && self.rate_factor >= 0.0) {
+            return Err(NodeError::parameter("rate_factor", format!("must be finite and >= 0, got {}", self.rate_factor)));
+        }
+        if !(self.duration_s.is_finite() && self.duration_s >= 0.0) {
+            return Err(NodeError::parameter("duration_s", format!("must be finite and >= 0, got {}", self.duration_s)));
+        }
+        if !(self.command_timeout_s.is_finite() && self.command_timeout_s > 0.0) {
+            return Err(NodeError::parameter("command_timeout_s", format!("must be finite and > 0, got {}", self.command_timeout_s)));
+        }
+        if !(self.speed_rpm.is_finite() && self.speed_rpm >= 0.0) {
+            return Err(NodeError::parameter("speed_rpm", format!("must be finite and >= 0, got {}", self.speed_rpm)));
+        }
+        Ok(())
+    }
+}
+
+/// Exciter setpoints on the rig clock, zero-order hold.
+#[derive(Debug, Default, Clone)]
+pub struct Setpoints {
+    /// (time, [f1, f2]) in increasing time.
+    points: VecDeque<(Stamp, [f64; 2])>,
+    /// Setpoints are known up to (excluding) this time.
+    covered_until: Option<Stamp>,
+    /// The clamp applied to every setpoint (the exciters' hard limit).
+    max_force_n: f64,
+}
+
+impl Setpoints {
+    pub fn new(max_force_n: f64) -> Self {
+        Self { points: VecDeque::new(), covered_until: None, max_force_n }
+    }
+
+    /// Takes a command's setpoints; later commands overwrite the future of earlier ones.
+    pub fn accept(&mut self, cmd: &ExciterCommand) -> Result<(), NodeError> {
+        let bad = |reason: String| NodeError::BadMessage { topic: crate::topics::EXCITER_COMMAND.name.into(), sequence: cmd.sequence, reason };
+        let rate = cmd.setpoint_rate_hz;
+        if cmd.force_1_n.len() != cmd.force_2_n.len() {
+            return Err(bad(format!("force_1_n has {} setpoints, force_2_n {}", cmd.force_1_n.len(), cmd.force_2_n.len())));
+        }
+        if cmd.force_1_n.is_empty() {
+            return Ok(());
+        }
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(bad(format!("setpoint_rate_hz must be finite and > 0, got {rate}")));
+        }
+        let first = Stamp::from_time(&cmd.header.stamp);
+        while self.points.back().is_some_and(|(t, _)| *t >= first) {
+            self.points.pop_back();
+        }
+        let max = self.max_force_n;
+        let clamp = |v: f64| if v.is_finite() { v.clamp(-max, max) } else { 0.0 };
+        for (k, (a, b)) in cmd.force_1_n.iter().zip(&cmd.force_2_n).enumerate() {
+            self.points.push_back((first.after_samples(k as i64, rate), [clamp(*a), clamp(*b)]));
+        }
+        let end = first.after_samples(cmd.force_1_n.len() as i64, rate);
+        self.covered_until = Some(if cmd.stop {
+            // A stop holds its last (zero) setpoint for ever.
+            Stamp(i64::MAX)
+        } else {
+            end
+        });
+        Ok(())
+    }
+
+    /// True when setpoints are known up to `t` (inclusive).
+    pub fn covers(&self, t: Stamp) -> bool {
+        self.covered_until.is_some_and(|c| c > t)
+    }
+
+    /// The force at `t`: the last setpoint at or before `t`, zero before the first. Drops
+    /// setpoints that no later time can need.
+    pub fn at(&mut self, t: Stamp) -> [f64; 2] {
+        while self.points.len() >= 2 && self.points[1].0 <= t {
+            self.points.pop_front();
+        }
+        match self.points.front() {
+            Some((s, f)) if *s <= t => *f,
+            _ => [0.0; 2],
+        }
+    }
+}
+
+/// The simulated rig behind the DAQ node.
+pub struct SimDaqCore {
+    sim: SimulatedRig,
+    rig_name: String,
+    calibration: Calibration,
+    channels: Vec<ChannelId>,
+    offsets_s: Vec<f64>,
+    rate_hz: f64,
+    epoch: Stamp,
+    block_scans: usize,
+    next_scan: u64,
+    sequence: u64,
+    setpoints: Setpoints,
+    speed_rad_s: f64,
+    static_load_n: f64,
+    temperature_c: f64,
+    exciting: bool,
+    /// Blocks run without (complete) setpoints.
+    pub blocks_without_setpoints: u64,
+}
+
+impl SimDaqCore {
+    /// A rig at equilibrium with scan 0 at `epoch` (the rig file's seed makes it
+    /// reproducible).
+    pub fn new(rig: &RigConfig, params: &DaqParams, epoch: Stamp) -> Result<Self, NodeError> {
+        params.validate()?;
+        let sim = SimulatedRig::new(rig, 0.0)?;
+        let calibration = rig.daq.calibration();
+        let channels = calibration.scan_order();
+        let offsets_s = channels.iter().map(|&c| calibration.sample_offset_s(c)).collect::<Result<Vec<_>, _>>()?;
+        let speed_rpm = if params.speed_rpm > 0.0 { params.speed_rpm } else { rig.operating.speed_rpm };
+        // Before the first block: the bellows carry the film load plus the housing's weight.
+        let bellows = rig.operating.bearing_load_n + rig.housing.mass_kg * rig.housing.gravity_m_s2;
+        Ok(Self {
+            rate_hz: rig.daq.sample_rate_hz,
+            sim,
+            rig_name: rig.name.clone(),
+            calibration,
+            channels,
+            offsets_s,
+            epoch,
+            block_scans: params.block_scans as usize,
+            next_scan: 0,
+            sequence: 0,
+            setpoints: Setpoints::new(limits_of(rig).max_force_n),
+            speed_rad_s: speed_rpm * std::f64::consts::PI / 30.0,
+            static_load_n: bellows,
+            temperature_c: rig.operating.bearing_temperature_c,
+            exciting: false,
+            blocks_without_setpoints: 0,
+        })
+    }
+
+    pub fn sample_rate_hz(&self) -> f64 {
+        self.rate_hz
+    }
+
+    /// The simulated film's operating point (the truth behind the record; no node reads it).
+    pub fn operating_point(&self) -> &oilfilm_physics::operating_point::OperatingPoint {
+        self.sim.operating_point()
+    }
+
+    /// Rig time of scan 0.
+    pub fn epoch(&self) -> Stamp {
+        self.epoch
+    }
+
+    /// The rig clock now: the start of the next scan.
+    pub fn now(&self) -> Stamp {
+        self.epoch.after_samples(self.next_scan as i64, self.rate_hz)
+    }
+
+    /// Rig time at the end of the next block (the last force it needs).
+    pub fn next_block_end(&self) -> Stamp {
+        self.epoch.after_samples((self.next_scan + self.block_scans as u64) as i64, self.rate_hz)
+    }
+
+    /// Setpoints from the exciter.
+    pub fn command(&mut self, cmd: &ExciterCommand) -> Result<(), NodeError> {
+        self.setpoints.accept(cmd)
+    }
+
+    /// True when the exciter's setpoints cover the next block.
+    pub fn ready(&self) -> bool {
+        self.setpoints.covers(self.next_block_end())
+    }
+
+    /// Simulates the next block (forces held at their last setpoint where none is known,
+    /// zero before the first) and returns its frame.
+    pub fn produce(&mut self) -> Result<DaqFrame, NodeError> {
+        if !self.ready() {
+            self.blocks_without_setpoints += 1;
+        }
+        let first_scan = self.next_scan;
+        let n = self.block_scans;
+        let mut values = Vec::with_capacity(n * self.channels.len());
+        for i in 1..=n as u64 {
+            let scan = first_scan + i;
+            let at = self.epoch.after_samples(scan as i64, self.rate_hz);
+            let input = RigInput { exciter_n: self.setpoints.at(at) };
+            let s = self.sim.step(&input, scan as f64 * self.sim.period_s())?;
+            values.extend_from_slice(&s.scan.volts);
+            self.static_load_n = s.truth.bellows_n;
+            self.temperature_c = s.truth.temperature_c;
+            self.exciting = input.exciter_n.iter().any(|f| *f != 0.0);
+        }
+        self.next_scan += n as u64;
+        let frame = DaqFrame {
+            header: Header { stamp: self.epoch.after_samples(first_scan as i64, self.rate_hz).to_time(), frame_id: BEARING_FRAME_ID.into() },
+            sequence: self.sequence,
+            first_scan,
+            sample_rate_hz: self.rate_hz,
+            units: DaqFrame::UNITS_VOLTS,
+            channel_names: self.channels.iter().map(|c| c.name().to_string()).collect(),
+            channel_units: vec!["V".to_string(); self.channels.len()],
+            channel_offsets_s: self.offsets_s.clone(),
+            scan_count: n as u32,
+            values,
+            rig: self.rig_name.clone(),
+        };
+        self.sequence += 1;
+        Ok(frame)
+    }
+
+    /// The rig's status now.
+    pub fn status(&self) -> RigStatus {
+        RigStatus {
+            header: Header { stamp: self.now().to_time(), frame_id: BEARING_FRAME_ID.into() },
+            speed_rad_s: self.speed_rad_s,
+            static_load_n: self.static_load_n,
+            bearing_temperature_degc: self.temperature_c,
+            state: if self.exciting { RigStatus::STATE_EXCITING } else { RigStatus::STATE_RUNNING },
+            message: if self.blocks_without_setpoints > 0 {
+                format!("simulated rig; {} block(s) ran without exciter setpoints (force held)", self.blocks_without_setpoints)
+            } else {
+                "simulated rig".to_string()
+            },
+        }
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+}

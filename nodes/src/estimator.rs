@@ -1,0 +1,380 @@
+//! The estimator node's core: conditioned frames in, one coefficient estimate (or refusal)
+//! per window out, through the identification crate's windowed least squares and window
+//! report (the same code `oilfilm identify` runs).
+//!
+//! Windows sit at fixed sample indices of the conditioned stream, `[k hop, k hop + window)`,
+//! so an estimate depends only on the samples, never on frame boundaries or arrival times.
+//! A window holding an invalid sample (a probe out of range, a rejected block) is refused
+//! with the count and the first such sample; a gap in the stream restarts the windows.
+//! Speed: the `speed_rpm` parameter if set, else the latest `rig/status`, else the rig
+//! file's, and the estimate's flags say which.
+
+use std::collections::VecDeque;
+
+use nalgebra::Matrix2;
+use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver};
+use oilfilm_identification::pipeline::{window_report, WindowReport};
+use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, Header, RigStatus, BEARING_FRAME_ID};
+use oilfilm_physics::config::RigConfig;
+use serde::{Deserialize, Serialize};
+
+use crate::error::NodeError;
+use crate::stamp::Stamp;
+use crate::topics;
+
+/// The estimator node's parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimatorParams {
+    /// Rig file (TOML); empty: the built-in rig. Geometry and oil law for the dimensionless
+    /// coefficients and the operating point.
+    pub rig: String,
+    /// Samples per window (the paper: 50 000 = 10 s at 5 kHz).
+    pub window: i64,
+    /// Samples between window starts.
+    pub hop: i64,
+    /// `kc` (8 coefficients) or `kcm` (12, with added mass).
+    pub model: String,
+    /// `qr`, `svd` or `normal_equations` (the paper's, for comparison only).
+    pub solver: String,
+    pub max_condition: f64,
+    pub max_relative_se: f64,
+    /// Shaft speed, rpm; 0: from rig/status (else the rig file's).
+    pub speed_rpm: f64,
+}
+
+impl Default for EstimatorParams {
+    fn default() -> Self {
+        let c = EstimatorConfig::default();
+        Self {
+            rig: String::new(),
+            window: c.window as i64,
+            hop: c.hop as i64,
+            model: "kc".into(),
+            solver: "qr".into(),
+            max_condition: c.max_condition,
+            max_relative_se: c.max_relative_se,
+            speed_rpm: 0.0,
+        }
+    }
+}
+
+impl EstimatorParams {
+    /// The estimator's settings at `sample_rate_hz`; the error names the parameter.
+    pub fn config(&self, sample_rate_hz: f64) -> Result<EstimatorConfig, NodeError> {
+        let count = |name: &str, v: i64| usize::try_from(v).map_err(|_| NodeError::parameter(name, format!("must be >= 0, got {v}")));
+        let model = match self.model.as_str() {
+            "kc" => ModelOrder::Kc,
+            "kcm" => ModelOrder::Kcm,
+            other => return Err(NodeError::parameter("model", format!("`{other}` is not a model (kc, kcm)"))),
+        };
+        let solver = match self.solver.as_str() {
+            "qr" => Solver::Qr,
+            "svd" => Solver::Svd,
+            "normal_equations" => Solver::NormalEquations,
+            other => return Err(NodeError::parameter("solver", format!("`{other}` is not a solver (qr, svd, normal_equations)"))),
+        };
+        let c = EstimatorConfig {
+            window: count("window", self.window)?,
+            hop: count("hop", self.hop)?,
+            model,
+            solver,
+            max_condition: self.max_condition,
+            sample_rate_hz,
+            max_relative_se: self.max_relative_se,
+        };
+        c.validate().map_err(|e| match e {
+            oilfilm_identification::IdentificationError::InvalidParameter { field, reason } => NodeError::parameter(field, reason),
+            other => NodeError::Identification(other),
+        })?;
+        if !(self.speed_rpm.is_finite() && self.speed_rpm >= 0.0) {
+            return Err(NodeError::parameter("speed_rpm", format!("must be finite and >= 0, got {}", self.speed_rpm)));
+        }
+        Ok(c)
+    }
+}
+
+/// Conditioned samples awaiting their windows.
+#[derive(Default)]
+struct Buffer {
+    /// Sample index of element 0.
+    first: u64,
+    x: VecDeque<f64>,
+    y: VecDeque<f64>,
+    vx: VecDeque<f64>,
+    vy: VecDeque<f64>,
+    ax: VecDeque<f64>,
+    ay: VecDeque<f64>,
+    fx: VecDeque<f64>,
+    fy: VecDeque<f64>,
+    temperature: VecDeque<f64>,
+    valid: VecDeque<bool>,
+}
+
+impl Buffer {
+    fn end(&self) -> u64 {
+        self.first + self.x.len() as u64
+    }
+
+    fn drop_before(&mut self, sample: u64) {
+        let k = (sample.saturating_sub(self.first) as usize).min(self.x.len());
+        for c in [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy, &mut self.ax, &mut self.ay, &mut self.fx, &mut self.fy, &mut self.temperature] {
+            c.drain(..k);
+        }
+        self.valid.drain(..k);
+        self.first += k as u64;
+    }
+}
+
+/// The estimator's state.
+pub struct EstimatorCore {
+    rig: RigConfig,
+    params: EstimatorParams,
+    buffer: Buffer,
+    /// Rate and the stream's origin (sample index, rig time) for window times.
+    rate_hz: f64,
+    origin: Option<(u64, Stamp)>,
+    next_start: u64,
+    status_speed_rpm: Option<f64>,
+    sequence: u64,
+    restart_note: Option<String>,
+}
+
+impl EstimatorCore {
+    pub fn new(rig: RigConfig, params: EstimatorParams) -> Result<Self, NodeError> {
+        params.config(5000.0)?;
+        Ok(Self {
+            rig,
+            params,
+            buffer: Buffer::default(),
+            rate_hz: 0.0,
+            origin: None,
+            next_start: 0,
+            status_speed_rpm: None,
+            sequence: 0,
+            restart_note: None,
+        })
+    }
+
+    pub fn params(&self) -> &EstimatorParams {
+        &self.params
+    }
+
+    /// New parameters (the parameter service); the windows restart at the next hop.
+    pub fn set_params(&mut self, params: EstimatorParams) -> Result<(), NodeError> {
+        params.config(if self.rate_hz > 0.0 { self.rate_hz } else { 5000.0 })?;
+        let hop = params.hop as u64;
+        self.params = params;
+        self.next_start = self.buffer.end().div_ceil(hop) * hop;
+        Ok(())
+    }
+
+    /// The rig's status: its speed is the operating point's unless `speed_rpm` is set.
+    pub fn rig_status(&mut self, status: &RigStatus) {
+        if status.speed_rad_s.is_finite() && status.speed_rad_s > 0.0 {
+            self.status_speed_rpm = Some(status.speed_rad_s * 30.0 / std::f64::consts::PI);
+        }
+    }
+
+    /// Takes one conditioned frame; returns the estimates of the windows it completes.
+    pub fn push(&mut self, frame: &ConditionedFrame) -> Result<Vec<CoefficientEstimate>, NodeError> {
+        let n = frame.x_m.len();
+        let bad = |reason: String| NodeError::BadMessage { topic: topics::CONDITIONED.name.into(), sequence: frame.sequence, reason };
+        if !(frame.sample_rate_hz.is_finite() && frame.sample_rate_hz > 0.0) {
+            return Err(bad(format!("sample_rate_hz must be finite and > 0, got {}", frame.sample_rate_hz)));
+        }
+        for (name, len) in [
+            ("y_m", frame.y_m.len()),
+            ("x_dot_m_s", frame.x_dot_m_s.len()),
+            ("y_dot_m_s", frame.y_dot_m_s.len()),
+            ("fx_n", frame.fx_n.len()),
+            ("fy_n", frame.fy_n.len()),
+            ("valid", frame.valid.len()),
+        ] {
+            if len != n {
+                return Err(bad(format!("{name} has {len} samples, x_m has {n}")));
+            }
+        }
+        let has_acc = frame.x_ddot_m_s2.len() == n && frame.y_ddot_m_s2.len() == n;
+        if !has_acc && !(frame.x_ddot_m_s2.is_empty() && frame.y_ddot_m_s2.is_empty()) {
+            return Err(bad(format!("x_ddot_m_s2 / y_ddot_m_s2 have {} / {} samples: either none or {n}", frame.x_ddot_m_s2.len(), frame.y_ddot_m_s2.len())));
+        }
+        let config = self.params.config(frame.sample_rate_hz)?;
+        if self.rate_hz != frame.sample_rate_hz || self.buffer.end() != frame.first_sample || self.origin.is_none() {
+            if self.origin.is_some() {
+                self.restart_note = Some(format!(
+                    "windows restarted at sample {}: the conditioned stream {}",
+                    frame.first_sample,
+                    if self.rate_hz != frame.sample_rate_hz { "changed rate".to_string() } else { format!("jumped from sample {}", self.buffer.end()) }
+                ));
+            }
+            self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
+            self.rate_hz = frame.sample_rate_hz;
+            self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
+            let hop = config.hop as u64;
+            self.next_start = frame.first_sample.div_ceil(hop) * hop;
+        }
+        let b = &mut self.buffer;
+        b.x.extend(&frame.x_m);
+        b.y.extend(&frame.y_m);
+        b.vx.extend(&frame.x_dot_m_s);
+        b.vy.extend(&frame.y_dot_m_s);
+        if has_acc {
+            b.ax.extend(&frame.x_ddot_m_s2);
+            b.ay.extend(&frame.y_ddot_m_s2);
+        } else {
+            b.ax.extend(std::iter::repeat_n(f64::NAN, n));
+            b.ay.extend(std::iter::repeat_n(f64::NAN, n));
+        }
+        b.fx.extend(&frame.fx_n);
+        b.fy.extend(&frame.fy_n);
+        b.temperature.extend(std::iter::repeat_n(frame.bearing_temperature_degc, n));
+        b.valid.extend(&frame.valid);
+
+        let mut out = Vec::new();
+        let (window, hop) = (config.window as u64, config.hop as u64);
+        while self.buffer.end() >= self.next_start + window {
+            self.buffer.drop_before(self.next_start);
+            out.push(self.estimate(&config)?);
+            self.next_start += hop;
+        }
+        self.buffer.drop_before(self.next_start);
+        Ok(out)
+    }
+
+    /// The window at `next_start` (at the front of the buffer).
+    fn estimate(&mut self, config: &EstimatorConfig) -> Result<CoefficientEstimate, NodeError> {
+        let w = config.window;
+        let b = &mut self.buffer;
+        let col = |c: &mut VecDeque<f64>| -> Vec<f64> { c.make_contiguous()[..w].to_vec() };
+        let (x, y, vx, vy, ax, ay, fx, fy) =
+            (col(&mut b.x), col(&mut b.y), col(&mut b.vx), col(&mut b.vy), col(&mut b.ax), col(&mut b.ay), col(&mut b.fx), col(&mut b.fy));
+        let temperature = b.temperature.iter().take(w).sum::<f64>() / w as f64;
+        let invalid: Vec<usize> = b.valid.iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
+        let start = self.next_start;
+        let (origin_sample, origin_stamp) = self.origin.unwrap_or((start, Stamp(0)));
+        let t0 = origin_stamp.after_samples((start - origin_sample) as i64, self.rate_hz);
+        let t1 = origin_stamp.after_samples((start + w as u64 - origin_sample) as i64, self.rate_hz);
+        let (speed_rpm, speed_flag) = match (self.params.speed_rpm, self.status_speed_rpm) {
+            (s, _) if s > 0.0 => (s, "speed from the speed_rpm parameter"),
+            (_, Some(s)) => (s, "speed from rig/status"),
+            _ => (self.rig.operating.speed_rpm, "speed not reported: the rig file's speed assumed"),
+        };
+        let mut msg = CoefficientEstimate {
+            header: Header { stamp: t1.to_time(), frame_id: BEARING_FRAME_ID.into() },
+            sequence: self.sequence,
+            window_start: t0.to_time(),
+            window_end: t1.to_time(),
+            window_start_sample: start,
+            window_end_sample: start + w as u64,
+            model: if config.model == ModelOrder::Kcm { CoefficientEstimate::MODEL_KCM } else { CoefficientEstimate::MODEL_KC },
+            ..nan_estimate()
+        };
+        self.sequence += 1;
+        if let Some(note) = self.restart_note.take() {
+            msg.flags.push(note);
+        }
+        msg.flags.push(speed_flag.to_string());
+        if let Some(&first) = invalid.first() {
+            msg.refusal_reason = format!(
+                "{} of {w} samples in the window are invalid (first: sample {}): a probe left its linear range or the conditioner rejected a block (see the conditioned frames' flags)",
+                invalid.len(),
+                start + first as u64
+            );
+            msg.speed_rad_s = speed_rpm * std::f64::consts::PI / 30.0;
+            return Ok(msg);
+        }
+        let acc = config.model == ModelOrder::Kcm;
+        let signals = Signals {
+            x_m: &x,
+            y_m: &y,
+            vx_m_s: &vx,
+            vy_m_s: &vy,
+            ax_m_s2: acc.then_some(&ax[..]),
+            ay_m_s2: acc.then_some(&ay[..]),
+            fx_n: &fx,
+            fy_n: &fy,
+        };
+        let estimate = estimator::estimate_window(&signals, 0..w, config)?;
+        let report = window_report(&signals, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
+        fill(&mut msg, &report);
+        Ok(msg)
+    }
+}
+
+/// An estimate with every number NaN and nothing solved.
+fn nan_estimate() -> CoefficientEstimate {
+    let n4 = [f64::NAN; 4];
+    CoefficientEstimate {
+        stiffness_n_m: n4,
+        damping_n_s_m: n4,
+        stiffness_se_n_m: n4,
+        damping_se_n_s_m: n4,
+        stiffness_lund: n4,
+        damping_lund: n4,
+        stiffness_zhou: n4,
+        damping_zhou: n4,
+        condition_number: f64::NAN,
+        residual_rms_n: [f64::NAN; 2],
+        speed_rad_s: f64::NAN,
+        bearing_temperature_degc: f64::NAN,
+        viscosity_pa_s: f64::NAN,
+        static_force_n: [f64::NAN; 2],
+        load_n: f64::NAN,
+        journal_position_m: [f64::NAN; 2],
+        sommerfeld_number: f64::NAN,
+        load_parameter_fy: f64::NAN,
+        amplitude_d: f64::NAN,
+        ..Default::default()
+    }
+}
+
+/// Row-major `[xx, xy, yx, yy]`.
+pub fn row_major(m: &Matrix2<f64>) -> [f64; 4] {
+    [m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]]
+}
+
+/// The message fields of a window report.
+fn fill(msg: &mut CoefficientEstimate, r: &WindowReport) {
+    let e = &r.estimate;
+    let o = &r.operating;
+    msg.condition_number = e.condition_number;
+    msg.rank = e.rank as u32;
+    msg.residual_rms_n = e.residual_rms_n;
+    msg.excitation_frequencies_hz = e.frequencies_hz.clone();
+    msg.flags.extend(e.flags.iter().cloned());
+    msg.speed_rad_s = o.speed_rpm * std::f64::consts::PI / 30.0;
+    msg.bearing_temperature_degc = o.temperature_c;
+    msg.viscosity_pa_s = o.viscosity_pa_s;
+    msg.static_force_n = o.static_force_n;
+    msg.load_n = o.load_n;
+    msg.journal_position_m = o.mean_position_m;
+    msg.sommerfeld_number = o.sommerfeld;
+    msg.load_parameter_fy = o.load_parameter;
+    msg.amplitude_d = o.amplitude_d;
+    match &e.result {
+        Ok(c) => {
+            msg.solved = true;
+            msg.stiffness_n_m = row_major(&c.stiffness_n_m);
+            msg.damping_n_s_m = row_major(&c.damping_n_s_m);
+            msg.stiffness_se_n_m = row_major(&c.stiffness_se);
+            msg.damping_se_n_s_m = row_major(&c.damping_se);
+            if let (Some(m), Some(se)) = (&c.added_mass_kg, &c.added_mass_se) {
+                msg.added_mass_kg = row_major(m).to_vec();
+                msg.added_mass_se_kg = row_major(se).to_vec();
+            }
+            if let Some(l) = &r.lund {
+                msg.stiffness_lund = row_major(&l.stiffness);
+                msg.damping_lund = row_major(&l.damping);
+            }
+            if let Some(z) = &r.zhou {
+                msg.stiffness_zhou = row_major(&z.stiffness);
+                msg.damping_zhou = row_major(&z.damping);
+            }
+        }
+        Err(refusal) => {
+            msg.solved = false;
+            msg.refusal_reason = refusal.to_string();
+        }
+    }
+}

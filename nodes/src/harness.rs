@@ -1,0 +1,103 @@
+//! The `sim_rig` graph in one process, on in-memory topics: the four node cores and their
+//! polls exactly as the node binaries run them, turned round-robin until the DAQ finishes.
+//! Tests, benchmarks and offline re-analysis use it; it is deterministic (no clock: the DAQ
+//! runs as fast as the setpoints come).
+
+use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, RigStatus};
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::operating_point::OperatingPoint;
+
+use crate::conditioner::{ConditionerCore, ConditionerParams};
+use crate::daq::{DaqParams, SimDaqCore};
+use crate::error::NodeError;
+use crate::estimator::{EstimatorCore, EstimatorParams};
+use crate::exciter::{ExciterCore, ExciterParams};
+use crate::poll::{self, ConditionerPorts, DaqPorts, EstimatorPorts, ExciterPorts, Pace, SimDaqState};
+use crate::ports::memory::Bus;
+use crate::ports::{Collect, Nothing, Replay};
+use crate::stamp::Stamp;
+
+/// Everything the graph published.
+#[derive(Debug, Default, Clone)]
+pub struct Recording {
+    pub commands: Vec<ExciterCommand>,
+    pub frames: Vec<DaqFrame>,
+    pub status: Vec<RigStatus>,
+    pub conditioned: Vec<ConditionedFrame>,
+    pub estimates: Vec<CoefficientEstimate>,
+}
+
+/// The parameters of the four nodes.
+#[derive(Debug, Clone, Default)]
+pub struct GraphParams {
+    pub exciter: ExciterParams,
+    pub daq: DaqParams,
+    pub conditioner: ConditionerParams,
+    pub estimator: EstimatorParams,
+}
+
+/// Runs `sim_rig` for `params.daq.duration_s` of rig time (which must be > 0). Returns what
+/// every topic carried and the simulated film's operating point (its linear coefficients are
+/// the truth tests judge against; no node reads it).
+pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, OperatingPoint), NodeError> {
+    if !(params.daq.duration_s > 0.0) {
+        return Err(NodeError::parameter("duration_s", "the in-memory graph needs a finite run (> 0 s)"));
+    }
+    let hard = oilfilm_identification::simulate::limits_of(rig);
+    let mut exciter = ExciterCore::new(hard, &params.exciter)?;
+    let epoch = Stamp(if params.daq.start_stamp_ns != 0 { params.daq.start_stamp_ns } else { 1_700_000_000_000_000_000 });
+    let mut daq = SimDaqCore::new(rig, &params.daq, epoch)?;
+    let truth = daq.operating_point().clone();
+    let mut conditioner = ConditionerCore::new(rig.clone(), &params.conditioner)?;
+    let mut estimator = EstimatorCore::new(rig.clone(), params.estimator.clone())?;
+
+    let (commands, frames, status, conditioned, estimates) =
+        (Bus::<ExciterCommand>::new(), Bus::<DaqFrame>::new(), Bus::<RigStatus>::new(), Bus::<ConditionedFrame>::new(), Bus::<CoefficientEstimate>::new());
+    let mut rec = (commands.subscriber(), frames.subscriber(), status.subscriber(), conditioned.subscriber(), estimates.subscriber());
+    let (mut ex_status, mut ex_out) = (status.subscriber(), commands.publisher());
+    let (mut daq_cmd, mut daq_frames, mut daq_status) = (commands.subscriber(), frames.publisher(), status.publisher());
+    let (mut co_in, mut co_out) = (frames.subscriber(), conditioned.publisher());
+    let (mut es_in, mut es_status, mut es_out) = (conditioned.subscriber(), status.subscriber(), estimates.publisher());
+    let mut no_requests = Nothing;
+    let pace = Pace { rate_factor: 0.0, wall_start: Stamp(0), command_timeout_s: f64::INFINITY, duration_s: params.daq.duration_s };
+    let mut daq_state = SimDaqState::default();
+    loop {
+        let wall = Stamp(0);
+        let d = poll::sim_daq(&mut daq, &mut daq_state, &mut DaqPorts { commands: &mut daq_cmd, frames: &mut daq_frames, status: &mut daq_status }, &pace, wall)?;
+        let e = poll::exciter(&mut exciter, &mut ExciterPorts { requests: &mut no_requests, status: &mut ex_status, commands: &mut ex_out }, wall)?;
+        let c = poll::conditioner(&mut conditioner, &mut ConditionerPorts { frames: &mut co_in, conditioned: &mut co_out })?;
+        let s = poll::estimator(&mut estimator, &mut EstimatorPorts { conditioned: &mut es_in, status: &mut es_status, estimates: &mut es_out })?;
+        if d.finished && e.handled + c.handled + s.handled == 0 {
+            break;
+        }
+        if d.handled + e.handled + c.handled + s.handled == 0 {
+            // The DAQ waits for setpoints and the exciter for the rig clock: cannot happen
+            // with both present, but never spin for ever.
+            return Err(NodeError::Closed("in-memory graph stalled".into()));
+        }
+    }
+    let recording = Recording { commands: rec.0.drain(), frames: rec.1.drain(), status: rec.2.drain(), conditioned: rec.3.drain(), estimates: rec.4.drain() };
+    Ok((recording, truth))
+}
+
+/// Offline re-analysis: recorded DAQ frames and rig status through a fresh conditioner and
+/// estimator, as the `replay` graph runs them. Status messages are taken before the frames
+/// (the estimator needs the speed first; the speed does not change during a run).
+pub fn reanalyse(
+    rig: &RigConfig,
+    conditioner: &ConditionerParams,
+    estimator: &EstimatorParams,
+    frames: &[DaqFrame],
+    status: &[RigStatus],
+) -> Result<Recording, NodeError> {
+    let mut cond = ConditionerCore::new(rig.clone(), conditioner)?;
+    let mut est = EstimatorCore::new(rig.clone(), estimator.clone())?;
+    let mut frames_in = Replay::new(frames.iter().cloned());
+    let mut status_in = Replay::new(status.iter().cloned());
+    let conditioned = Bus::<ConditionedFrame>::new();
+    let (mut rec, mut es_in, mut co_out) = (conditioned.subscriber(), conditioned.subscriber(), conditioned.publisher());
+    let mut estimates = Collect::default();
+    poll::conditioner(&mut cond, &mut ConditionerPorts { frames: &mut frames_in, conditioned: &mut co_out })?;
+    poll::estimator(&mut est, &mut EstimatorPorts { conditioned: &mut es_in, status: &mut status_in, estimates: &mut estimates })?;
+    Ok(Recording { conditioned: rec.drain(), estimates: estimates.0, ..Recording::default() })
+}
