@@ -3,6 +3,7 @@
 //! Thin by design: it parses arguments, reads files, calls the core and prints. All physics
 //! lives in `oilfilm-physics`.
 
+mod launch;
 mod bench;
 mod bench_pipeline;
 mod records;
@@ -32,6 +33,9 @@ enum Command {
     /// Run the rig: operating point, film coefficients, and a simulated two-tone record
     /// through the multiplexed DAQ chain.
     Rig(RigArgs),
+    /// Start a launch file's nodes (ROS 2 launch YAML), supervise them, print the estimates
+    /// as they arrive, and stop them all after --seconds or on Ctrl-C.
+    Launch(launch::LaunchArgs),
     /// The film's static equilibrium and linear coefficients at an operating point.
     Coefficients(CoefficientArgs),
     /// Simulate a record of the rig (any excitation, any injected effect) in the ASCII format.
@@ -120,6 +124,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Rig(args) => run_rig(&args),
+        Command::Launch(args) => launch::run(&args),
         Command::Coefficients(args) => run_coefficients(&args),
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),

@@ -66,8 +66,12 @@ impl Default for DaqParams {
 
 impl DaqParams {
     pub fn validate(&self) -> Result<(), NodeError> {
-        if !matches!(self.source.as_str(), "sim" | "ascii" | "tcp") {
-            return Err(NodeError::parameter("source", format!("`{}` is not a source (sim, ascii, tcp)", self.source)));
+        // The ASCII-replay and TCP sources are not built yet (issue 4 is open on them).
+        if self.source != "sim" {
+            return Err(NodeError::parameter(
+                "source",
+                format!("`{}`: this build has the `sim` source only (ascii and tcp are planned, not built)", self.source),
+            ));
         }
         if self.source == "ascii" && self.file.is_empty() {
             return Err(NodeError::parameter("file", "source `ascii` needs the record's path"));

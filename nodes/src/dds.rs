@@ -1,0 +1,217 @@
+//! The DDS port: ros2-client (pure Rust DDS) under the node binaries.
+//!
+//! What ros2-client does not do for us, done here: `ROS_DOMAIN_ID` is read from the
+//! environment and passed into the context; every topic's QoS is set explicitly from
+//! [`crate::topics`] (ros2-client's subscription default is best-effort, keep-last 1); the
+//! typed parameters are declared through the standard parameter services, and a change
+//! from `ros2 param set` (or rclpy) is checked against the typed struct before it is
+//! accepted, then handed to the node's loop.
+
+use std::sync::{Arc, Mutex, PoisonError};
+
+use ros2_client::{
+    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile,
+    qos::{Durability, History, Reliability, WhenFull},
+};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use crate::error::NodeError;
+use crate::params::NodeArgs;
+use crate::ports::{Publish, Receive};
+use crate::topics::Topic;
+
+fn mw(what: impl Into<String>, e: impl std::fmt::Display) -> NodeError {
+    NodeError::Middleware { what: what.into(), reason: e.to_string() }
+}
+
+/// `ROS_DOMAIN_ID` (0 when unset), checked as ROS does (0..=232).
+pub fn domain_id() -> Result<u16, NodeError> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(s) if s.trim().is_empty() => Ok(0),
+        Ok(s) => match s.trim().parse::<u16>() {
+            Ok(d) if d <= 232 => Ok(d),
+            _ => Err(NodeError::parameter("ROS_DOMAIN_ID", format!("`{s}` is not a domain id (0..=232)"))),
+        },
+    }
+}
+
+/// A topic's QoS in ros2-client's terms.
+pub fn qos_of(topic: &Topic) -> QosProfile {
+    let q = topic.qos;
+    QosProfile {
+        reliability: if q.reliable { Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) } } else { Reliability::BestEffort },
+        durability: if q.transient_local { Durability::TransientLocal } else { Durability::Volatile },
+        history: History::KeepLast { depth: q.depth.max(1) as usize },
+        ..QosProfile::publisher_default()
+    }
+}
+
+/// A JSON parameter as a ROS parameter value.
+pub fn to_parameter(v: &Value) -> ParameterValue {
+    match v {
+        Value::Bool(b) => ParameterValue::Boolean(*b),
+        Value::Number(n) if n.is_i64() => ParameterValue::Integer(n.as_i64().unwrap_or_default()),
+        Value::Number(n) => ParameterValue::Double(n.as_f64().unwrap_or(f64::NAN)),
+        Value::String(s) => ParameterValue::String(s.clone()),
+        Value::Array(a) if a.iter().all(Value::is_string) => {
+            ParameterValue::StringArray(a.iter().filter_map(|s| s.as_str().map(str::to_string)).collect())
+        }
+        Value::Array(a) if a.iter().all(|x| x.is_i64()) => ParameterValue::IntegerArray(a.iter().filter_map(Value::as_i64).collect()),
+        Value::Array(a) => ParameterValue::DoubleArray(a.iter().filter_map(Value::as_f64).collect()),
+        Value::Null | Value::Object(_) => ParameterValue::NotSet,
+    }
+}
+
+/// A ROS parameter value as JSON (for the typed struct).
+pub fn from_parameter(p: &ParameterValue) -> Value {
+    match p {
+        ParameterValue::NotSet => Value::Null,
+        ParameterValue::Boolean(b) => Value::Bool(*b),
+        ParameterValue::Integer(i) => Value::from(*i),
+        ParameterValue::Double(d) => serde_json::Number::from_f64(*d).map_or(Value::Null, Value::Number),
+        ParameterValue::String(s) => Value::String(s.clone()),
+        ParameterValue::ByteArray(b) => Value::from(b.clone()),
+        ParameterValue::BooleanArray(b) => Value::from(b.clone()),
+        ParameterValue::IntegerArray(i) => Value::from(i.clone()),
+        ParameterValue::DoubleArray(d) => Value::from(d.clone()),
+        ParameterValue::StringArray(s) => Value::from(s.clone()),
+    }
+}
+
+/// Checks a whole parameter set (the typed struct's validation): `Err(reason)` refuses it.
+pub type Validator = Box<dyn Fn(&Map<String, Value>) -> Result<(), String> + Send + Sync>;
+
+/// One ROS 2 node on DDS.
+pub struct RosNode {
+    node: Node,
+    namespace: String,
+    params: Arc<Mutex<Map<String, Value>>>,
+    changed: Arc<Mutex<bool>>,
+    spinner: Option<std::thread::JoinHandle<()>>,
+}
+
+impl RosNode {
+    /// A node named by `args` in domain `ROS_DOMAIN_ID`, with `params` declared. A set
+    /// request is checked by `validate` on the whole set with the new value (so a value the
+    /// node would reject is refused through the service, with the reason).
+    pub fn new(args: &NodeArgs, params: &Map<String, Value>, validate: Validator) -> Result<Self, NodeError> {
+        let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?)).map_err(|e| mw("context", e))?;
+        let shared = Arc::new(Mutex::new(params.clone()));
+        let changed = Arc::new(Mutex::new(false));
+        let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(true);
+        for (k, v) in params {
+            options = options.declare_parameter(k, to_parameter(v));
+        }
+        let (check_params, validate) = (Arc::clone(&shared), Arc::new(validate));
+        options = options.parameter_validator(Box::new(move |name, value| {
+            let mut next = check_params.lock().unwrap_or_else(PoisonError::into_inner).clone();
+            if !next.contains_key(name) {
+                return Err(format!("`{name}` is not a parameter of this node"));
+            }
+            next.insert(name.to_string(), from_parameter(value));
+            validate(&next)
+        }));
+        let (set_params, set_changed) = (Arc::clone(&shared), Arc::clone(&changed));
+        options = options.parameter_set_action(Box::new(move |name, value| {
+            set_params.lock().unwrap_or_else(PoisonError::into_inner).insert(name.to_string(), from_parameter(value));
+            *set_changed.lock().unwrap_or_else(PoisonError::into_inner) = true;
+            Ok(())
+        }));
+        let node_name = NodeName::new(&args.namespace, &args.name).map_err(|e| mw("node name", format!("{e:?}")))?;
+        let mut node = context.new_node(node_name, options).map_err(|e| mw("node", e))?;
+        let spinner = node.spinner().map_err(|e| mw("spinner", e))?;
+        let handle = std::thread::Builder::new()
+            .name("ros2-spinner".into())
+            .spawn(move || {
+                if let Err(e) = smol::block_on(spinner.spin()) {
+                    tracing::error!("ROS 2 spinner stopped: {e}");
+                }
+            })
+            .map_err(|e| NodeError::Io { what: "spinner thread".into(), source: e })?;
+        Ok(Self { node, namespace: args.namespace.clone(), params: shared, changed, spinner: Some(handle) })
+    }
+
+    fn topic(&mut self, topic: &Topic) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
+        let full = crate::topics::qualified(&self.namespace, topic);
+        let (ns, base) = full.rsplit_once('/').unwrap_or(("/", full.as_str()));
+        let name = Name::new(if ns.is_empty() { "/" } else { ns }, base).map_err(|e| mw(format!("topic name {full}"), format!("{e:?}")))?;
+        let (pkg, ty) = topic.type_name.split_once("/msg/").unwrap_or(("oilfilm_msgs", topic.type_name));
+        self.node.create_topic(&name, MessageTypeName::new(pkg, ty), &qos_of(topic)).map_err(|e| mw(format!("topic {full}"), e))
+    }
+
+    pub fn publisher<M: Serialize>(&mut self, topic: &Topic) -> Result<DdsPublisher<M>, NodeError> {
+        let t = self.topic(topic)?;
+        let p = self.node.create_publisher::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("publisher {}", topic.name), e))?;
+        Ok(DdsPublisher { publisher: p, topic: topic.name })
+    }
+
+    pub fn subscription<M: DeserializeOwned + 'static>(&mut self, topic: &Topic) -> Result<DdsSubscription<M>, NodeError> {
+        let t = self.topic(topic)?;
+        let s = self.node.create_subscription::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("subscription {}", topic.name), e))?;
+        Ok(DdsSubscription { subscription: s, topic: topic.name })
+    }
+
+    /// The whole parameter set, if a parameter changed since the last call.
+    pub fn parameter_change(&self) -> Option<Map<String, Value>> {
+        let mut changed = self.changed.lock().unwrap_or_else(PoisonError::into_inner);
+        if !std::mem::replace(&mut *changed, false) {
+            return None;
+        }
+        Some(self.params.lock().unwrap_or_else(PoisonError::into_inner).clone())
+    }
+
+    /// Stops the spinner (the context says goodbye to DDS when dropped).
+    pub fn shutdown(mut self) {
+        self.node.stop_spinner();
+        if let Some(h) = self.spinner.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+pub struct DdsPublisher<M: Serialize> {
+    publisher: ros2_client::Publisher<M>,
+    topic: &'static str,
+}
+
+impl<M: Serialize> Publish<M> for DdsPublisher<M> {
+    fn publish(&mut self, message: M) -> Result<(), NodeError> {
+        self.publisher.publish(message).map_err(|e| mw(format!("publish on {}", self.topic), e))
+    }
+}
+
+pub struct DdsSubscription<M> {
+    subscription: ros2_client::Subscription<M>,
+    topic: &'static str,
+}
+
+impl<M: DeserializeOwned + 'static> Receive<M> for DdsSubscription<M> {
+    fn receive(&mut self) -> Result<Option<M>, NodeError> {
+        match self.subscription.take() {
+            Ok(m) => Ok(m.map(|(m, _)| m)),
+            // A sample that does not decode is skipped with its reason, like any bad input.
+            Err(e) => {
+                tracing::warn!(topic = self.topic, "undecodable sample skipped: {e}");
+                Ok(None)
+            }
+        }
+    }
+}
+
+/// SIGINT/SIGTERM set this; the node loops poll it.
+pub fn shutdown_flag() -> Result<Arc<std::sync::atomic::AtomicBool>, NodeError> {
+    let flag = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let f = Arc::clone(&flag);
+    ctrlc::set_handler(move || f.store(true, std::sync::atomic::Ordering::SeqCst))
+        .map_err(|e| mw("signal handler", e))?;
+    Ok(flag)
+}
+
+/// Logs to stderr, `RUST_LOG` filtering (default info).
+pub fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rustdds=warn,ros2_client=warn"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}

@@ -1,0 +1,199 @@
+//! Launch files as data: the ROS 2 launch YAML schema (`launch: - node: {pkg, exec, name,
+//! namespace, param: [{from: FILE} | {name, value}]}`), so the file `oilfilm launch` reads
+//! is one `ros2 launch` reads too. `$(dirname)` is the launch file's directory.
+//!
+//! [`Supervisor`] starts every node with its `--ros-args`, watches them, and stops them all
+//! (SIGINT, then SIGKILL after a grace period) when one dies, when asked, or at the end.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+
+use crate::error::NodeError;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LaunchFile {
+    launch: Vec<Entry>,
+}
+
+/// One entry of `launch:`; only `node` entries are supported.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Entry {
+    node: NodeEntry,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NodeEntry {
+    pkg: String,
+    exec: String,
+    name: Option<String>,
+    namespace: Option<String>,
+    #[serde(default)]
+    param: Vec<ParamEntry>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged, deny_unknown_fields)]
+enum ParamEntry {
+    From { from: String },
+    Value { name: String, value: serde_yaml_ng::Value },
+}
+
+/// One node to start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeLaunch {
+    pub exec: String,
+    pub name: String,
+    pub namespace: String,
+    pub args: Vec<String>,
+}
+
+/// Reads a launch file; the error names the file and what is wrong.
+pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
+    let doc: LaunchFile = serde_yaml_ng::from_str(&text).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
+    // Absolute, so `$(dirname)/x` and `x` mean the same file wherever the nodes start.
+    let dir = std::fs::canonicalize(&dir).map_err(|e| NodeError::File { file: file.clone(), reason: format!("its directory: {e}") })?;
+    let mut out = Vec::new();
+    for Entry { node: n } in doc.launch {
+        if n.pkg != "oilfilm" {
+            return Err(NodeError::File { file, reason: format!("node `{}`: package `{}` is not ours (pkg: oilfilm)", n.exec, n.pkg) });
+        }
+        let name = n.name.clone().unwrap_or_else(|| n.exec.trim_start_matches("oilfilm-").to_string());
+        let namespace = n.namespace.clone().unwrap_or_else(|| crate::topics::NAMESPACE.into());
+        let mut args = vec!["--ros-args".into(), "-r".into(), format!("__node:={name}"), "-r".into(), format!("__ns:={namespace}")];
+        for p in &n.param {
+            match p {
+                ParamEntry::From { from } => {
+                    let resolved = from.replace("$(dirname)", &dir.display().to_string());
+                    let resolved = if Path::new(&resolved).is_absolute() { PathBuf::from(resolved) } else { dir.join(resolved) };
+                    if !resolved.exists() {
+                        return Err(NodeError::File { file, reason: format!("node `{name}`: params file {} does not exist", resolved.display()) });
+                    }
+                    args.extend(["--params-file".into(), resolved.display().to_string()]);
+                }
+                ParamEntry::Value { name: k, value } => {
+                    let v = serde_yaml_ng::to_string(value).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
+                    args.extend(["-p".into(), format!("{k}:={}", v.trim())]);
+                }
+            }
+        }
+        out.push(NodeLaunch { exec: n.exec, name, namespace, args });
+    }
+    Ok(out)
+}
+
+/// The running nodes.
+pub struct Supervisor {
+    children: Vec<(NodeLaunch, Child)>,
+}
+
+impl Supervisor {
+    /// Starts each node from `bin_dir` with its arguments plus `extra_args` (e.g.
+    /// `-p duration_s:=10` for the DAQ is added by the caller through the launch entries).
+    pub fn start(nodes: &[NodeLaunch], bin_dir: &Path) -> Result<Self, NodeError> {
+        let mut s = Self { children: Vec::new() };
+        for n in nodes {
+            let exe = bin_dir.join(&n.exec);
+            match Command::new(&exe).args(&n.args).spawn() {
+                Ok(child) => s.children.push((n.clone(), child)),
+                Err(e) => {
+                    s.stop(Duration::from_secs(2));
+                    return Err(NodeError::Io { what: format!("starting {} ({})", n.name, exe.display()), source: e });
+                }
+            }
+        }
+        Ok(s)
+    }
+
+    /// The first node that has exited, with its status.
+    pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
+        for (n, c) in &mut self.children {
+            if let Ok(Some(status)) = c.try_wait() {
+                return Some((n.name.clone(), status));
+            }
+        }
+        None
+    }
+
+    /// SIGINT to every node still running, then SIGKILL after `grace`.
+    pub fn stop(&mut self, grace: Duration) {
+        for (_, c) in &mut self.children {
+            if let Ok(None) = c.try_wait() {
+                // SAFETY-free: `kill` with SIGINT via the system command (std has no signal API).
+                let _ = Command::new("kill").args(["-INT", &c.id().to_string()]).status();
+            }
+        }
+        let deadline = Instant::now() + grace;
+        for (n, c) in &mut self.children {
+            loop {
+                match c.try_wait() {
+                    Ok(Some(_)) => break,
+                    Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+                    _ => {
+                        tracing::warn!("{} did not stop within {grace:?}: killed", n.name);
+                        let _ = c.kill();
+                        let _ = c.wait();
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Names of the nodes.
+    pub fn names(&self) -> Vec<String> {
+        self.children.iter().map(|(n, _)| n.name.clone()).collect()
+    }
+}
+
+impl Drop for Supervisor {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(3));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sim_rig_launch_file_reads() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch_configs/sim_rig.launch.yaml");
+        let nodes = read(&path).unwrap();
+        let names: Vec<&str> = nodes.iter().map(|n| n.name.as_str()).collect();
+        assert_eq!(names, ["exciter", "daq", "conditioner", "estimator"]);
+        assert!(nodes.iter().all(|n| n.args.iter().any(|a| a.ends_with("params/sim_rig.yaml"))));
+        // Each node's section of the params file loads into its typed parameters.
+        for n in &nodes {
+            let args = crate::params::parse_args(&n.name, n.args.clone()).unwrap();
+            let r = match n.name.as_str() {
+                "exciter" => crate::params::load::<crate::exciter::ExciterParams>(&args).map(|_| ()),
+                "daq" => crate::params::load::<crate::daq::DaqParams>(&args).map(|_| ()),
+                "conditioner" => crate::params::load::<crate::conditioner::ConditionerParams>(&args).map(|_| ()),
+                _ => crate::params::load::<crate::estimator::EstimatorParams>(&args).map(|_| ()),
+            };
+            r.unwrap_or_else(|e| panic!("{}: {e}", n.name));
+        }
+    }
+
+    #[test]
+    fn a_bad_launch_file_names_the_problem() {
+        let dir = std::env::temp_dir().join(format!("oilfilm-launch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("bad.yaml");
+        std::fs::write(&f, "launch:\n- node:\n    pkg: oilfilm\n    exec: oilfilm-daq\n    param:\n    - from: missing.yaml\n").unwrap();
+        let e = read(&f).unwrap_err().to_string();
+        assert!(e.contains("bad.yaml") && e.contains("missing.yaml"), "{e}");
+        std::fs::write(&f, "launch:\n- nod:\n    pkg: oilfilm\n").unwrap();
+        assert!(read(&f).unwrap_err().to_string().contains("bad.yaml"));
+    }
+}
