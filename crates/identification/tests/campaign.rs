@@ -207,11 +207,12 @@ fn relative_variation_grows_with_amplitude() {
 
 /// The paper (Figs 9-10) found RV larger at F_Y 1.3 than at 0.35 at the same d (over 20 % at
 /// d = 0.05 for the stiffness terms at 1.3). The simulated isoviscous film does not show it:
-/// at d = 0.05 the mean |RV| is smaller at F_Y 1.3, and at the largest common d the two are
-/// within two standard errors. This test pins that finding (so that a change in the film or
-/// the identification that moves it is noticed) rather than asserting the paper's claim,
-/// which fails here. Checked against the direct finite-difference film as well (the rig's
-/// tabulated film agrees to 1e-3 at d = 0.12 at both F_Y).
+/// at d = 0.05 and at the largest common d the mean |RV| is smaller at F_Y 1.3 by more than
+/// two standard errors (quick run: 0.63 against 1.56 % and 3.09 against 5.36 %). This test
+/// pins that finding (so that a change in the film or the identification that moves it is
+/// noticed) rather than asserting the paper's claim, which fails here. The film itself shows
+/// the same without rig or identification (tests/rv_vs_load_film.rs,
+/// docs/findings/rv-vs-load.md).
 #[test]
 fn relative_variation_is_not_larger_at_high_fy_unlike_the_paper() {
     let c = quick_campaign();
@@ -229,8 +230,10 @@ fn relative_variation_is_not_larger_at_high_fy_unlike_the_paper() {
     assert!(!f.rv_at_d_005.extrapolated_low_fy && !f.rv_at_d_005.extrapolated_high_fy);
     // At d = 0.05 the high F_Y varies less, by more than two standard errors.
     assert_eq!(f.rv_at_d_005.verdict, Verdict::Smaller, "{:?}", f.rv_at_d_005);
-    // At the largest common d it is not (significantly) larger either.
-    assert_ne!(f.rv_at_common_d.verdict, Verdict::Larger, "{:?}", f.rv_at_common_d);
+    // And at the largest common d.
+    assert_eq!(f.rv_at_common_d.verdict, Verdict::Smaller, "{:?}", f.rv_at_common_d);
+    // Coefficient by coefficient, most are smaller at the high F_Y too.
+    assert!(f.rv_at_d_005.larger_at_high_fy <= 2 && f.rv_at_common_d.larger_at_high_fy <= 3, "{} and {} of 8 larger", f.rv_at_d_005.larger_at_high_fy, f.rv_at_common_d.larger_at_high_fy);
     assert!(!f.rv_faster_at_high_fy);
 }
 
