@@ -43,6 +43,8 @@ interop() {
 }
 interop "oilfilm_msgs builds with rosidl; rclpy serialises every message as the golden CDR fixtures say" bash tests/interop/run-check-msgs.sh --check
 interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopback)" bash tests/interop/run-rclpy-roundtrip.sh
+# The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
+interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
