@@ -145,10 +145,12 @@ impl ConditionerCore {
     /// Takes one DAQ frame; returns the conditioned frames it completes. `Err` for a frame
     /// that cannot be used (it is skipped; the stream goes on).
     pub fn push(&mut self, frame: &DaqFrame) -> Result<Vec<ConditionedFrame>, NodeError> {
-        let (channels, n_scans) = self.check(frame)?;
+        let (kept, n_scans) = self.check(frame)?;
+        let channels: Vec<ChannelId> = kept.iter().map(|(_, id)| *id).collect();
+        let offsets: Vec<f64> = kept.iter().map(|(c, _)| frame.channel_offsets_s[*c]).collect();
         let restart = match &self.stream {
             None => Some("stream started".to_string()),
-            Some(s) if s.rate_hz != frame.sample_rate_hz || s.channels != channels || s.offsets_s != frame.channel_offsets_s || s.units != frame.units || s.rig != frame.rig => {
+            Some(s) if s.rate_hz != frame.sample_rate_hz || s.channels != channels || s.offsets_s != offsets || s.units != frame.units || s.rig != frame.rig => {
                 Some(format!("stream restarted at scan {}: the DAQ's rate, schedule, units or rig changed", frame.first_scan))
             }
             Some(s) if s.end_scan() != frame.first_scan => Some(format!(
@@ -160,11 +162,13 @@ impl ConditionerCore {
             Some(_) => None,
         };
         if let Some(note) = restart {
-            self.start_stream(frame, channels, note)?;
+            let ignored: Vec<&str> = frame.channel_names.iter().filter(|n| ChannelId::parse(n).is_err()).map(String::as_str).collect();
+            let note = if ignored.is_empty() { note } else { format!("{note}; channels not used by the chain ignored: {}", ignored.join(", ")) };
+            self.start_stream(frame, channels, offsets, note)?;
         }
         let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
-        let width = stream.channels.len();
-        for (c, col) in stream.columns.iter_mut().enumerate() {
+        let width = frame.channel_names.len();
+        for (col, (c, _)) in stream.columns.iter_mut().zip(&kept) {
             col.extend((0..n_scans).map(|k| frame.values[k * width + c]));
         }
         let mut out = Vec::new();
@@ -178,7 +182,7 @@ impl ConditionerCore {
         Ok(out)
     }
 
-    fn check(&self, frame: &DaqFrame) -> Result<(Vec<ChannelId>, usize), NodeError> {
+    fn check(&self, frame: &DaqFrame) -> Result<(Vec<(usize, ChannelId)>, usize), NodeError> {
         let bad = |reason: String| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason };
         if !(frame.sample_rate_hz.is_finite() && frame.sample_rate_hz > 0.0) {
             return Err(bad(format!("sample_rate_hz must be finite and > 0, got {}", frame.sample_rate_hz)));
@@ -197,15 +201,21 @@ impl ConditionerCore {
         if frame.rig != self.rig.name {
             return Err(bad(format!("frame from rig `{}`, but this conditioner has the calibration of rig `{}` (parameter `rig`)", frame.rig, self.rig.name)));
         }
-        let channels = frame
-            .channel_names
-            .iter()
-            .map(|name| ChannelId::parse(name).map_err(|_| bad(format!("unknown channel `{name}` (expected {})", ChannelId::all_names()))))
-            .collect::<Result<Vec<_>, _>>()?;
+        // Channels the chain does not use (a DAQ may carry more) are ignored, not refused;
+        // a channel the chain needs but the frame lacks is refused by the chain with its name.
+        let mut channels = Vec::new();
+        for (c, name) in frame.channel_names.iter().enumerate() {
+            if let Ok(id) = ChannelId::parse(name) {
+                if channels.iter().any(|(_, k)| *k == id) {
+                    return Err(bad(format!("channel `{name}` appears twice")));
+                }
+                channels.push((c, id));
+            }
+        }
         Ok((channels, n))
     }
 
-    fn start_stream(&mut self, frame: &DaqFrame, channels: Vec<ChannelId>, note: String) -> Result<(), NodeError> {
+    fn start_stream(&mut self, frame: &DaqFrame, channels: Vec<ChannelId>, offsets_s: Vec<f64>, note: String) -> Result<(), NodeError> {
         let probe = RawRecord {
             sample_rate_hz: frame.sample_rate_hz,
             start_time_s: 0.0,
@@ -213,12 +223,12 @@ impl ConditionerCore {
             units: RawUnits::Volts,
             columns: vec![Vec::new(); channels.len()],
         };
-        let calibration = calibration_for(&self.rig, &probe, &frame.channel_offsets_s)?;
+        let calibration = calibration_for(&self.rig, &probe, &offsets_s)?;
         let edge = conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?;
         self.stream = Some(Stream {
             rate_hz: frame.sample_rate_hz,
             units: frame.units,
-            offsets_s: frame.channel_offsets_s.clone(),
+            offsets_s,
             rig: frame.rig.clone(),
             calibration,
             first_scan: frame.first_scan,
