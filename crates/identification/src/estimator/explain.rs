@@ -7,7 +7,10 @@
 //! directions together in the span of the union of their lines. Noise fills in the missing
 //! dimensions numerically, but information about the film it does not carry (sensor noise in a
 //! regressor only biases the fit), so a structurally deficient window is refused even when its
-//! noisy matrix is technically of full rank.
+//! noisy matrix is technically of full rank. The same holds for a line that is found but lies
+//! below the noise of its direction's regressors (the bellows' slow ripple beside one strong
+//! sine: its velocity is tiny): only lines at least [`super::spectrum::LINE_SNR_MIN`] above
+//! that noise count.
 
 use super::spectrum::LineAnalysis;
 use super::svd::SmallSvd;
@@ -31,22 +34,57 @@ fn dominated(lines: &LineAnalysis, d: usize) -> bool {
 }
 
 /// The rank the excitation allows, if it is below what the model needs.
+///
+/// Only lines that stand above the regressors' broadband noise count
+/// ([`LineAnalysis::determining`], [`super::spectrum::LINE_SNR_MIN`]): a line buried in the
+/// velocity noise (the bellows' slow ripple beside one strong sine) spans its two dimensions
+/// with noise, not with information, and least squares attenuates the fit there without any
+/// standard error showing it.
 pub fn structural_rank(model: ModelOrder, lines: &LineAnalysis) -> Option<usize> {
     let per = model.regressors() / 2;
-    let rd = |d: usize| if dominated(lines, d) { per.min(2 * lines.lines[d].len()) } else { per };
+    let rd = |d: usize| if dominated(lines, d) { per.min(2 * lines.determining(d).len()) } else { per };
     let mut bound = rd(0) + rd(1);
     if dominated(lines, 0) && dominated(lines, 1) {
-        bound = bound.min(2 * lines.merged.len());
+        bound = bound.min(2 * lines.determining_merged().len());
     }
     (bound < model.regressors()).then_some(bound)
+}
+
+/// The lines found but not counted by [`structural_rank`], said with their SNR; empty if none.
+fn weak_lines(lines: &LineAnalysis) -> String {
+    let mut weak: Vec<(f64, f64)> = Vec::new();
+    for d in 0..2 {
+        for (f, snr) in lines.weak(d) {
+            match weak.iter_mut().find(|(g, _)| (g - f).abs() < super::spectrum::MAIN_LOBE_BINS as f64 * lines.resolution_hz) {
+                Some(w) => w.1 = w.1.max(snr),
+                None => weak.push((f, snr)),
+            }
+        }
+    }
+    if weak.is_empty() {
+        return String::new();
+    }
+    weak.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let freqs: Vec<f64> = weak.iter().map(|w| w.0).collect();
+    let worst = weak.iter().map(|w| w.1).fold(f64::NEG_INFINITY, f64::max);
+    let (noun, verb) = if weak.len() == 1 { ("line", "stands") } else { ("lines", "stand") };
+    format!(
+        ". The weak {noun} at {} {verb} at most {:.1} dB above the broadband noise of the displacement or velocity regressors (at least {:.1} dB needed): in the directions only {} would span, least squares fits noise, attenuating the coefficients with no standard error showing it, so {} not counted",
+        fmt_hz(&freqs),
+        10.0 * worst.log10(),
+        10.0 * super::spectrum::LINE_SNR_MIN.log10(),
+        if weak.len() == 1 { "it" } else { "they" },
+        if weak.len() == 1 { "it is" } else { "they are" },
+    )
 }
 
 /// Explanation of a structural rank deficiency found by [`structural_rank`].
 pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usize, numerical: Option<&SmallSvd>) -> String {
     let p = model.regressors();
     let names = model.regressor_names().join(", ");
-    let mut text = if dominated(lines, 0) && dominated(lines, 1) && lines.merged.len() == 1 {
-        let f = fmt_hz(&lines.merged);
+    let merged = lines.determining_merged();
+    let mut text = if dominated(lines, 0) && dominated(lines, 1) && merged.len() == 1 {
+        let f = fmt_hz(&merged);
         match model {
             ModelOrder::Kc => format!(
                 "both exciters at one frequency: {names} all lie in span{{cos, sin}} of {f} (rank {rank} of {p}): excite two frequencies"
@@ -62,7 +100,7 @@ pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usi
             if !dominated(lines, d) {
                 continue;
             }
-            let l = &lines.lines[d];
+            let l = &lines.determining(d);
             if model == ModelOrder::Kcm && l.len() == 1 {
                 parts.push(format!(
                     "{v} moves only at {f}, where {v}'' = -w^2 {v}, so {v}, {v}', {v}'' lie in span{{cos, sin}} of {f}",
@@ -72,10 +110,10 @@ pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usi
             }
         }
         let alias = model == ModelOrder::Kcm && !parts.is_empty();
-        if !alias && dominated(lines, 0) && dominated(lines, 1) && 2 * lines.merged.len() < p {
+        if !alias && dominated(lines, 0) && dominated(lines, 1) && 2 * merged.len() < p {
             parts.push(format!(
                 "{names} all lie in span{{cos, sin}} of {}",
-                fmt_hz(&lines.merged)
+                fmt_hz(&merged)
             ));
         }
         let advice = match model {
@@ -85,6 +123,7 @@ pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usi
         let head = if alias { "stiffness and added mass alias at one frequency (K - w^2 M): " } else { "" };
         format!("{head}{} (rank {rank} of {p}): {advice}", parts.join("; "))
     };
+    text.push_str(&weak_lines(lines));
     if let Some(svd) = numerical {
         let p_num = svd.rank((svd.p as f64) * 1e3 * f64::EPSILON);
         if p_num > rank {
