@@ -37,6 +37,13 @@ enum BenchWhat {
         #[arg(long)]
         python: Option<std::path::PathBuf>,
     },
+    /// The conditioner and estimator nodes on loopback DDS: latency, throughput, drops and
+    /// CPU at 5 kHz x 10 channels and 100 kHz x 16 channels.
+    Nodes {
+        /// Seconds of frames per configuration.
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+    },
     /// Film coefficient set at the Zhou point and rig simulation speed.
     Physics {
         /// Repeats of the coefficient set (the median is reported).
@@ -52,6 +59,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     match args.what {
         BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
         BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
+        BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
     }
 }
 

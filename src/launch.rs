@@ -73,6 +73,7 @@ pub fn run(args: &LaunchArgs) -> Result<()> {
         count += 1;
         print_estimate(&e);
     }
+    drop(estimates);
     ros.shutdown();
     println!("{count} estimate(s) received");
     if let Some(f) = failure {

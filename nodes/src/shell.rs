@@ -73,6 +73,8 @@ pub fn exciter_main() -> Result<(), NodeError> {
         commands.publish(cmd)?;
         std::thread::sleep(Duration::from_millis(200));
     }
+    // Entities go before their participant, or DDS cannot remove them cleanly.
+    drop((requests, status, commands));
     ros.shutdown();
     Ok(())
 }
@@ -114,6 +116,7 @@ pub fn daq_main() -> Result<(), NodeError> {
             std::thread::sleep(IDLE);
         }
     }
+    drop((commands, frames, status));
     ros.shutdown();
     Ok(())
 }
@@ -132,6 +135,7 @@ pub fn conditioner_main() -> Result<(), NodeError> {
             std::thread::sleep(IDLE);
         }
     }
+    drop((frames, conditioned));
     ros.shutdown();
     Ok(())
 }
@@ -161,6 +165,7 @@ pub fn estimator_main() -> Result<(), NodeError> {
             std::thread::sleep(IDLE);
         }
     }
+    drop((conditioned, status, estimates));
     ros.shutdown();
     Ok(())
 }

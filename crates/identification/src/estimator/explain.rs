@@ -69,7 +69,7 @@ fn weak_lines(lines: &LineAnalysis) -> String {
     let worst = weak.iter().map(|w| w.1).fold(f64::NEG_INFINITY, f64::max);
     let (noun, verb) = if weak.len() == 1 { ("line", "stands") } else { ("lines", "stand") };
     format!(
-        ". The weak {noun} at {} {verb} at most {:.1} dB above the broadband noise of the displacement or velocity regressors (at least {:.1} dB needed): in the directions only {} would span, least squares fits noise, attenuating the coefficients with no standard error showing it, so {} not counted",
+        ". The weak {noun} at {} {verb} at most {:+.1} dB against the broadband noise of the displacement or velocity regressors (at least {:+.1} dB needed): in the directions only {} would span, least squares fits noise, attenuating the coefficients with no standard error showing it, so {} not counted",
         fmt_hz(&freqs),
         10.0 * worst.log10(),
         10.0 * super::spectrum::LINE_SNR_MIN.log10(),
