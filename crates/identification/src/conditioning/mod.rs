@@ -595,7 +595,7 @@ pub fn condition_into(
     let valid = trim..n - trim;
 
     // Per channel: SI, range check on the raw column, deskew; then the low-pass on all ten
-    // together (four lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
+    // together (eight lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
     // `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
     let mut si: [Vec<f64>; CHANNEL_COUNT] = Default::default();
@@ -622,9 +622,8 @@ pub fn condition_into(
     }
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
-    // part of eq. 2 first, then filter the eight columns that carry dynamics (two lock-step
-    // passes of four lanes instead of three for ten raw channels). The bellows' load and the
-    // temperature keep their de-skewed samples: only their means are used.
+    // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
+    // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep their de-skewed samples: only their means are used.
     let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
     let (mut x_m, mut tilt_x_m) = (a_x, b_x);
     let (mut y_m, mut tilt_y_m) = (a_y, b_y);
