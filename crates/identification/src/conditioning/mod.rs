@@ -475,6 +475,84 @@ pub(crate) fn non_finite_error(
     }
 }
 
+/// Samples per tile of [`calibrate_check_deskew`] (4 kB, L1-resident).
+const TILE: usize = 512;
+
+/// Steps 3, 2 and 4 for one column of volts in one pass: calibrates the readings tile by
+/// tile into L1, counts the readings outside the linear range and the non-finite values on
+/// the way, and de-skews from the tile into `out`. The same operations in the same order as
+/// [`calibrate::to_si_into`] followed by [`deskew::FractionalDelay::apply_into`], so the same
+/// result bit for bit, with the column read once and `out` written once instead of three
+/// passes over memory. Returns `Ok(false)` (and `out` is to be discarded) when a reading is
+/// non-finite, does not convert to a finite value, or is out of range: the caller then runs
+/// the stages one by one, which name the sample.
+fn calibrate_check_deskew(
+    channel: ChannelId,
+    volts: &[f64],
+    calibration: &Calibration,
+    delay: &deskew::FractionalDelay,
+    out: &mut [f64],
+) -> Result<bool, IdentificationError> {
+    let len = volts.len();
+    let taps = delay.taps();
+    let c = calibration.channel(channel)?;
+    let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
+    if out.len() != len
+        || len < taps
+        || !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite())
+    {
+        return Ok(false);
+    }
+    let gain = 1.0 / sensitivity;
+    let (lo, hi) = range_check::volts_bounds(channel, calibration)?;
+    let si = |v: f64| (v - offset) * gain;
+    let w = delay.weights();
+    let start = delay.stencil_start();
+    let interior = delay.interior(len);
+    let mut tile = [0.0; TILE + deskew::MAX_TAPS];
+    let mut bad = 0usize;
+    let mut r = 0;
+    while r < len {
+        // Readings `r..end` are counted once; the tile holds `r..tile_end`, so that every
+        // output whose stencil starts in `r..end` finds its whole stencil in the tile.
+        let end = (r + TILE).min(len);
+        let tile_end = (end + taps - 1).min(len);
+        let t = &mut tile[..tile_end - r];
+        for (x, &v) in t.iter_mut().zip(&volts[r..tile_end]) {
+            *x = si(v);
+        }
+        for (&v, x) in volts[r..end].iter().zip(t.iter()) {
+            bad += (!(v > lo && v < hi) | !x.is_finite()) as usize;
+        }
+        // Outputs n with n + start in r..end, inside the interior.
+        let n0 = ((r as isize - start).max(interior.start as isize) as usize).min(interior.end);
+        let n1 = ((end as isize - start).max(0) as usize).clamp(n0, interior.end);
+        if n0 < n1 {
+            // n0 + start >= r and (n1 - 1) + start + taps <= tile_end, so every stencil is
+            // inside the tile; one vectorised pass per tap over the L1-resident block.
+            let k = (n0 as isize + start) as usize - r;
+            let m = n1 - n0;
+            let dst = &mut out[n0..n1];
+            for (o, &x) in dst.iter_mut().zip(&t[k..k + m]) {
+                *o = w[0] * x;
+            }
+            for (j, &wj) in w.iter().enumerate().skip(1) {
+                for (o, &x) in dst.iter_mut().zip(&t[k + j..k + j + m]) {
+                    *o += wj * x;
+                }
+            }
+        }
+        r = end;
+    }
+    if bad > 0 {
+        return Ok(false);
+    }
+    for n in (0..interior.start.min(len)).chain(interior.end.max(interior.start.min(len))..len) {
+        out[n] = delay.edge_value(n, len, |i| si(volts[i]));
+    }
+    Ok(true)
+}
+
 /// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
 /// differentiate twice, eq. 2. The record must hold all ten channels.
 pub fn condition(
@@ -602,6 +680,13 @@ pub fn condition_into(
     for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
         let column = &raw.columns[col_of[ch.index()]];
         let mut buf = next();
+        if let (RawUnits::Volts, Some(d)) = (raw.units, delay) {
+            if calibrate_check_deskew(ch, column, calibration, d, &mut buf)? {
+                si[ch.index()] = buf;
+                continue;
+            }
+            // A non-finite or out-of-range reading: the stages one by one say which.
+        }
         match raw.units {
             RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, &mut buf)?,
             RawUnits::Si => {
@@ -623,7 +708,8 @@ pub fn condition_into(
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
-    // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep their de-skewed samples: only their means are used.
+    // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
+    // their de-skewed samples: only their means are used.
     let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
     let (mut x_m, mut tilt_x_m) = (a_x, b_x);
     let (mut y_m, mut tilt_y_m) = (a_y, b_y);
