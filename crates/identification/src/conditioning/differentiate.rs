@@ -242,25 +242,40 @@ impl SavitzkyGolayDerivative {
         let mut start = m;
         while start < len - m {
             let end = (start + BLOCK).min(len - m);
-            let dst = &mut out[start..end];
-            let c1 = self.interior[0];
-            for (o, (&a, &b)) in dst
-                .iter_mut()
-                .zip(input[start + 1..].iter().zip(&input[start - 1..]))
-            {
-                *o = c1 * (a - b);
-            }
-            for (k, &c) in self.interior.iter().enumerate().skip(1) {
-                let k = k + 1;
-                for (o, (&a, &b)) in dst
-                    .iter_mut()
-                    .zip(input[start + k..].iter().zip(&input[start - k..]))
-                {
-                    *o += c * (a - b);
-                }
-            }
+            self.interior_block(input, out, start..end);
             start = end;
         }
+        self.edges(input, out);
+        Ok(())
+    }
+
+    /// Interior outputs `range` (inside `M..len - M`): `M` vectorised passes over the block.
+    fn interior_block(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        let start = range.start;
+        let dst = &mut out[range];
+        let c1 = self.interior[0];
+        for (o, (&a, &b)) in dst
+            .iter_mut()
+            .zip(input[start + 1..].iter().zip(&input[start - 1..]))
+        {
+            *o = c1 * (a - b);
+        }
+        for (k, &c) in self.interior.iter().enumerate().skip(1) {
+            let k = k + 1;
+            for (o, (&a, &b)) in dst
+                .iter_mut()
+                .zip(input[start + k..].iter().zip(&input[start - k..]))
+            {
+                *o += c * (a - b);
+            }
+        }
+    }
+
+    /// The `M` outputs at each end (one-sided windows); `len >= 2M + 1`.
+    fn edges(&self, input: &[f64], out: &mut [f64]) {
+        let len = input.len();
+        let m = self.half_length;
+        let width = 2 * m + 1;
         let tail = &input[len - width..];
         for r in 0..m {
             let lw = &self.left[r * width..(r + 1) * width];
@@ -268,6 +283,41 @@ impl SavitzkyGolayDerivative {
             let rw = &self.right[r * width..(r + 1) * width];
             out[len - m + r] = rw.iter().zip(tail).map(|(a, b)| a * b).sum();
         }
+    }
+
+    /// Differentiates `input` twice, as the paper does: `first` is its derivative and
+    /// `second` the derivative of `first` (all three the same length, at least `2M + 1`).
+    /// The same result, bit for bit, as two calls of [`SavitzkyGolayDerivative::apply_into`],
+    /// but the second pass follows the first block by block while `first` is still in cache,
+    /// so the columns cross memory once each.
+    pub fn apply_twice_into(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+    ) -> Result<(), IdentificationError> {
+        let len = input.len();
+        let m = self.half_length;
+        if first.len() != len || second.len() != len || len < 2 * m + 1 {
+            // The one-pass path reports the mismatch.
+            self.apply_into(input, first)?;
+            return self.apply_into(first, second);
+        }
+        self.edges(input, first);
+        let mut start = m;
+        let mut done = m;
+        while start < len - m {
+            let end = (start + BLOCK).min(len - m);
+            self.interior_block(input, first, start..end);
+            start = end;
+            // first[..end] and first[len - m..] are final: second[i] needs first[i - M..=i + M].
+            let upto = if end == len - m { len - m } else { end - m };
+            if upto > done {
+                self.interior_block(first, second, done..upto);
+                done = upto;
+            }
+        }
+        self.edges(first, second);
         Ok(())
     }
 

@@ -724,10 +724,8 @@ pub fn condition_into(
     // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`).
     let mut housing_ax_m_s2 = next();
     let mut housing_ay_m_s2 = next();
-    sg.apply_into(&frame_x, &mut tmp)?;
-    sg.apply_into(&tmp, &mut housing_ax_m_s2)?;
-    sg.apply_into(&frame_y, &mut tmp)?;
-    sg.apply_into(&tmp, &mut housing_ay_m_s2)?;
+    sg.apply_twice_into(&frame_x, &mut tmp, &mut housing_ax_m_s2)?;
+    sg.apply_twice_into(&frame_y, &mut tmp, &mut housing_ay_m_s2)?;
 
     // Eq. 2's inertial part: the film force on the journal.
     film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
@@ -738,10 +736,8 @@ pub fn condition_into(
     let mut ax_m_s2 = next();
     let mut vy_m_s = next();
     let mut ay_m_s2 = next();
-    sg.apply_into(&x_m, &mut vx_m_s)?;
-    sg.apply_into(&vx_m_s, &mut ax_m_s2)?;
-    sg.apply_into(&y_m, &mut vy_m_s)?;
-    sg.apply_into(&vy_m_s, &mut ay_m_s2)?;
+    sg.apply_twice_into(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
+    sg.apply_twice_into(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
     // non-finite number on.
