@@ -475,82 +475,128 @@ pub(crate) fn non_finite_error(
     }
 }
 
-/// Samples per tile of [`calibrate_check_deskew`] (4 kB, L1-resident).
-const TILE: usize = 512;
+/// Scans per tile of [`front_end`] (ten channels of 256 samples: 20 kB, L1-resident).
+const TILE: usize = 256;
 
-/// Steps 3, 2 and 4 for one column of volts in one pass: calibrates the readings tile by
-/// tile into L1, counts the readings outside the linear range and the non-finite values on
-/// the way, and de-skews from the tile into `out`. The same operations in the same order as
-/// [`calibrate::to_si_into`] followed by [`deskew::FractionalDelay::apply_into`], so the same
-/// result bit for bit, with the column read once and `out` written once instead of three
-/// passes over memory. Returns `Ok(false)` (and `out` is to be discarded) when a reading is
-/// non-finite, does not convert to a finite value, or is out of range: the caller then runs
-/// the stages one by one, which name the sample.
-fn calibrate_check_deskew(
-    channel: ChannelId,
-    volts: &[f64],
+/// One channel's constants for [`front_end`].
+struct FrontChannel<'a> {
+    volts: &'a [f64],
+    offset: f64,
+    gain: f64,
+    /// Readings `v` with `v > lo && v < hi` are in the linear range.
+    lo: f64,
+    hi: f64,
+    delay: &'a deskew::FractionalDelay,
+    interior: Range<usize>,
+}
+
+/// Steps 3, 2, 4 and the linear combinations of steps 5 and 7 for a record of volts, scan
+/// tile by scan tile: each channel is calibrated into L1 and de-skewed from there, its
+/// readings counted against the linear range and for finiteness on the way, and the tile's
+/// ten channels are combined into `out` = `[x, y, tilt_x, tilt_y, frame_x, frame_y, fx
+/// (applied), fy (applied), f3, temperature]`. The same operations in the same order as
+/// [`calibrate::to_si_into`], [`deskew::FractionalDelay::apply_into`],
+/// [`kinematics::mean_and_difference_in_place`] and the applied part of eq. 2, so the same
+/// result bit for bit, with the raw columns read once and each output written once instead
+/// of some twenty passes over memory.
+///
+/// Returns `Ok(false)` (and `out` is to be discarded) when a reading is non-finite, does not
+/// convert to a finite value or is out of range, or a calibration or stencil is unusable:
+/// the caller then runs the stages one by one, which report the cause exactly.
+fn front_end(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
-    delay: &deskew::FractionalDelay,
-    out: &mut [f64],
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
 ) -> Result<bool, IdentificationError> {
-    let len = volts.len();
-    let taps = delay.taps();
-    let c = calibration.channel(channel)?;
-    let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
-    if out.len() != len
-        || len < taps
-        || !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite())
-    {
+    let len = raw.len();
+    if raw.units != RawUnits::Volts || out.iter().any(|c| c.len() != len) {
         return Ok(false);
     }
-    let gain = 1.0 / sensitivity;
-    let (lo, hi) = range_check::volts_bounds(channel, calibration)?;
-    let si = |v: f64| (v - offset) * gain;
-    let w = delay.weights();
-    let start = delay.stencil_start();
-    let interior = delay.interior(len);
-    let mut tile = [0.0; TILE + deskew::MAX_TAPS];
+    let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+    for (&ch, delay) in ChannelId::ALL.iter().zip(delays) {
+        let (Some(delay), Some(volts)) = (delay, raw.columns.get(col_of[ch.index()])) else {
+            return Ok(false);
+        };
+        let c = calibration.channel(ch)?;
+        let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
+        if volts.len() != len
+            || len < delay.taps()
+            || !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite())
+        {
+            return Ok(false);
+        }
+        let (lo, hi) = range_check::volts_bounds(ch, calibration)?;
+        chans.push(FrontChannel {
+            volts,
+            offset,
+            gain: 1.0 / sensitivity,
+            lo,
+            hi,
+            delay,
+            interior: delay.interior(len),
+        });
+    }
+    let applied = film_force::Applied::new(mechanics);
+    let mut tile = [[0.0; TILE]; CHANNEL_COUNT];
+    let mut input = [0.0; TILE + deskew::MAX_TAPS];
     let mut bad = 0usize;
-    let mut r = 0;
-    while r < len {
-        // Readings `r..end` are counted once; the tile holds `r..tile_end`, so that every
-        // output whose stencil starts in `r..end` finds its whole stencil in the tile.
-        let end = (r + TILE).min(len);
-        let tile_end = (end + taps - 1).min(len);
-        let t = &mut tile[..tile_end - r];
-        for (x, &v) in t.iter_mut().zip(&volts[r..tile_end]) {
-            *x = si(v);
-        }
-        for (&v, x) in volts[r..end].iter().zip(t.iter()) {
-            bad += (!(v > lo && v < hi) | !x.is_finite()) as usize;
-        }
-        // Outputs n with n + start in r..end, inside the interior.
-        let n0 = ((r as isize - start).max(interior.start as isize) as usize).min(interior.end);
-        let n1 = ((end as isize - start).max(0) as usize).clamp(n0, interior.end);
-        if n0 < n1 {
-            // n0 + start >= r and (n1 - 1) + start + taps <= tile_end, so every stencil is
-            // inside the tile; one vectorised pass per tap over the L1-resident block.
-            let k = (n0 as isize + start) as usize - r;
-            let m = n1 - n0;
-            let dst = &mut out[n0..n1];
-            for (o, &x) in dst.iter_mut().zip(&t[k..k + m]) {
-                *o = w[0] * x;
-            }
-            for (j, &wj) in w.iter().enumerate().skip(1) {
-                for (o, &x) in dst.iter_mut().zip(&t[k + j..k + j + m]) {
-                    *o += wj * x;
+    let mut o0 = 0;
+    while o0 < len {
+        let o1 = (o0 + TILE).min(len);
+        for (c, t) in chans.iter().zip(tile.iter_mut()) {
+            let t = &mut t[..o1 - o0];
+            let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
+            let si = |v: f64| (v - offset) * gain;
+            // `&` and `|`, not `&&`: no branch per reading, so the count vectorises.
+            bad += c.volts[o0..o1]
+                .iter()
+                .map(|&v| (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize)
+                .sum::<usize>();
+            // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
+            // a >= interior.start and b <= interior.end).
+            let a = o0.max(c.interior.start).min(o1);
+            let b = o1.min(c.interior.end).max(a);
+            if a < b {
+                let w = c.delay.weights();
+                let taps = w.len();
+                let i0 = (a as isize + c.delay.stencil_start()) as usize;
+                let i1 = i0 + (b - a) + taps - 1;
+                let x = &mut input[..i1 - i0];
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                }
+                let m = b - a;
+                let dst = &mut t[a - o0..b - o0];
+                for (o, &x) in dst.iter_mut().zip(&x[..m]) {
+                    *o = w[0] * x;
+                }
+                for (j, &wj) in w.iter().enumerate().skip(1) {
+                    for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
+                        *o += wj * x;
+                    }
                 }
             }
+            for n in (o0..a).chain(b..o1) {
+                t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
+            }
         }
-        r = end;
+        let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &tile;
+        let [x, y, tilt_x, tilt_y, hx, hy, fx, fy, load, temp] = &mut *out;
+        for (i, n) in (o0..o1).enumerate() {
+            [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
+            [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
+            [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
+        }
+        hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
+        hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
+        load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
+        temp[o0..o1].copy_from_slice(&temperature[..o1 - o0]);
+        o0 = o1;
     }
-    if bad > 0 {
-        return Ok(false);
-    }
-    for n in (0..interior.start.min(len)).chain(interior.end.max(interior.start.min(len))..len) {
-        out[n] = delay.edge_value(n, len, |i| si(volts[i]));
-    }
-    Ok(true)
+    Ok(bad == 0)
 }
 
 /// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
@@ -676,47 +722,42 @@ pub fn condition_into(
     // together (eight lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
     // `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
-    let mut si: [Vec<f64>; CHANNEL_COUNT] = Default::default();
-    for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
-        let column = &raw.columns[col_of[ch.index()]];
-        let mut buf = next();
-        if let (RawUnits::Volts, Some(d)) = (raw.units, delay) {
-            if calibrate_check_deskew(ch, column, calibration, d, &mut buf)? {
-                si[ch.index()] = buf;
-                continue;
-            }
-            // A non-finite or out-of-range reading: the stages one by one say which.
-        }
-        match raw.units {
-            RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, &mut buf)?,
-            RawUnits::Si => {
-                if let Some(i) = first_non_finite(column) {
-                    return Err(non_finite_error(ch, i, column[i], "si"));
-                }
-                buf.copy_from_slice(column);
-            }
-        }
-        if let Some(v) = range_check::check(ch, column, raw.units, calibration)? {
-            violations.push(v);
-        }
-        if let Some(d) = delay {
-            d.apply_into(&buf, &mut tmp)?;
-            std::mem::swap(&mut buf, &mut tmp);
-        }
-        si[ch.index()] = buf;
-    }
+    let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
-    let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
-    let (mut x_m, mut tilt_x_m) = (a_x, b_x);
-    let (mut y_m, mut tilt_y_m) = (a_y, b_y);
-    kinematics::mean_and_difference_in_place(&mut x_m, &mut tilt_x_m)?;
-    kinematics::mean_and_difference_in_place(&mut y_m, &mut tilt_y_m)?;
-    let (mut fx_n, mut fy_n) = (f1, f2);
-    film_force::applied_in_place(&mut fx_n, &mut fy_n, &f3, mechanics)?;
+    if !front_end(raw, &col_of, calibration, &delays, mechanics, &mut front)? {
+        // Something to report (or a record of SI values): the stages one by one.
+        let mut si = front;
+        for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
+            let column = &raw.columns[col_of[ch.index()]];
+            let buf = &mut si[ch.index()];
+            match raw.units {
+                RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, buf)?,
+                RawUnits::Si => {
+                    if let Some(i) = first_non_finite(column) {
+                        return Err(non_finite_error(ch, i, column[i], "si"));
+                    }
+                    buf.copy_from_slice(column);
+                }
+            }
+            if let Some(v) = range_check::check(ch, column, raw.units, calibration)? {
+                violations.push(v);
+            }
+            if let Some(d) = delay {
+                d.apply_into(buf, &mut tmp)?;
+                std::mem::swap(buf, &mut tmp);
+            }
+        }
+        let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature] = si;
+        kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x)?;
+        kinematics::mean_and_difference_in_place(&mut a_y, &mut b_y)?;
+        film_force::applied_in_place(&mut f1, &mut f2, &f3, mechanics)?;
+        front = [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature];
+    }
+    let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n, f3, temperature] = front;
     let mut dynamic = [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n];
     lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new())?;
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
