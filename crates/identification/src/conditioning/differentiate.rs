@@ -321,13 +321,27 @@ impl SavitzkyGolayDerivative {
         first: &mut [f64],
         second: &mut [f64],
     ) -> Result<(), IdentificationError> {
+        self.apply_twice_into_finite(input, first, second).map(|_| ())
+    }
+
+    /// [`SavitzkyGolayDerivative::apply_twice_into`], telling whether every sample of
+    /// `second` is finite (checked block by block while it is in cache).
+    pub(crate) fn apply_twice_into_finite(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+    ) -> Result<bool, IdentificationError> {
         let len = input.len();
         let m = self.half_length;
+        let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
         if first.len() != len || second.len() != len || len < 2 * m + 1 {
             // The one-pass path reports the mismatch.
             self.apply_into(input, first)?;
-            return self.apply_into(first, second);
+            self.apply_into(first, second)?;
+            return Ok(all_finite(second));
         }
+        let mut finite = true;
         self.edges(input, first);
         let mut start = m;
         let mut done = m;
@@ -339,11 +353,12 @@ impl SavitzkyGolayDerivative {
             let upto = if end == len - m { len - m } else { end - m };
             if upto > done {
                 self.interior_block(first, second, done..upto);
+                finite &= all_finite(&second[done..upto]);
                 done = upto;
             }
         }
         self.edges(first, second);
-        Ok(())
+        Ok(finite && all_finite(&second[..m]) && all_finite(&second[len - m..]))
     }
 
     /// Differentiates, allocating the output.

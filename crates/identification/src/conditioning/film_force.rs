@@ -51,7 +51,7 @@ pub fn eq2_into(
     fx.copy_from_slice(f1);
     fy.copy_from_slice(f2);
     applied_in_place(fx, fy, f3, mechanics)?;
-    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics)
+    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics).map(|_| ())
 }
 
 
@@ -100,8 +100,9 @@ impl Applied {
     }
 }
 
-/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`.
-pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<(), IdentificationError> {
+/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`; whether every
+/// result is finite.
+pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<bool, IdentificationError> {
     let n = fx.len();
     if fy.len() != n || housing_ax.len() != n || housing_ay.len() != n {
         return Err(IdentificationError::BadInput {
@@ -111,11 +112,13 @@ pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_
     }
     let m = mechanics.housing_mass_kg;
     let (fy, hx, hy) = (&mut fy[..n], &housing_ax[..n], &housing_ay[..n]);
+    let mut finite = true;
     for i in 0..n {
         fx[i] -= m * hx[i];
         fy[i] -= m * hy[i];
+        finite &= fx[i].is_finite() & fy[i].is_finite();
     }
-    Ok(())
+    Ok(finite)
 }
 
 /// Eq. 2, allocating `(fx, fy)`.

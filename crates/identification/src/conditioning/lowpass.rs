@@ -186,9 +186,10 @@ fn cascade_pass<const L: usize, const S: usize>(
     cols: &mut [&mut [f64]; L],
     n: usize,
     backward: bool,
-) {
+) -> bool {
     let mut frames = [[0.0; L]; TILE];
     let mut done = 0;
+    let mut finite = true;
     while done < n {
         let t = TILE.min(n - done);
         let start = if backward { n - done - t } else { done };
@@ -211,10 +212,12 @@ fn cascade_pass<const L: usize, const S: usize>(
         for (l, col) in cols.iter_mut().enumerate() {
             for (x, f) in col[start..start + t].iter_mut().zip(frames.iter()) {
                 *x = f[l];
+                finite &= f[l].is_finite();
             }
         }
         done += t;
     }
+    finite
 }
 
 /// `S` sections forward over the left extension, the columns and the right extension.
@@ -242,14 +245,15 @@ fn forward<const L: usize, const S: usize>(
     }
 }
 
-/// `S` sections backward over the right extension and the columns.
+/// `S` sections backward over the right extension and the columns; whether every output
+/// written to the columns is finite.
 #[inline(always)]
 fn backward<const L: usize, const S: usize>(
     sections: &[Section; S],
     cols: &mut [&mut [f64]; L],
     n: usize,
     right: &mut [[f64; L]],
-) {
+) -> bool {
     let x0 = right
         .last()
         .copied()
@@ -258,7 +262,7 @@ fn backward<const L: usize, const S: usize>(
     for f in right.iter_mut().rev() {
         *f = st.step(*f);
     }
-    cascade_pass(&mut st, cols, n, true);
+    cascade_pass(&mut st, cols, n, true)
 }
 
 /// A digital Butterworth low-pass used forward-backward.
@@ -377,17 +381,17 @@ impl Butterworth {
     /// backward outputs would be discarded). Two sections per pass (see [`Cascade`]); `L`
     /// lanes are independent recursions the CPU overlaps (one lane alone is bound by the
     /// latency of its recursion, eight by arithmetic throughput).
-    fn filtfilt_lanes<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) {
+    /// Returns whether every output is finite.
+    fn filtfilt_lanes<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the only requirement of a `target_feature` function is that the CPU
                 // has the feature, which was checked on the line above.
-                unsafe { self.filtfilt_lanes_avx2(cols, scratch) };
-                return;
+                return unsafe { self.filtfilt_lanes_avx2(cols, scratch) };
             }
         }
-        self.filtfilt_lanes_body(cols, scratch);
+        self.filtfilt_lanes_body(cols, scratch)
     }
 
     /// [`Butterworth::filtfilt_lanes`] compiled for AVX2: four lanes per instruction instead
@@ -395,12 +399,12 @@ impl Butterworth {
     /// Rust never forms on its own), so the result is the same bit for bit on any CPU.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn filtfilt_lanes_avx2<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) {
-        self.filtfilt_lanes_body(cols, scratch);
+    fn filtfilt_lanes_avx2<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
+        self.filtfilt_lanes_body(cols, scratch)
     }
 
     #[inline(always)]
-    fn filtfilt_lanes_body<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) {
+    fn filtfilt_lanes_body<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
         let n = cols[0].len();
         let mut cols = cols.map(|c| &mut c[..n]);
         let pad = self.settling.min(n - 1);
@@ -427,15 +431,18 @@ impl Butterworth {
         for s in groups.remainder() {
             forward(std::array::from_ref(s), left, &mut cols, n, right);
         }
+        // The last backward pass writes the result: its finiteness is the answer.
+        let mut finite = true;
         let mut groups = self.sections.chunks_exact(FUSED);
         for g in &mut groups {
             if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
-                backward(g, &mut cols, n, right);
+                finite = backward(g, &mut cols, n, right);
             }
         }
         for s in groups.remainder() {
-            backward(std::array::from_ref(s), &mut cols, n, right);
+            finite = backward(std::array::from_ref(s), &mut cols, n, right);
         }
+        finite
     }
 
     /// Zero-phase filtering of `input` into `out` (same length, at least 2 samples), using
@@ -475,8 +482,18 @@ impl Butterworth {
         columns: &mut [Vec<f64>],
         scratch: &mut Vec<f64>,
     ) -> Result<(), IdentificationError> {
+        self.filtfilt_many_in_place_finite(columns, scratch).map(|_| ())
+    }
+
+    /// [`Butterworth::filtfilt_many_in_place`], telling whether every output is finite
+    /// (checked as the outputs are written, so the caller need not read the columns again).
+    pub(crate) fn filtfilt_many_in_place_finite(
+        &self,
+        columns: &mut [Vec<f64>],
+        scratch: &mut Vec<f64>,
+    ) -> Result<bool, IdentificationError> {
         let Some(n) = columns.first().map(Vec::len) else {
-            return Ok(());
+            return Ok(true);
         };
         check_len(n)?;
         if let Some((k, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != n) {
@@ -487,26 +504,27 @@ impl Butterworth {
         }
         // Eight lanes in lock-step: the recursion of each lane waits on its own previous
         // output, so independent lanes fill the multiply-add pipeline (latency hiding).
+        let mut finite = true;
         let mut groups = columns.chunks_exact_mut(8);
         for g in &mut groups {
             if let [a, b, c, d, e, f, g2, h] = g {
-                self.filtfilt_lanes::<8>([a, b, c, d, e, f, g2, h], scratch);
+                finite &= self.filtfilt_lanes::<8>([a, b, c, d, e, f, g2, h], scratch);
             }
         }
         let mut rest = groups.into_remainder().chunks_exact_mut(4);
         for g in &mut rest {
             if let [a, b, c, d] = g {
-                self.filtfilt_lanes::<4>([a, b, c, d], scratch);
+                finite &= self.filtfilt_lanes::<4>([a, b, c, d], scratch);
             }
         }
         for g in rest.into_remainder().chunks_mut(2) {
             match g {
-                [a, b] => self.filtfilt_lanes::<2>([a, b], scratch),
-                [a] => self.filtfilt_lanes::<1>([a], scratch),
+                [a, b] => finite &= self.filtfilt_lanes::<2>([a, b], scratch),
+                [a] => finite &= self.filtfilt_lanes::<1>([a], scratch),
                 _ => {}
             }
         }
-        Ok(())
+        Ok(finite)
     }
 
     /// Zero-phase filtering, allocating the output.

@@ -590,6 +590,8 @@ fn front_end(
             [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
             [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
         }
+        // The temperature is final here (it is not filtered): check it while it is in L1.
+        bad += temperature[..o1 - o0].iter().map(|v| !v.is_finite() as usize).sum::<usize>();
         hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
         hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
         load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
@@ -728,7 +730,8 @@ pub fn condition_into(
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
-    if !front_end(raw, &col_of, calibration, &delays, mechanics, &mut front)? {
+    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &mut front)?;
+    if !fused {
         // Something to report (or a record of SI values): the stages one by one.
         let mut si = front;
         for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
@@ -759,7 +762,7 @@ pub fn condition_into(
     }
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n, f3, temperature] = front;
     let mut dynamic = [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n];
-    lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new())?;
+    let filtered_finite = lp.filtfilt_many_in_place_finite(&mut dynamic, &mut Vec::new())?;
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
     // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`).
@@ -769,7 +772,7 @@ pub fn condition_into(
     sg.apply_twice_into(&frame_y, &mut tmp, &mut housing_ay_m_s2)?;
 
     // Eq. 2's inertial part: the film force on the journal.
-    film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
+    let force_finite = film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // r' and r''.
@@ -777,11 +780,15 @@ pub fn condition_into(
     let mut ax_m_s2 = next();
     let mut vy_m_s = next();
     let mut ay_m_s2 = next();
-    sg.apply_twice_into(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
-    sg.apply_twice_into(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
+    let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
+    let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
-    // non-finite number on.
+    // non-finite number on. The stages checked their final outputs as they wrote them (the
+    // front end the temperature, the low-pass r and the tilt, eq. 2 the force, the
+    // differentiator r''); only if one of them saw a non-finite value, or the front end did
+    // not run, are the columns searched here, to name the first one.
+    let known_finite = fused && filtered_finite && force_finite && ax_finite && ay_finite;
     for (name, col) in [
         ("x_m", &x_m),
         ("y_m", &y_m),
@@ -792,7 +799,10 @@ pub fn condition_into(
         ("fx_n", &fx_n),
         ("fy_n", &fy_n),
         ("temperature_c", &temperature),
-    ] {
+    ]
+    .into_iter()
+    .filter(|_| !known_finite)
+    {
         if let Some(i) = first_non_finite(col) {
             return Err(IdentificationError::BadInput {
                 what: format!("conditioned `{name}`, sample {i}"),
