@@ -511,6 +511,41 @@ fn front_end(
     mechanics: &Mechanics,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
 ) -> Result<bool, IdentificationError> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the only requirement of a `target_feature` function is that the CPU has
+            // the feature, which was checked on the line above.
+            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, out) };
+        }
+    }
+    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+}
+
+/// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
+/// multiply-add), so the same result bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn front_end_avx2(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+) -> Result<bool, IdentificationError> {
+    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+}
+
+#[inline(always)]
+fn front_end_body(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+) -> Result<bool, IdentificationError> {
     let len = raw.len();
     if raw.units != RawUnits::Volts || out.iter().any(|c| c.len() != len) {
         return Ok(false);
