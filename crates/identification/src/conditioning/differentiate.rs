@@ -276,6 +276,64 @@ impl SavitzkyGolayDerivative {
 
     #[inline(always)]
     fn interior_block_body(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        match self.half_length {
+            4 => self.interior_block_const::<4>(input, out, range),
+            5 => self.interior_block_const::<5>(input, out, range),
+            6 => self.interior_block_const::<6>(input, out, range),
+            _ => self.interior_block_passes(input, out, range),
+        }
+    }
+
+    /// The interior with `M` known at compile time: each output sums its `M` terms in a
+    /// register, in the same order as the passes of
+    /// [`SavitzkyGolayDerivative::interior_block_passes`] (so the same result bit for bit),
+    /// without storing and reloading the partial sums `M - 1` times.
+    #[inline(always)]
+    fn interior_block_const<const M: usize>(
+        &self,
+        input: &[f64],
+        out: &mut [f64],
+        range: std::ops::Range<usize>,
+    ) {
+        let Ok(c) = <[f64; M]>::try_from(&self.interior[..M.min(self.interior.len())]) else {
+            return self.interior_block_passes(input, out, range);
+        };
+        let (start, end) = (range.start, range.end);
+        // Outputs start..end read input[start - M .. end + M]; x[i + M] is input[start + i].
+        let x = &input[start - M..end + M];
+        let dst = &mut out[start..end];
+        let lanes = dst.len() / 4 * 4;
+        let (body, rest) = dst.split_at_mut(lanes);
+        // Four outputs at a time as arrays, so that the compiler keeps them in one vector.
+        for (q, o) in body.chunks_exact_mut(4).enumerate() {
+            let i = 4 * q + M;
+            let pair = |k: usize| -> ([f64; 4], [f64; 4]) {
+                let (a, b) = (&x[i + k..i + k + 4], &x[i - k..i - k + 4]);
+                ([a[0], a[1], a[2], a[3]], [b[0], b[1], b[2], b[3]])
+            };
+            let (a, b) = pair(1);
+            let mut acc: [f64; 4] = std::array::from_fn(|l| c[0] * (a[l] - b[l]));
+            for k in 2..=M {
+                let (a, b) = pair(k);
+                for l in 0..4 {
+                    acc[l] += c[k - 1] * (a[l] - b[l]);
+                }
+            }
+            o.copy_from_slice(&acc);
+        }
+        for (j, o) in rest.iter_mut().enumerate() {
+            let i = lanes + j + M;
+            let mut acc = c[0] * (x[i + 1] - x[i - 1]);
+            for k in 2..=M {
+                acc += c[k - 1] * (x[i + k] - x[i - k]);
+            }
+            *o = acc;
+        }
+    }
+
+    /// The interior as `M` vectorised passes over the block (any `M`).
+    #[inline(always)]
+    fn interior_block_passes(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
         let start = range.start;
         let dst = &mut out[range];
         let c1 = self.interior[0];
