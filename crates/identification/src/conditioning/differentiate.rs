@@ -390,6 +390,20 @@ impl SavitzkyGolayDerivative {
         first: &mut [f64],
         second: &mut [f64],
     ) -> Result<bool, IdentificationError> {
+        self.apply_twice_each(input, first, second, |_, _| {})
+    }
+
+    /// [`SavitzkyGolayDerivative::apply_twice_into_finite`], calling `each(range, block)` as
+    /// each block of `second` becomes final (`block` is `second[range]`; the ranges cover the
+    /// column once, the interior in increasing order, then the two ends), so that a
+    /// consumer can use it while it is in cache.
+    pub(crate) fn apply_twice_each(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+        mut each: impl FnMut(std::ops::Range<usize>, &[f64]),
+    ) -> Result<bool, IdentificationError> {
         let len = input.len();
         let m = self.half_length;
         let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
@@ -397,6 +411,7 @@ impl SavitzkyGolayDerivative {
             // The one-pass path reports the mismatch.
             self.apply_into(input, first)?;
             self.apply_into(first, second)?;
+            each(0..len, second);
             return Ok(all_finite(second));
         }
         let mut finite = true;
@@ -412,10 +427,13 @@ impl SavitzkyGolayDerivative {
             if upto > done {
                 self.interior_block(first, second, done..upto);
                 finite &= all_finite(&second[done..upto]);
+                each(done..upto, &second[done..upto]);
                 done = upto;
             }
         }
         self.edges(first, second);
+        each(0..m, &second[..m]);
+        each(len - m..len, &second[len - m..]);
         Ok(finite && all_finite(&second[..m]) && all_finite(&second[len - m..]))
     }
 

@@ -800,14 +800,22 @@ pub fn condition_into(
     let filtered_finite = lp.filtfilt_many_in_place_finite(&mut dynamic, &mut Vec::new())?;
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
-    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`).
+    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`), and
+    // eq. 2's inertial part, the film force on the journal `F -= m X''`, block by block as
+    // the acceleration is formed (the same operation as `film_force::subtract_inertia_in_place`,
+    // without reading the columns back).
     let mut housing_ax_m_s2 = next();
     let mut housing_ay_m_s2 = next();
-    sg.apply_twice_into(&frame_x, &mut tmp, &mut housing_ax_m_s2)?;
-    sg.apply_twice_into(&frame_y, &mut tmp, &mut housing_ay_m_s2)?;
-
-    // Eq. 2's inertial part: the film force on the journal.
-    let force_finite = film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
+    let mass = mechanics.housing_mass_kg;
+    let mut force_finite = true;
+    for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
+        sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
+            for (f, &a) in force[range].iter_mut().zip(a) {
+                *f -= mass * a;
+                force_finite &= f.is_finite();
+            }
+        })?;
+    }
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // r' and r''.
