@@ -50,13 +50,21 @@
 //! consumer calls to refuse it, as the paper's step 2 demands.
 //!
 //! ## Cost
-//! Each stage is a few tight passes over contiguous columns, with no allocation per sample
-//! and no dynamic dispatch. [`condition`] allocates the 17 output columns and nothing else
-//! of size; [`condition_into`] reuses those of a previous result and allocates nothing.
-//! Measured on one core of the shared 2-core development machine for a 50 000-scan,
-//! 10-channel record (`examples/bench_conditioning.rs`, best of 15): `condition` about
-//! 6.4 ms (78 M samples/s), `condition_into` about 4.3 ms (115 M samples/s); the
-//! zero-phase low-pass is half of it.
+//! On a shared machine the chain is bound as much by memory traffic as by arithmetic, so
+//! the stages are fused where they meet: calibration, range count, de-skew and the linear
+//! combinations of steps 5 and 7 run scan tile by scan tile in L1 (`front_end`), reading
+//! each raw column once; the low-pass makes one pass per direction over the eight dynamic
+//! columns; the second derivative follows the first block by block, and eq. 2's inertial
+//! part follows the housing acceleration; each stage checks the finiteness of what it
+//! writes, so nothing is read again for that. The hot loops are compiled for AVX2 when the
+//! CPU has it (runtime detection, no FMA, so the result is the same bit for bit on every
+//! CPU). The per-stage functions remain, and the fused path falls back to them whenever there
+//! is something to report (a non-finite or out-of-range reading) so that the report names
+//! the sample. [`condition`] allocates the 17 output columns and nothing else of size;
+//! [`condition_into`] reuses those of a previous result and allocates nothing of size.
+//! Measured on one core of the shared 2-core development machine for a 300 000-scan,
+//! 10-channel record, best of 15: `condition_into` about 16-22 ms depending on the load
+//! (140-190 M samples/s); the zero-phase low-pass is the largest part, about 7 ms.
 
 pub mod calibrate;
 pub mod deskew;
