@@ -144,7 +144,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         lp.filtfilt_many_in_place(&mut cols, &mut scratch).unwrap(); // equal lengths
         black_box(&cols);
     });
-    report("lowpass::filtfilt_many_in_place (4 lanes)", all, t);
+    report("lowpass::filtfilt_many_in_place (8 lanes)", all, t);
 
     let (mut mean, mut diff) = (vec![0.0; n], vec![0.0; n]);
     let t = best_of(repeats, || {

@@ -1048,6 +1048,40 @@ fn small_si_record() -> (RawRecord, Calibration) {
     (Scenario::new().si_record(1000, &cal), cal)
 }
 
+/// Finite readings whose conditioned values overflow (a probe calibrated at 1e-305 V/m, read
+/// at +-0.1 V, is +-1e304 m: its acceleration is infinite) are refused, not handed on.
+#[test]
+fn overflow_in_the_filters_is_refused() {
+    let mut cfg = quiet_daq_config();
+    let probe = cfg
+        .channels
+        .iter_mut()
+        .find(|c| c.channel == ChannelId::ProbeAX)
+        .unwrap(); // zhou2004 has every channel
+    probe.sensitivity_v_per_unit = 1.0e-305;
+    probe.offset_v = 0.0;
+    probe.linear_range = [-5.0e304, 5.0e304];
+    let fs = cfg.sample_rate_hz;
+    let mut daq = Daq::new(&cfg, &Effects::default(), 1).unwrap(); // a valid configuration
+    let scans: Vec<DaqScan> = (0..2000u64)
+        .map(|i| {
+            daq.scan(i, i as f64 / fs, &mut |t: f64| {
+                let mut s = PhysicalSignals::zero();
+                s.set(ChannelId::F3, 9000.0);
+                s.set(ChannelId::Temperature, 40.0);
+                s.set(ChannelId::ProbeAX, 1.0e304 * (2.0 * PI * 50.0 * t).sin());
+                s
+            })
+        })
+        .collect();
+    let raw = RawRecord::from_scans(&scans, fs).unwrap(); // consecutive scans
+    let cal = daq.calibration().clone();
+    assert!(range_check::check_record(&raw, &cal).unwrap().is_empty());
+    let err = condition(&raw, &cal, &mechanics(), &ConditioningConfig::default()).unwrap_err();
+    let (what, reason) = bad_input(err);
+    assert!(what.contains("conditioned") && reason.contains("overflowed"), "{what}: {reason}");
+}
+
 #[test]
 fn nan_sample_is_refused_naming_channel_and_index() {
     let (mut raw, cal) = small_si_record();

@@ -199,25 +199,34 @@ impl FractionalDelay {
             from = to;
         }
         // Edges: shifted stencil inside [0, len).
-        let mut w = [0.0; MAX_TAPS];
-        let w = &mut w[..taps];
-        let edge = |n: usize, out: &mut [f64], w: &mut [f64]| {
-            let first = (n as isize + start).clamp(0, (len - taps) as isize);
-            lagrange_weights(first, n as f64 - self.delay_samples, w);
-            let first = first as usize;
-            out[n] = w
-                .iter()
-                .zip(&input[first..first + taps])
-                .map(|(a, b)| a * b)
-                .sum();
-        };
-        for n in 0..lo.min(len) {
-            edge(n, out, w);
-        }
-        for n in hi_excl.max(lo.min(len))..len {
-            edge(n, out, w);
+        for n in (0..lo.min(len)).chain(hi_excl.max(lo.min(len))..len) {
+            out[n] = self.edge_value(n, len, |i| input[i]);
         }
         Ok(())
+    }
+
+    /// Output indices `lo..hi` whose interior stencil lies inside a record of `len >= taps`
+    /// samples; the others are [`FractionalDelay::edge_value`]s.
+    pub(crate) fn interior(&self, len: usize) -> std::ops::Range<usize> {
+        let lo = (-self.start).max(0) as usize;
+        let hi = (len as isize - self.start - self.weights.len() as isize + 1)
+            .clamp(0, len as isize) as usize;
+        lo..hi
+    }
+
+    /// Output `n` of a record of `len >= taps` samples with the stencil shifted inside
+    /// `[0, len)`; `input(i)` is input sample `i`.
+    pub(crate) fn edge_value(&self, n: usize, len: usize, input: impl Fn(usize) -> f64) -> f64 {
+        let taps = self.weights.len();
+        let mut w = [0.0; MAX_TAPS];
+        let w = &mut w[..taps];
+        let first = (n as isize + self.start).clamp(0, (len - taps) as isize);
+        lagrange_weights(first, n as f64 - self.delay_samples, w);
+        let first = first as usize;
+        w.iter()
+            .enumerate()
+            .map(|(j, a)| a * input(first + j))
+            .sum()
     }
 
     /// Applies the delay, allocating the output.

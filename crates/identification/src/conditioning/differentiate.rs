@@ -35,7 +35,10 @@
 //! [`super::Conditioned::valid`] (the conditioning trims `2M`, one `M` per pass).
 //!
 //! ## Cost
-//! `M` multiply-adds and `2M` adds per sample, as `M` vectorised passes over the column.
+//! `M` multiply-adds and `2M` adds per sample, as `M` vectorised passes over L1-resident
+//! blocks of the column (AVX2 when the CPU has it, same result bit for bit);
+//! [`SavitzkyGolayDerivative::apply_twice_into`] runs the second derivative a block behind
+//! the first, while the first is still in cache.
 
 use oilfilm_physics::daq::ChannelId;
 
@@ -242,25 +245,120 @@ impl SavitzkyGolayDerivative {
         let mut start = m;
         while start < len - m {
             let end = (start + BLOCK).min(len - m);
-            let dst = &mut out[start..end];
-            let c1 = self.interior[0];
-            for (o, (&a, &b)) in dst
-                .iter_mut()
-                .zip(input[start + 1..].iter().zip(&input[start - 1..]))
-            {
-                *o = c1 * (a - b);
-            }
-            for (k, &c) in self.interior.iter().enumerate().skip(1) {
-                let k = k + 1;
-                for (o, (&a, &b)) in dst
-                    .iter_mut()
-                    .zip(input[start + k..].iter().zip(&input[start - k..]))
-                {
-                    *o += c * (a - b);
-                }
-            }
+            self.interior_block(input, out, start..end);
             start = end;
         }
+        self.edges(input, out);
+        Ok(())
+    }
+
+    /// Interior outputs `range` (inside `M..len - M`): `M` vectorised passes over the block,
+    /// compiled for AVX2 when the CPU has it (the same operations in the same order, so the
+    /// same result bit for bit).
+    fn interior_block(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature, which was checked on the line above.
+                unsafe { self.interior_block_avx2(input, out, range) };
+                return;
+            }
+        }
+        self.interior_block_body(input, out, range);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn interior_block_avx2(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        self.interior_block_body(input, out, range);
+    }
+
+    #[inline(always)]
+    fn interior_block_body(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        match self.half_length {
+            4 => self.interior_block_const::<4>(input, out, range),
+            5 => self.interior_block_const::<5>(input, out, range),
+            6 => self.interior_block_const::<6>(input, out, range),
+            _ => self.interior_block_passes(input, out, range),
+        }
+    }
+
+    /// The interior with `M` known at compile time: each output sums its `M` terms in a
+    /// register, in the same order as the passes of
+    /// [`SavitzkyGolayDerivative::interior_block_passes`] (so the same result bit for bit),
+    /// without storing and reloading the partial sums `M - 1` times.
+    #[inline(always)]
+    fn interior_block_const<const M: usize>(
+        &self,
+        input: &[f64],
+        out: &mut [f64],
+        range: std::ops::Range<usize>,
+    ) {
+        let Ok(c) = <[f64; M]>::try_from(&self.interior[..M.min(self.interior.len())]) else {
+            return self.interior_block_passes(input, out, range);
+        };
+        let (start, end) = (range.start, range.end);
+        // Outputs start..end read input[start - M .. end + M]; x[i + M] is input[start + i].
+        let x = &input[start - M..end + M];
+        let dst = &mut out[start..end];
+        let lanes = dst.len() / 4 * 4;
+        let (body, rest) = dst.split_at_mut(lanes);
+        // Four outputs at a time as arrays, so that the compiler keeps them in one vector.
+        for (q, o) in body.chunks_exact_mut(4).enumerate() {
+            let i = 4 * q + M;
+            let pair = |k: usize| -> ([f64; 4], [f64; 4]) {
+                let (a, b) = (&x[i + k..i + k + 4], &x[i - k..i - k + 4]);
+                ([a[0], a[1], a[2], a[3]], [b[0], b[1], b[2], b[3]])
+            };
+            let (a, b) = pair(1);
+            let mut acc: [f64; 4] = std::array::from_fn(|l| c[0] * (a[l] - b[l]));
+            for k in 2..=M {
+                let (a, b) = pair(k);
+                for l in 0..4 {
+                    acc[l] += c[k - 1] * (a[l] - b[l]);
+                }
+            }
+            o.copy_from_slice(&acc);
+        }
+        for (j, o) in rest.iter_mut().enumerate() {
+            let i = lanes + j + M;
+            let mut acc = c[0] * (x[i + 1] - x[i - 1]);
+            for k in 2..=M {
+                acc += c[k - 1] * (x[i + k] - x[i - k]);
+            }
+            *o = acc;
+        }
+    }
+
+    /// The interior as `M` vectorised passes over the block (any `M`).
+    #[inline(always)]
+    fn interior_block_passes(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+        let start = range.start;
+        let dst = &mut out[range];
+        let c1 = self.interior[0];
+        for (o, (&a, &b)) in dst
+            .iter_mut()
+            .zip(input[start + 1..].iter().zip(&input[start - 1..]))
+        {
+            *o = c1 * (a - b);
+        }
+        for (k, &c) in self.interior.iter().enumerate().skip(1) {
+            let k = k + 1;
+            for (o, (&a, &b)) in dst
+                .iter_mut()
+                .zip(input[start + k..].iter().zip(&input[start - k..]))
+            {
+                *o += c * (a - b);
+            }
+        }
+    }
+
+    /// The `M` outputs at each end (one-sided windows); `len >= 2M + 1`.
+    fn edges(&self, input: &[f64], out: &mut [f64]) {
+        let len = input.len();
+        let m = self.half_length;
+        let width = 2 * m + 1;
         let tail = &input[len - width..];
         for r in 0..m {
             let lw = &self.left[r * width..(r + 1) * width];
@@ -268,7 +366,75 @@ impl SavitzkyGolayDerivative {
             let rw = &self.right[r * width..(r + 1) * width];
             out[len - m + r] = rw.iter().zip(tail).map(|(a, b)| a * b).sum();
         }
-        Ok(())
+    }
+
+    /// Differentiates `input` twice, as the paper does: `first` is its derivative and
+    /// `second` the derivative of `first` (all three the same length, at least `2M + 1`).
+    /// The same result, bit for bit, as two calls of [`SavitzkyGolayDerivative::apply_into`],
+    /// but the second pass follows the first block by block while `first` is still in cache,
+    /// so the columns cross memory once each.
+    pub fn apply_twice_into(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+    ) -> Result<(), IdentificationError> {
+        self.apply_twice_into_finite(input, first, second).map(|_| ())
+    }
+
+    /// [`SavitzkyGolayDerivative::apply_twice_into`], telling whether every sample of
+    /// `second` is finite (checked block by block while it is in cache).
+    pub(crate) fn apply_twice_into_finite(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+    ) -> Result<bool, IdentificationError> {
+        self.apply_twice_each(input, first, second, |_, _| {})
+    }
+
+    /// [`SavitzkyGolayDerivative::apply_twice_into_finite`], calling `each(range, block)` as
+    /// each block of `second` becomes final (`block` is `second[range]`; the ranges cover the
+    /// column once, the interior in increasing order, then the two ends), so that a
+    /// consumer can use it while it is in cache.
+    pub(crate) fn apply_twice_each(
+        &self,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+        mut each: impl FnMut(std::ops::Range<usize>, &[f64]),
+    ) -> Result<bool, IdentificationError> {
+        let len = input.len();
+        let m = self.half_length;
+        let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
+        if first.len() != len || second.len() != len || len < 2 * m + 1 {
+            // The one-pass path reports the mismatch.
+            self.apply_into(input, first)?;
+            self.apply_into(first, second)?;
+            each(0..len, second);
+            return Ok(all_finite(second));
+        }
+        let mut finite = true;
+        self.edges(input, first);
+        let mut start = m;
+        let mut done = m;
+        while start < len - m {
+            let end = (start + BLOCK).min(len - m);
+            self.interior_block(input, first, start..end);
+            start = end;
+            // first[..end] and first[len - m..] are final: second[i] needs first[i - M..=i + M].
+            let upto = if end == len - m { len - m } else { end - m };
+            if upto > done {
+                self.interior_block(first, second, done..upto);
+                finite &= all_finite(&second[done..upto]);
+                each(done..upto, &second[done..upto]);
+                done = upto;
+            }
+        }
+        self.edges(first, second);
+        each(0..m, &second[..m]);
+        each(len - m..len, &second[len - m..]);
+        Ok(finite && all_finite(&second[..m]) && all_finite(&second[len - m..]))
     }
 
     /// Differentiates, allocating the output.

@@ -51,7 +51,7 @@ pub fn eq2_into(
     fx.copy_from_slice(f1);
     fy.copy_from_slice(f2);
     applied_in_place(fx, fy, f3, mechanics)?;
-    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics)
+    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics).map(|_| ())
 }
 
 
@@ -66,21 +66,43 @@ pub(crate) fn applied_in_place(f1_to_fx: &mut [f64], f2_to_fy: &mut [f64], f3: &
     if f2_to_fy.len() != n || f3.len() != n {
         return Err(IdentificationError::BadInput { what: "eq. 2 columns".into(), reason: "f1, f2 and f3 differ in length".into() });
     }
-    let m = mechanics.housing_mass_kg;
-    let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
-    let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
-    let mg = m * mechanics.gravity_m_s2;
+    let applied = Applied::new(mechanics);
     let (fy, f3) = (&mut f2_to_fy[..n], &f3[..n]);
     for i in 0..n {
-        let (f1, f2) = (f1_to_fx[i], fy[i]);
-        f1_to_fx[i] = c1 * f1 + c2 * f2;
-        fy[i] = s1 * f1 + s2 * f2 + (f3[i] - mg);
+        [f1_to_fx[i], fy[i]] = applied.at(f1_to_fx[i], fy[i], f3[i]);
     }
     Ok(())
 }
 
-/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`.
-pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<(), IdentificationError> {
+/// The applied part of eq. 2 at one sample, for a validated [`Mechanics`].
+#[derive(Copy, Clone)]
+pub(crate) struct Applied {
+    c1: f64,
+    s1: f64,
+    c2: f64,
+    s2: f64,
+    mg: f64,
+}
+
+impl Applied {
+    pub(crate) fn new(mechanics: &Mechanics) -> Self {
+        let [a1, a2] = mechanics.exciter_angles_deg.map(f64::to_radians);
+        let (c1, s1, c2, s2) = (a1.cos(), a1.sin(), a2.cos(), a2.sin());
+        let mg = mechanics.housing_mass_kg * mechanics.gravity_m_s2;
+        Self { c1, s1, c2, s2, mg }
+    }
+
+    /// `[fx, fy]` from the exciter forces `f1`, `f2` and the bellows' load `f3`.
+    #[inline(always)]
+    pub(crate) fn at(&self, f1: f64, f2: f64, f3: f64) -> [f64; 2] {
+        let Self { c1, s1, c2, s2, mg } = *self;
+        [c1 * f1 + c2 * f2, s1 * f1 + s2 * f2 + (f3 - mg)]
+    }
+}
+
+/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`; whether every
+/// result is finite.
+pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<bool, IdentificationError> {
     let n = fx.len();
     if fy.len() != n || housing_ax.len() != n || housing_ay.len() != n {
         return Err(IdentificationError::BadInput {
@@ -90,11 +112,13 @@ pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_
     }
     let m = mechanics.housing_mass_kg;
     let (fy, hx, hy) = (&mut fy[..n], &housing_ax[..n], &housing_ay[..n]);
+    let mut finite = true;
     for i in 0..n {
         fx[i] -= m * hx[i];
         fy[i] -= m * hy[i];
+        finite &= fx[i].is_finite() & fy[i].is_finite();
     }
-    Ok(())
+    Ok(finite)
 }
 
 /// Eq. 2, allocating `(fx, fy)`.

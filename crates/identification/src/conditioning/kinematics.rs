@@ -61,11 +61,15 @@ pub fn mean_and_difference_in_place(
 ) -> Result<(), IdentificationError> {
     same_len("probe ends A and B", a, b)?;
     for (x, y) in a.iter_mut().zip(b.iter_mut()) {
-        let (p, q) = (*x, *y);
-        *x = 0.5 * (p + q);
-        *y = p - q;
+        [*x, *y] = mean_and_difference(*x, *y);
     }
     Ok(())
+}
+
+/// `[(a + b) / 2, a - b]` for the readings `a`, `b` of the two ends.
+#[inline(always)]
+pub(crate) fn mean_and_difference(a: f64, b: f64) -> [f64; 2] {
+    [0.5 * (a + b), a - b]
 }
 
 /// The relative displacement (mean of ends) and tilt (A - B) from the four bearing probes.

@@ -44,12 +44,17 @@
 //! exactly) to 1e-6 of its span, up to the last sample (tested).
 //!
 //! ## Cost
-//! Per section, a forward and a backward pass in place over the column, five multiplies
-//! and four adds per sample, arranged so that only one multiply and one subtract are on the
-//! recursion's loop-carried path. [`Butterworth::filtfilt_many_in_place`] runs four columns
-//! in lock-step so that their independent recursions overlap (about 4 ns per sample and
-//! channel for the default on one core, 2.7 times faster than one column at a time, see
-//! `examples/bench_conditioning.rs`); the only scratch memory is the two reflections.
+//! Per section, a forward and a backward pass over the column, five multiplies and four
+//! adds per sample, arranged so that only one multiply and one subtract are on the
+//! recursion's loop-carried path. [`Butterworth::filtfilt_many_in_place`] runs eight columns
+//! in lock-step, and two sections per pass (the default's two sections: one pass forward,
+//! one backward), so sixteen independent recursions overlap and each sample is read and
+//! written once per direction; the columns go through the recursion in L1-resident tiles of
+//! interleaved lanes, compiled for AVX2 when the CPU has it (same operations, same result bit
+//! for bit). About 0.35 ns per sample and column for the default on one core of the
+//! development machine (8 columns of 300 000 samples in 5.4-6.5 ms, against 9.3-10.6 ms for
+//! one section per pass with the lanes gathered from the columns sample by sample); the only
+//! scratch memory is the two reflections and one tile.
 
 use oilfilm_physics::daq::ChannelId;
 
@@ -130,32 +135,134 @@ impl<const L: usize> Lanes<L> {
     }
 }
 
-/// One section over the `L` columns in place, forward or backward in time.
+/// Sections run together in one pass over the data (see [`Butterworth::filtfilt_lanes`]).
+const FUSED: usize = 2;
+
+/// `S` cascaded sections for `L` lanes: one step feeds each section's output to the next.
+/// Each section's recursion is independent of the others' (only its input comes from the
+/// previous section), so `S` sections in one pass are `S * L` chains the CPU overlaps, and
+/// the data is read and written once instead of `S` times.
+#[derive(Copy, Clone)]
+struct Cascade<'a, const L: usize, const S: usize> {
+    sections: &'a [Section; S],
+    lanes: [Lanes<L>; S],
+}
+
+impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
+    /// Every section in its DC steady state for its own first input, when the cascade's first
+    /// input is `x0`: section `k`'s first input is section `k - 1`'s first output, computed
+    /// here by the same arithmetic as the step that will produce it (so the result is the
+    /// same, bit for bit, as running the sections one after the other over the whole signal).
+    fn steady(sections: &'a [Section; S], x0: [f64; L]) -> Self {
+        let mut v = x0;
+        let lanes = std::array::from_fn(|k| {
+            let mut st = Lanes::steady(&sections[k], v);
+            let first = st;
+            v = st.step(&sections[k], v);
+            first
+        });
+        Self { sections, lanes }
+    }
+
+    #[inline(always)]
+    fn step(&mut self, x: [f64; L]) -> [f64; L] {
+        let mut v = x;
+        for (st, s) in self.lanes.iter_mut().zip(self.sections) {
+            v = st.step(s, v);
+        }
+        v
+    }
+}
+
+/// Samples per tile of [`cascade_pass`] (a tile of eight lanes is 2 kB, L1-resident).
+const TILE: usize = 32;
+
+/// The cascade over the `L` columns in place, forward or backward in time. The columns are
+/// copied tile by tile into frames of `L` lanes (one vector load per sample instead of `L`
+/// scalar ones with a bounds check each), run through the cascade and copied back.
 #[inline(always)]
-#[allow(clippy::needless_range_loop)] // `i` indexes L columns at once
-fn section_pass<const L: usize>(
-    s: &Section,
-    st: &mut Lanes<L>,
+fn cascade_pass<const L: usize, const S: usize>(
+    st: &mut Cascade<'_, L, S>,
     cols: &mut [&mut [f64]; L],
     n: usize,
     backward: bool,
-) {
-    // Plain loops (a closure here was not inlined: a call per sample).
-    if backward {
-        for i in (0..n).rev() {
-            let y = st.step(s, std::array::from_fn(|l| cols[l][i]));
-            for l in 0..L {
-                cols[l][i] = y[l];
+) -> bool {
+    let mut frames = [[0.0; L]; TILE];
+    let mut done = 0;
+    let mut finite = true;
+    while done < n {
+        let t = TILE.min(n - done);
+        let start = if backward { n - done - t } else { done };
+        let frames = &mut frames[..t];
+        for (l, col) in cols.iter().enumerate() {
+            for (f, &x) in frames.iter_mut().zip(&col[start..start + t]) {
+                f[l] = x;
             }
         }
-    } else {
-        for i in 0..n {
-            let y = st.step(s, std::array::from_fn(|l| cols[l][i]));
-            for l in 0..L {
-                cols[l][i] = y[l];
+        // Plain loops (a closure here was not inlined: a call per sample).
+        if backward {
+            for f in frames.iter_mut().rev() {
+                *f = st.step(*f);
+            }
+        } else {
+            for f in frames.iter_mut() {
+                *f = st.step(*f);
             }
         }
+        for (l, col) in cols.iter_mut().enumerate() {
+            for (x, f) in col[start..start + t].iter_mut().zip(frames.iter()) {
+                *x = f[l];
+                finite &= f[l].is_finite();
+            }
+        }
+        done += t;
     }
+    finite
+}
+
+/// `S` sections forward over the left extension, the columns and the right extension.
+#[inline(always)]
+fn forward<const L: usize, const S: usize>(
+    sections: &[Section; S],
+    left: &mut [[f64; L]],
+    cols: &mut [&mut [f64]; L],
+    n: usize,
+    right: &mut [[f64; L]],
+) {
+    // A section started in steady state for its first input outputs that level times its
+    // DC gain first, so the next section's first input is its own steady level.
+    let x0 = left
+        .first()
+        .copied()
+        .unwrap_or(std::array::from_fn(|l| cols[l][0]));
+    let mut st = Cascade::steady(sections, x0);
+    for f in left.iter_mut() {
+        *f = st.step(*f);
+    }
+    cascade_pass(&mut st, cols, n, false);
+    for f in right.iter_mut() {
+        *f = st.step(*f);
+    }
+}
+
+/// `S` sections backward over the right extension and the columns; whether every output
+/// written to the columns is finite.
+#[inline(always)]
+fn backward<const L: usize, const S: usize>(
+    sections: &[Section; S],
+    cols: &mut [&mut [f64]; L],
+    n: usize,
+    right: &mut [[f64; L]],
+) -> bool {
+    let x0 = right
+        .last()
+        .copied()
+        .unwrap_or(std::array::from_fn(|l| cols[l][n - 1]));
+    let mut st = Cascade::steady(sections, x0);
+    for f in right.iter_mut().rev() {
+        *f = st.step(*f);
+    }
+    cascade_pass(&mut st, cols, n, true)
 }
 
 /// A digital Butterworth low-pass used forward-backward.
@@ -271,10 +378,33 @@ impl Butterworth {
     /// forward, then starts again in steady state for its first input of the time-reversed
     /// signal and runs backward (as SciPy's `filtfilt`). The columns themselves are never
     /// copied, and the backward pass stops at the first real sample (the left extension's
-    /// backward outputs would be discarded). One section at a time keeps the state in
-    /// registers; `L` lanes are independent recursions the CPU overlaps (one lane alone is
-    /// bound by the latency of its recursion, four by arithmetic throughput).
-    fn filtfilt_lanes<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) {
+    /// backward outputs would be discarded). Two sections per pass (see [`Cascade`]); `L`
+    /// lanes are independent recursions the CPU overlaps (one lane alone is bound by the
+    /// latency of its recursion, eight by arithmetic throughput).
+    /// Returns whether every output is finite.
+    fn filtfilt_lanes<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature, which was checked on the line above.
+                return unsafe { self.filtfilt_lanes_avx2(cols, scratch) };
+            }
+        }
+        self.filtfilt_lanes_body(cols, scratch)
+    }
+
+    /// [`Butterworth::filtfilt_lanes`] compiled for AVX2: four lanes per instruction instead
+    /// of two. The same multiplies and adds in the same order (no fused multiply-add, which
+    /// Rust never forms on its own), so the result is the same bit for bit on any CPU.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn filtfilt_lanes_avx2<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
+        self.filtfilt_lanes_body(cols, scratch)
+    }
+
+    #[inline(always)]
+    fn filtfilt_lanes_body<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
         let n = cols[0].len();
         let mut cols = cols.map(|c| &mut c[..n]);
         let pad = self.settling.min(n - 1);
@@ -290,34 +420,29 @@ impl Butterworth {
                 right[i - 1][l] = 2.0 * cols[l][n - 1] - cols[l][n - 1 - i];
             }
         }
-        for s in &self.sections {
-            // A section started in steady state for its first input outputs exactly that
-            // level times its DC gain first, so the next section's first input is its own
-            // steady level.
-            let x0 = left
-                .first()
-                .copied()
-                .unwrap_or(std::array::from_fn(|l| cols[l][0]));
-            let mut st = Lanes::steady(s, x0);
-            for f in left.iter_mut() {
-                *f = st.step(s, *f);
-            }
-            section_pass(s, &mut st, &mut cols, n, false);
-            for f in right.iter_mut() {
-                *f = st.step(s, *f);
+        // The sections in groups of `FUSED` per pass (each group's first input is the previous
+        // group's output, exactly as section after section).
+        let mut groups = self.sections.chunks_exact(FUSED);
+        for g in &mut groups {
+            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
+                forward(g, left, &mut cols, n, right);
             }
         }
-        for s in &self.sections {
-            let x0 = right
-                .last()
-                .copied()
-                .unwrap_or(std::array::from_fn(|l| cols[l][n - 1]));
-            let mut st = Lanes::steady(s, x0);
-            for f in right.iter_mut().rev() {
-                *f = st.step(s, *f);
-            }
-            section_pass(s, &mut st, &mut cols, n, true);
+        for s in groups.remainder() {
+            forward(std::array::from_ref(s), left, &mut cols, n, right);
         }
+        // The last backward pass writes the result: its finiteness is the answer.
+        let mut finite = true;
+        let mut groups = self.sections.chunks_exact(FUSED);
+        for g in &mut groups {
+            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
+                finite = backward(g, &mut cols, n, right);
+            }
+        }
+        for s in groups.remainder() {
+            finite = backward(std::array::from_ref(s), &mut cols, n, right);
+        }
+        finite
     }
 
     /// Zero-phase filtering of `input` into `out` (same length, at least 2 samples), using
@@ -350,15 +475,25 @@ impl Butterworth {
     }
 
     /// Zero-phase filtering of several columns of one length (at least 2 samples) in place,
-    /// four at a time: the same result as [`Butterworth::filtfilt_in_place`] on each, bit for
+    /// eight at a time: the same result as [`Butterworth::filtfilt_in_place`] on each, bit for
     /// bit, several times faster.
     pub fn filtfilt_many_in_place(
         &self,
         columns: &mut [Vec<f64>],
         scratch: &mut Vec<f64>,
     ) -> Result<(), IdentificationError> {
+        self.filtfilt_many_in_place_finite(columns, scratch).map(|_| ())
+    }
+
+    /// [`Butterworth::filtfilt_many_in_place`], telling whether every output is finite
+    /// (checked as the outputs are written, so the caller need not read the columns again).
+    pub(crate) fn filtfilt_many_in_place_finite(
+        &self,
+        columns: &mut [Vec<f64>],
+        scratch: &mut Vec<f64>,
+    ) -> Result<bool, IdentificationError> {
         let Some(n) = columns.first().map(Vec::len) else {
-            return Ok(());
+            return Ok(true);
         };
         check_len(n)?;
         if let Some((k, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != n) {
@@ -369,26 +504,27 @@ impl Butterworth {
         }
         // Eight lanes in lock-step: the recursion of each lane waits on its own previous
         // output, so independent lanes fill the multiply-add pipeline (latency hiding).
+        let mut finite = true;
         let mut groups = columns.chunks_exact_mut(8);
         for g in &mut groups {
             if let [a, b, c, d, e, f, g2, h] = g {
-                self.filtfilt_lanes::<8>([a, b, c, d, e, f, g2, h], scratch);
+                finite &= self.filtfilt_lanes::<8>([a, b, c, d, e, f, g2, h], scratch);
             }
         }
         let mut rest = groups.into_remainder().chunks_exact_mut(4);
         for g in &mut rest {
             if let [a, b, c, d] = g {
-                self.filtfilt_lanes::<4>([a, b, c, d], scratch);
+                finite &= self.filtfilt_lanes::<4>([a, b, c, d], scratch);
             }
         }
         for g in rest.into_remainder().chunks_mut(2) {
             match g {
-                [a, b] => self.filtfilt_lanes::<2>([a, b], scratch),
-                [a] => self.filtfilt_lanes::<1>([a], scratch),
+                [a, b] => finite &= self.filtfilt_lanes::<2>([a, b], scratch),
+                [a] => finite &= self.filtfilt_lanes::<1>([a], scratch),
                 _ => {}
             }
         }
-        Ok(())
+        Ok(finite)
     }
 
     /// Zero-phase filtering, allocating the output.

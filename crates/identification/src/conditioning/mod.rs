@@ -50,13 +50,21 @@
 //! consumer calls to refuse it, as the paper's step 2 demands.
 //!
 //! ## Cost
-//! Each stage is a few tight passes over contiguous columns, with no allocation per sample
-//! and no dynamic dispatch. [`condition`] allocates the 17 output columns and nothing else
-//! of size; [`condition_into`] reuses those of a previous result and allocates nothing.
-//! Measured on one core of the shared 2-core development machine for a 50 000-scan,
-//! 10-channel record (`examples/bench_conditioning.rs`, best of 15): `condition` about
-//! 6.4 ms (78 M samples/s), `condition_into` about 4.3 ms (115 M samples/s); the
-//! zero-phase low-pass is half of it.
+//! On a shared machine the chain is bound as much by memory traffic as by arithmetic, so
+//! the stages are fused where they meet: calibration, range count, de-skew and the linear
+//! combinations of steps 5 and 7 run scan tile by scan tile in L1 (`front_end`), reading
+//! each raw column once; the low-pass makes one pass per direction over the eight dynamic
+//! columns; the second derivative follows the first block by block, and eq. 2's inertial
+//! part follows the housing acceleration; each stage checks the finiteness of what it
+//! writes, so nothing is read again for that. The hot loops are compiled for AVX2 when the
+//! CPU has it (runtime detection, no FMA, so the result is the same bit for bit on every
+//! CPU). The per-stage functions remain, and the fused path falls back to them whenever there
+//! is something to report (a non-finite or out-of-range reading) so that the report names
+//! the sample. [`condition`] allocates the 17 output columns and nothing else of size;
+//! [`condition_into`] reuses those of a previous result and allocates nothing of size.
+//! Measured on one core of the shared 2-core development machine for a 300 000-scan,
+//! 10-channel record, best of 15: `condition_into` about 16-22 ms depending on the load
+//! (140-190 M samples/s); the zero-phase low-pass is the largest part, about 7 ms.
 
 pub mod calibrate;
 pub mod deskew;
@@ -475,6 +483,167 @@ pub(crate) fn non_finite_error(
     }
 }
 
+/// Scans per tile of [`front_end`] (ten channels of 256 samples: 20 kB, L1-resident).
+const TILE: usize = 256;
+
+/// One channel's constants for [`front_end`].
+struct FrontChannel<'a> {
+    volts: &'a [f64],
+    offset: f64,
+    gain: f64,
+    /// Readings `v` with `v > lo && v < hi` are in the linear range.
+    lo: f64,
+    hi: f64,
+    delay: &'a deskew::FractionalDelay,
+    interior: Range<usize>,
+}
+
+/// Steps 3, 2, 4 and the linear combinations of steps 5 and 7 for a record of volts, scan
+/// tile by scan tile: each channel is calibrated into L1 and de-skewed from there, its
+/// readings counted against the linear range and for finiteness on the way, and the tile's
+/// ten channels are combined into `out` = `[x, y, tilt_x, tilt_y, frame_x, frame_y, fx
+/// (applied), fy (applied), f3, temperature]`. The same operations in the same order as
+/// [`calibrate::to_si_into`], [`deskew::FractionalDelay::apply_into`],
+/// [`kinematics::mean_and_difference_in_place`] and the applied part of eq. 2, so the same
+/// result bit for bit, with the raw columns read once and each output written once instead
+/// of some twenty passes over memory.
+///
+/// Returns `Ok(false)` (and `out` is to be discarded) when a reading is non-finite, does not
+/// convert to a finite value or is out of range, or a calibration or stencil is unusable:
+/// the caller then runs the stages one by one, which report the cause exactly.
+fn front_end(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+) -> Result<bool, IdentificationError> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the only requirement of a `target_feature` function is that the CPU has
+            // the feature, which was checked on the line above.
+            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, out) };
+        }
+    }
+    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+}
+
+/// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
+/// multiply-add), so the same result bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn front_end_avx2(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+) -> Result<bool, IdentificationError> {
+    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+}
+
+#[inline(always)]
+fn front_end_body(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+) -> Result<bool, IdentificationError> {
+    let len = raw.len();
+    if raw.units != RawUnits::Volts || out.iter().any(|c| c.len() != len) {
+        return Ok(false);
+    }
+    let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+    for (&ch, delay) in ChannelId::ALL.iter().zip(delays) {
+        let (Some(delay), Some(volts)) = (delay, raw.columns.get(col_of[ch.index()])) else {
+            return Ok(false);
+        };
+        let c = calibration.channel(ch)?;
+        let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
+        if volts.len() != len
+            || len < delay.taps()
+            || !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite())
+        {
+            return Ok(false);
+        }
+        let (lo, hi) = range_check::volts_bounds(ch, calibration)?;
+        chans.push(FrontChannel {
+            volts,
+            offset,
+            gain: 1.0 / sensitivity,
+            lo,
+            hi,
+            delay,
+            interior: delay.interior(len),
+        });
+    }
+    let applied = film_force::Applied::new(mechanics);
+    let mut tile = [[0.0; TILE]; CHANNEL_COUNT];
+    let mut input = [0.0; TILE + deskew::MAX_TAPS];
+    let mut bad = 0usize;
+    let mut o0 = 0;
+    while o0 < len {
+        let o1 = (o0 + TILE).min(len);
+        for (c, t) in chans.iter().zip(tile.iter_mut()) {
+            let t = &mut t[..o1 - o0];
+            let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
+            let si = |v: f64| (v - offset) * gain;
+            // `&` and `|`, not `&&`: no branch per reading, so the count vectorises.
+            bad += c.volts[o0..o1]
+                .iter()
+                .map(|&v| (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize)
+                .sum::<usize>();
+            // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
+            // a >= interior.start and b <= interior.end).
+            let a = o0.max(c.interior.start).min(o1);
+            let b = o1.min(c.interior.end).max(a);
+            if a < b {
+                let w = c.delay.weights();
+                let taps = w.len();
+                let i0 = (a as isize + c.delay.stencil_start()) as usize;
+                let i1 = i0 + (b - a) + taps - 1;
+                let x = &mut input[..i1 - i0];
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                }
+                let m = b - a;
+                let dst = &mut t[a - o0..b - o0];
+                for (o, &x) in dst.iter_mut().zip(&x[..m]) {
+                    *o = w[0] * x;
+                }
+                for (j, &wj) in w.iter().enumerate().skip(1) {
+                    for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
+                        *o += wj * x;
+                    }
+                }
+            }
+            for n in (o0..a).chain(b..o1) {
+                t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
+            }
+        }
+        let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &tile;
+        let [x, y, tilt_x, tilt_y, hx, hy, fx, fy, load, temp] = &mut *out;
+        for (i, n) in (o0..o1).enumerate() {
+            [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
+            [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
+            [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
+        }
+        // The temperature is final here (it is not filtered): check it while it is in L1.
+        bad += temperature[..o1 - o0].iter().map(|v| !v.is_finite() as usize).sum::<usize>();
+        hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
+        hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
+        load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
+        temp[o0..o1].copy_from_slice(&temperature[..o1 - o0]);
+        o0 = o1;
+    }
+    Ok(bad == 0)
+}
+
 /// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
 /// differentiate twice, eq. 2. The record must hold all ten channels.
 pub fn condition(
@@ -595,57 +764,66 @@ pub fn condition_into(
     let valid = trim..n - trim;
 
     // Per channel: SI, range check on the raw column, deskew; then the low-pass on all ten
-    // together (four lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
+    // together (eight lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
     // `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
-    let mut si: [Vec<f64>; CHANNEL_COUNT] = Default::default();
-    for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
-        let column = &raw.columns[col_of[ch.index()]];
-        let mut buf = next();
-        match raw.units {
-            RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, &mut buf)?,
-            RawUnits::Si => {
-                if let Some(i) = first_non_finite(column) {
-                    return Err(non_finite_error(ch, i, column[i], "si"));
-                }
-                buf.copy_from_slice(column);
-            }
-        }
-        if let Some(v) = range_check::check(ch, column, raw.units, calibration)? {
-            violations.push(v);
-        }
-        if let Some(d) = delay {
-            d.apply_into(&buf, &mut tmp)?;
-            std::mem::swap(&mut buf, &mut tmp);
-        }
-        si[ch.index()] = buf;
-    }
+    let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
-    // part of eq. 2 first, then filter the eight columns that carry dynamics (two lock-step
-    // passes of four lanes instead of three for ten raw channels). The bellows' load and the
-    // temperature keep their de-skewed samples: only their means are used.
-    let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = si;
-    let (mut x_m, mut tilt_x_m) = (a_x, b_x);
-    let (mut y_m, mut tilt_y_m) = (a_y, b_y);
-    kinematics::mean_and_difference_in_place(&mut x_m, &mut tilt_x_m)?;
-    kinematics::mean_and_difference_in_place(&mut y_m, &mut tilt_y_m)?;
-    let (mut fx_n, mut fy_n) = (f1, f2);
-    film_force::applied_in_place(&mut fx_n, &mut fy_n, &f3, mechanics)?;
+    // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
+    // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
+    // their de-skewed samples: only their means are used.
+    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &mut front)?;
+    if !fused {
+        // Something to report (or a record of SI values): the stages one by one.
+        let mut si = front;
+        for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
+            let column = &raw.columns[col_of[ch.index()]];
+            let buf = &mut si[ch.index()];
+            match raw.units {
+                RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, buf)?,
+                RawUnits::Si => {
+                    if let Some(i) = first_non_finite(column) {
+                        return Err(non_finite_error(ch, i, column[i], "si"));
+                    }
+                    buf.copy_from_slice(column);
+                }
+            }
+            if let Some(v) = range_check::check(ch, column, raw.units, calibration)? {
+                violations.push(v);
+            }
+            if let Some(d) = delay {
+                d.apply_into(buf, &mut tmp)?;
+                std::mem::swap(buf, &mut tmp);
+            }
+        }
+        let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature] = si;
+        kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x)?;
+        kinematics::mean_and_difference_in_place(&mut a_y, &mut b_y)?;
+        film_force::applied_in_place(&mut f1, &mut f2, &f3, mechanics)?;
+        front = [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature];
+    }
+    let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n, f3, temperature] = front;
     let mut dynamic = [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n];
-    lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new())?;
+    let filtered_finite = lp.filtfilt_many_in_place_finite(&mut dynamic, &mut Vec::new())?;
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
-    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`).
+    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`), and
+    // eq. 2's inertial part, the film force on the journal `F -= m X''`, block by block as
+    // the acceleration is formed (the same operation as `film_force::subtract_inertia_in_place`,
+    // without reading the columns back).
     let mut housing_ax_m_s2 = next();
     let mut housing_ay_m_s2 = next();
-    sg.apply_into(&frame_x, &mut tmp)?;
-    sg.apply_into(&tmp, &mut housing_ax_m_s2)?;
-    sg.apply_into(&frame_y, &mut tmp)?;
-    sg.apply_into(&tmp, &mut housing_ay_m_s2)?;
-
-    // Eq. 2's inertial part: the film force on the journal.
-    film_force::subtract_inertia_in_place(&mut fx_n, &mut fy_n, &housing_ax_m_s2, &housing_ay_m_s2, mechanics)?;
+    let mass = mechanics.housing_mass_kg;
+    let mut force_finite = true;
+    for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
+        sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
+            for (f, &a) in force[range].iter_mut().zip(a) {
+                *f -= mass * a;
+                force_finite &= f.is_finite();
+            }
+        })?;
+    }
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // r' and r''.
@@ -653,13 +831,15 @@ pub fn condition_into(
     let mut ax_m_s2 = next();
     let mut vy_m_s = next();
     let mut ay_m_s2 = next();
-    sg.apply_into(&x_m, &mut vx_m_s)?;
-    sg.apply_into(&vx_m_s, &mut ax_m_s2)?;
-    sg.apply_into(&y_m, &mut vy_m_s)?;
-    sg.apply_into(&vy_m_s, &mut ay_m_s2)?;
+    let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
+    let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
-    // non-finite number on.
+    // non-finite number on. The stages checked their final outputs as they wrote them (the
+    // front end the temperature, the low-pass r and the tilt, eq. 2 the force, the
+    // differentiator r''); only if one of them saw a non-finite value, or the front end did
+    // not run, are the columns searched here, to name the first one.
+    let known_finite = fused && filtered_finite && force_finite && ax_finite && ay_finite;
     for (name, col) in [
         ("x_m", &x_m),
         ("y_m", &y_m),
@@ -670,7 +850,10 @@ pub fn condition_into(
         ("fx_n", &fx_n),
         ("fy_n", &fy_n),
         ("temperature_c", &temperature),
-    ] {
+    ]
+    .into_iter()
+    .filter(|_| !known_finite)
+    {
         if let Some(i) = first_non_finite(col) {
             return Err(IdentificationError::BadInput {
                 what: format!("conditioned `{name}`, sample {i}"),

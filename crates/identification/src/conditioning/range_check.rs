@@ -35,8 +35,7 @@ pub fn check(
 ) -> Result<Option<RangeViolation>, IdentificationError> {
     let c = calibration.channel(channel)?;
     let [lo_v, hi_v] = c.linear_range_v;
-    let margin = 0.5 * calibration.lsb_v();
-    let (lo, hi) = (lo_v + margin, hi_v - margin);
+    let (lo, hi) = volts_bounds(channel, calibration)?;
     let (offset, sens) = (c.offset_v, c.sensitivity_v_per_unit);
     if !(sens.is_finite() && sens != 0.0) {
         return Err(IdentificationError::invalid(
@@ -92,6 +91,17 @@ pub fn check(
         range_si,
         count,
     }))
+}
+
+/// The open interval of readings (V) that count as inside `channel`'s linear range: a reading
+/// `v` is in range when `v > lo && v < hi`.
+pub(crate) fn volts_bounds(
+    channel: ChannelId,
+    calibration: &Calibration,
+) -> Result<(f64, f64), IdentificationError> {
+    let [lo_v, hi_v] = calibration.channel(channel)?.linear_range_v;
+    let margin = 0.5 * calibration.lsb_v();
+    Ok((lo_v + margin, hi_v - margin))
 }
 
 /// Checks every column of a record; violations in the record's channel order.
