@@ -109,12 +109,7 @@ impl ReplayCore {
     /// connection for TCP: it labels every report). `kind` says what it is in the status
     /// (`ascii replay`, `tcp stream`).
     pub fn new(rig: &RigConfig, params: &DaqParams, kind: &'static str, source_name: &str) -> Result<Self, NodeError> {
-        if !(1..=1_000_000).contains(&params.block_scans) {
-            return Err(NodeError::parameter("block_scans", format!("must be in 1..=1000000, got {}", params.block_scans)));
-        }
-        if !(params.speed_rpm.is_finite() && params.speed_rpm >= 0.0) {
-            return Err(NodeError::parameter("speed_rpm", format!("must be finite and >= 0, got {}", params.speed_rpm)));
-        }
+        params.validate()?;
         Ok(Self {
             reader: LineReader::new(source_name),
             kind,
@@ -246,6 +241,8 @@ impl ReplayCore {
     fn flush(&mut self, out: &mut Produced) {
         let (Some(block), Some(s)) = (self.block.take(), self.stream.as_ref()) else { return };
         let rate = s.header.sample_rate_hz;
+        // A header has its ten channels (the reader checks), so `width` > 0 and every channel
+        // position is below it: the chunks and `scan[p]` below are in range.
         let width = s.header.channels.len();
         let scan_stamp = |scan: u64| s.epoch.after_samples(i64::try_from(scan).unwrap_or(i64::MAX), rate);
         let mean_si = |position: Option<usize>, channel: ChannelId| {

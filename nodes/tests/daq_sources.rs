@@ -200,9 +200,12 @@ fn a_replayed_record_gives_its_values_bit_for_bit_and_identifies() {
     }
 }
 
-/// The fixture's text with bad lines injected; returns the text, the expected (line,
-/// column, words) of each report, and the record positions of the rows left out.
-fn damaged() -> (String, Vec<(usize, usize, &'static str)>, Vec<usize>) {
+/// (line, column, words of the message) of an expected report.
+type Expected = Vec<(usize, usize, &'static str)>;
+
+/// The fixture's text with bad lines injected; returns the text, the expected reports, and
+/// the record positions of the rows left out.
+fn damaged() -> (String, Expected, Vec<usize>) {
     let f = fixture();
     let lines: Vec<&str> = f.text.lines().collect();
     let first_row = lines.iter().position(|l| l.starts_with("scan ")).unwrap() + 1;
@@ -391,4 +394,18 @@ fn a_tcp_stream_with_a_bad_line_and_a_reconnection_gives_the_files_frames() {
     }
     assert!(statuses[0].message.starts_with(&format!("tcp stream of tcp://{address}#1")), "{}", statuses[0].message);
     assert!(statuses.last().unwrap().message.starts_with(&format!("tcp stream of tcp://{address}#2")));
+}
+
+#[test]
+fn daq_params_accept_the_ascii_and_tcp_sources_with_what_they_need() {
+    let p = |source: &str, file: &str, address: &str| DaqParams { source: source.into(), file: file.into(), address: address.into(), ..DaqParams::default() };
+    assert!(p("ascii", "run.txt", "").validate().is_ok());
+    assert!(p("tcp", "", "daq-host:5000").validate().is_ok());
+    assert!(p("tcp", "", "[::1]:5000").validate().is_ok());
+    for (bad, name) in [(p("ascii", "", ""), "file"), (p("tcp", "", ""), "address"), (p("tcp", "", "daq-host"), "address"), (p("tcp", "", "h:99999"), "address"), (p("udp", "", ""), "source")] {
+        match bad.validate() {
+            Err(NodeError::Parameter { name: n, .. }) => assert_eq!(n, name),
+            other => panic!("{bad:?}: {other:?}"),
+        }
+    }
 }
