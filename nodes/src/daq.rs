@@ -33,11 +33,14 @@ pub struct DaqParams {
     pub address: String,
     /// Scans per published frame.
     pub block_scans: i64,
-    /// Pace: 1 = real time, 4 = four times faster, 0 = as fast as the consumers allow.
+    /// Pace: 1 = real time, 4 = four times faster, 0 = as fast as the consumers allow (sim)
+    /// or as the file can be read (ascii). Not used by `tcp`: the acquisition sets the pace.
     pub rate_factor: f64,
-    /// Stop after this many seconds of rig time (0: run until stopped or the file ends).
+    /// Stop after this many seconds of rig time (0: run until stopped or the file ends;
+    /// not used by `tcp`).
     pub duration_s: f64,
-    /// Rig time of scan 0, ns since the epoch (0: the wall clock at start).
+    /// Rig time of scan 0, ns since the epoch (0: the wall clock at start for `sim`, the
+    /// record's `start_time_s` header for `ascii` and `tcp`).
     pub start_stamp_ns: i64,
     /// Sim: how long to wait for exciter setpoints before running a block with zero force,
     /// s of wall time (the rig goes on turning when the exciter node is absent).
@@ -66,18 +69,17 @@ impl Default for DaqParams {
 
 impl DaqParams {
     pub fn validate(&self) -> Result<(), NodeError> {
-        // The ASCII-replay and TCP sources are not built yet (issue 4 is open on them).
-        if self.source != "sim" {
-            return Err(NodeError::parameter(
-                "source",
-                format!("`{}`: this build has the `sim` source only (ascii and tcp are planned, not built)", self.source),
-            ));
+        if !["sim", "ascii", "tcp"].contains(&self.source.as_str()) {
+            return Err(NodeError::parameter("source", format!("`{}`: expected `sim`, `ascii` (replay `file`) or `tcp` (connect to `address`)", self.source)));
         }
         if self.source == "ascii" && self.file.is_empty() {
             return Err(NodeError::parameter("file", "source `ascii` needs the record's path"));
         }
         if self.source == "tcp" && self.address.is_empty() {
             return Err(NodeError::parameter("address", "source `tcp` needs host:port"));
+        }
+        if self.source == "tcp" && !self.address.rsplit_once(':').is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok()) {
+            return Err(NodeError::parameter("address", format!("`{}`: expected host:port", self.address)));
         }
         if !(1..=1_000_000).contains(&self.block_scans) {
             return Err(NodeError::parameter("block_scans", format!("must be in 1..=1000000, got {}", self.block_scans)));

@@ -22,6 +22,7 @@ pub mod dds;
 pub mod shell;
 pub mod poll;
 pub mod ports;
+pub mod replay;
 pub mod stamp;
 pub mod topics;
 

@@ -95,6 +95,14 @@
 //! * MATLAB: `fprintf(fid, "%d%s\n", n, sprintf(" %.17g", values))` per scan; read with
 //!   `readtable` with `CommentStyle` `#` and blank delimiters.
 //!
+//! ## Reading a line at a time
+//!
+//! [`LineReader`] is the parser: fed one line at a time (from a file, a socket, anything),
+//! it gives the header, then each row with its scan index. Header errors are fatal; a
+//! malformed row is reported with its line and column and skipped, and a row after missing
+//! scans is delivered with the gap reported, so a live stream survives bad rows. [`read`]
+//! runs it over a whole file and refuses the file at its first problem of any kind.
+//!
 //! [`write()`] and [`Writer`] print every value in its shortest form that reads back to the
 //! same `f64` (Rust's `{}` or `{:e}`, whichever is shorter), so write → read is bit-exact.
 
@@ -508,104 +516,228 @@ fn parse_scan_index(text: &str) -> Result<u64, String> {
 }
 
 /// A header value found so far: its value text, line and value column.
-struct Entry<'a> {
-    value: &'a str,
+#[derive(Debug, Clone)]
+struct Entry {
+    value: String,
     line: usize,
     column: usize,
 }
 
-/// Reads a record from the text of a file; `file_name` only labels errors. Never panics;
-/// every refusal is an [`IdentificationError::Parse`] naming the line and column (see the
-/// module docs for the rules).
-pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> {
-    let fail = |line: usize, column: usize, message: String| IdentificationError::Parse {
-        file: file_name.to_string(),
-        line,
-        column,
-        message,
-    };
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text
-        .split('\n')
-        .map(|l| l.strip_suffix('\r').unwrap_or(l))
-        .enumerate()
-        .map(|(i, l)| (i + 1, l));
-    let last_line = text.lines().count().max(1);
+/// A data row as a [`LineReader`] read it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    /// 1-based line number the row was on.
+    pub line: usize,
+    /// Its scan index.
+    pub scan_index: u64,
+    /// One value per channel, in the header's (column-line) order.
+    pub values: Vec<f64>,
+}
 
-    // 1. Format line.
-    let (_, first) = lines.next().unwrap_or((1, ""));
-    let version = parse_format_line(first).map_err(|(column, message)| fail(1, column, message))?;
+/// What one line told a [`LineReader`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Fed {
+    /// Nothing for the caller: the format line, a header line, a blank or a comment line.
+    Nothing,
+    /// The column line completed the header; the rows follow.
+    Header(Header),
+    /// A data row whose scan index follows the previous row's (or the first row).
+    Row(Row),
+    /// A well-formed data row after missing scans. The row is good and counts (the next row
+    /// must follow it); `gap` is the [`IdentificationError::Parse`] naming its line, the
+    /// column of its scan index and the scans that are missing.
+    Gap { row: Row, gap: IdentificationError },
+    /// A malformed data row (wrong field count, a bad scan index or value, a scan index that
+    /// does not increase, a header line after the column line), as an
+    /// [`IdentificationError::Parse`] with its line and column. The reader goes on as if the
+    /// line were absent.
+    Bad(IdentificationError),
+}
 
-    // 2. Header lines, up to the column line.
-    let mut entries: HashMap<&str, Entry> = HashMap::new();
-    let mut column_line = None;
-    for (number, line) in lines.by_ref() {
-        let trimmed = line.trim_start_matches([' ', '\t']);
-        if trimmed.is_empty() || trimmed.starts_with("##") {
-            continue;
-        }
-        let Some(body) = trimmed.strip_prefix('#') else {
-            column_line = Some((number, line));
-            break;
-        };
-        let body_start = line.len() - body.len();
-        let Some(colon) = body.find(':') else {
-            return Err(fail(
-                number,
-                0,
-                format!(
-                    "header lines read `# key: value`, found `{}` (comments start with `##`)",
-                    excerpt(line)
-                ),
-            ));
-        };
-        let key_raw = &body[..colon];
-        let key = key_raw.trim_matches([' ', '\t']);
-        let key_column = column_of(
-            line,
-            body_start + (key_raw.len() - key_raw.trim_start_matches([' ', '\t']).len()),
-        );
-        let value_raw = &body[colon + 1..];
-        let value = value_raw.trim_matches([' ', '\t']);
-        let value_column = column_of(
-            line,
-            body_start
-                + colon
-                + 1
-                + (value_raw.len() - value_raw.trim_start_matches([' ', '\t']).len()),
-        );
-        let Some(&key) = KEYS.iter().find(|k| **k == key) else {
-            return Err(fail(
-                number,
-                key_column,
-                format!("unknown header key `{}` (the keys are {})", excerpt(key), KEYS.join(", ")),
-            ));
-        };
-        if let Some(earlier) = entries.get(key) {
-            return Err(fail(
-                number,
-                key_column,
-                format!("header key `{key}` given twice (first on line {})", earlier.line),
-            ));
-        }
-        if value.is_empty() {
-            return Err(fail(number, value_column, format!("header key `{key}` has no value")));
-        }
-        entries.insert(key, Entry { value, line: number, column: value_column });
+/// Where a [`LineReader`] is in the record.
+#[derive(Debug, Clone)]
+enum Stage {
+    /// Waiting for the format line.
+    Format,
+    /// Header lines, up to the column line.
+    Header { version: u32, entries: HashMap<&'static str, Entry> },
+    /// Data rows.
+    Rows { header: Header, column_line: usize, last_scan: Option<u64> },
+    /// The header was refused: the stream cannot be interpreted.
+    Failed(IdentificationError),
+}
+
+/// Reads a record a line at a time, without I/O: the caller feeds each line with its
+/// 1-based number ([`LineReader::feed`]) and gets the header, then the rows, as they come.
+/// This is the one parser of the format: [`read`] feeds it a whole file, the DAQ node the
+/// lines of a file or of a TCP stream.
+///
+/// * Errors in the format line, a header line or the column line are fatal (`Err`): the
+///   stream cannot be interpreted, and every later `feed` returns the same error.
+/// * A malformed data row is recoverable ([`Fed::Bad`]): it is skipped and the next row is
+///   read as if it were absent. A row after missing scans is delivered with the gap
+///   ([`Fed::Gap`]).
+#[derive(Debug, Clone)]
+pub struct LineReader {
+    file: String,
+    stage: Stage,
+}
+
+impl LineReader {
+    /// A reader at the start of a record; `file_name` labels errors (a path, an address).
+    pub fn new(file_name: &str) -> Self {
+        Self { file: file_name.to_string(), stage: Stage::Format }
     }
 
-    // The column line ends the header: every required key must be there.
-    let Some((column_line_number, column_line)) = column_line else {
+    /// The label errors carry.
+    pub fn file_name(&self) -> &str {
+        &self.file
+    }
+
+    /// The header, once the column line has been read.
+    pub fn header(&self) -> Option<&Header> {
+        match &self.stage {
+            Stage::Rows { header, .. } => Some(header),
+            _ => None,
+        }
+    }
+
+    /// Scan index of the last row delivered.
+    pub fn last_scan(&self) -> Option<u64> {
+        match &self.stage {
+            Stage::Rows { last_scan, .. } => *last_scan,
+            _ => None,
+        }
+    }
+
+    /// The header and the line number of its column line when the header is complete;
+    /// else the error of a stream that ended at line `last_line` before its column line (or
+    /// the header's own error).
+    pub fn finish(&self, last_line: usize) -> Result<(&Header, usize), IdentificationError> {
+        match &self.stage {
+            Stage::Rows { header, column_line, .. } => Ok((header, *column_line)),
+            Stage::Failed(e) => Err(e.clone()),
+            Stage::Format | Stage::Header { .. } => Err(parse_error(
+                &self.file,
+                last_line,
+                0,
+                format!("the file ends before the column line `scan {}`", CHANNEL_NAMES.join(" ")),
+            )),
+        }
+    }
+
+    /// Reads line `number` (1-based). A line end (LF or CR LF) at its end is ignored, and a
+    /// byte-order mark at the start of the first line.
+    pub fn feed(&mut self, number: usize, line: &str) -> Result<Fed, IdentificationError> {
+        let line = line.strip_suffix('\n').unwrap_or(line);
+        let line = line.strip_suffix('\r').unwrap_or(line);
+        let file = self.file.as_str();
+        let fail = |line: usize, column: usize, message: String| parse_error(file, line, column, message);
+        let result = match &mut self.stage {
+            Stage::Failed(e) => return Err(e.clone()),
+            Stage::Format => {
+                let line = line.strip_prefix('\u{feff}').unwrap_or(line);
+                parse_format_line(line)
+                    .map(|version| {
+                        self.stage = Stage::Header { version, entries: HashMap::new() };
+                        Fed::Nothing
+                    })
+                    .map_err(|(column, message)| fail(number, column, message))
+            }
+            Stage::Header { version, entries } => match header_line(number, line, entries, &fail) {
+                Ok(None) => Ok(Fed::Nothing),
+                Ok(Some(())) => {
+                    let version = *version;
+                    column_line(version, entries, number, line, &fail).map(|header| {
+                        self.stage =
+                            Stage::Rows { header: header.clone(), column_line: number, last_scan: None };
+                        Fed::Header(header)
+                    })
+                }
+                Err(e) => Err(e),
+            },
+            Stage::Rows { header, last_scan, .. } => return Ok(data_row(number, line, header, last_scan, &fail)),
+        };
+        if let Err(e) = &result {
+            self.stage = Stage::Failed(e.clone());
+        }
+        result
+    }
+}
+
+fn parse_error(file: &str, line: usize, column: usize, message: String) -> IdentificationError {
+    IdentificationError::Parse { file: file.to_string(), line, column, message }
+}
+
+/// One line of the header section: `Ok(None)` for a blank, comment or header line (stored in
+/// `entries`), `Ok(Some(()))` for the column line that ends the header.
+fn header_line(
+    number: usize,
+    line: &str,
+    entries: &mut HashMap<&'static str, Entry>,
+    fail: &dyn Fn(usize, usize, String) -> IdentificationError,
+) -> Result<Option<()>, IdentificationError> {
+    let trimmed = line.trim_start_matches([' ', '\t']);
+    if trimmed.is_empty() || trimmed.starts_with("##") {
+        return Ok(None);
+    }
+    let Some(body) = trimmed.strip_prefix('#') else {
+        return Ok(Some(()));
+    };
+    let body_start = line.len() - body.len();
+    let Some(colon) = body.find(':') else {
         return Err(fail(
-            last_line,
+            number,
             0,
-            format!("the file ends before the column line `scan {}`", CHANNEL_NAMES.join(" ")),
+            format!(
+                "header lines read `# key: value`, found `{}` (comments start with `##`)",
+                excerpt(line)
+            ),
         ));
     };
+    let key_raw = &body[..colon];
+    let key = key_raw.trim_matches([' ', '\t']);
+    let key_column =
+        column_of(line, body_start + (key_raw.len() - key_raw.trim_start_matches([' ', '\t']).len()));
+    let value_raw = &body[colon + 1..];
+    let value = value_raw.trim_matches([' ', '\t']);
+    let value_column = column_of(
+        line,
+        body_start + colon + 1 + (value_raw.len() - value_raw.trim_start_matches([' ', '\t']).len()),
+    );
+    let Some(&key) = KEYS.iter().find(|k| **k == key) else {
+        return Err(fail(
+            number,
+            key_column,
+            format!("unknown header key `{}` (the keys are {})", excerpt(key), KEYS.join(", ")),
+        ));
+    };
+    if let Some(earlier) = entries.get(key) {
+        return Err(fail(
+            number,
+            key_column,
+            format!("header key `{key}` given twice (first on line {})", earlier.line),
+        ));
+    }
+    if value.is_empty() {
+        return Err(fail(number, value_column, format!("header key `{key}` has no value")));
+    }
+    entries.insert(key, Entry { value: value.to_string(), line: number, column: value_column });
+    Ok(None)
+}
+
+/// The column line ends the header: every required key must be there.
+fn column_line(
+    version: u32,
+    entries: &HashMap<&'static str, Entry>,
+    number: usize,
+    line: &str,
+    fail: &dyn Fn(usize, usize, String) -> IdentificationError,
+) -> Result<Header, IdentificationError> {
     for key in KEYS {
         if !OPTIONAL_KEYS.contains(&key) && !entries.contains_key(key) {
             return Err(fail(
-                column_line_number,
+                number,
                 0,
                 format!(
                     "header key `{key}` is missing: every key but {} is required before the \
@@ -615,81 +747,121 @@ pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> 
             ));
         }
     }
-    let header = parse_header(version, &entries, column_line_number, column_line, &fail)?;
-    let n = header.channels.len();
+    parse_header(version, entries, number, line, fail)
+}
 
-    // 4. Data rows.
-    let mut scan_index: Vec<u64> = Vec::new();
-    let mut columns: Vec<Vec<f64>> = vec![Vec::new(); n];
-    for (number, line) in lines {
-        let trimmed = line.trim_start_matches([' ', '\t']);
-        if trimmed.is_empty() || trimmed.starts_with("##") {
-            continue;
-        }
-        if trimmed.starts_with('#') {
-            return Err(fail(
-                number,
-                column_of(line, line.len() - trimmed.len()),
-                "header line after the column line: header keys come before `scan ...` \
-                 (comments start with `##`)"
-                    .into(),
-            ));
-        }
-        let row = fields(line);
-        if row.len() != n + 1 {
-            let column = row.get(n + 1).map_or(0, |(c, _)| *c);
-            return Err(fail(
-                number,
-                column,
-                format!(
-                    "expected {} fields (scan index and {n} channels), found {}{}",
-                    n + 1,
-                    row.len(),
-                    comma_hint(line)
-                ),
-            ));
-        }
-        let mut row = row.into_iter();
-        // The length was checked just above: n + 1 >= 1 fields.
-        let Some((index_column, index_text)) = row.next() else { continue };
-        let index = parse_scan_index(index_text).map_err(|m| fail(number, index_column, m))?;
-        if let Some(&previous) = scan_index.last() {
-            let expected = previous.checked_add(1);
-            if Some(index) != expected {
-                let message = if index <= previous {
-                    format!(
-                        "scan index {index} does not increase: the previous row is scan {previous}"
-                    )
-                } else if index - previous == 2 {
-                    format!(
-                        "scan index {index} skips scan {} (previous row is scan {previous})",
-                        previous + 1
-                    )
-                } else {
-                    format!(
-                        "scan index {index} skips scans {} to {} (previous row is scan {previous})",
-                        previous + 1,
-                        index - 1
-                    )
-                };
-                return Err(fail(number, index_column, message));
-            }
-        }
-        for ((column, text), (values, name)) in row.zip(columns.iter_mut().zip(&header.channels)) {
-            let x = parse_number(text)
-                .map_err(|m| fail(number, column, format!("channel `{name}`: value {m}")))?;
-            values.push(x);
-        }
-        scan_index.push(index);
+/// One line after the column line.
+fn data_row(
+    number: usize,
+    line: &str,
+    header: &Header,
+    last_scan: &mut Option<u64>,
+    fail: &dyn Fn(usize, usize, String) -> IdentificationError,
+) -> Fed {
+    let n = header.channels.len();
+    let trimmed = line.trim_start_matches([' ', '\t']);
+    if trimmed.is_empty() || trimmed.starts_with("##") {
+        return Fed::Nothing;
     }
+    if trimmed.starts_with('#') {
+        return Fed::Bad(fail(
+            number,
+            column_of(line, line.len() - trimmed.len()),
+            "header line after the column line: header keys come before `scan ...` \
+             (comments start with `##`)"
+                .into(),
+        ));
+    }
+    let row = fields(line);
+    if row.len() != n + 1 {
+        let column = row.get(n + 1).map_or(0, |(c, _)| *c);
+        return Fed::Bad(fail(
+            number,
+            column,
+            format!(
+                "expected {} fields (scan index and {n} channels), found {}{}",
+                n + 1,
+                row.len(),
+                comma_hint(line)
+            ),
+        ));
+    }
+    let mut row = row.into_iter();
+    // The length was checked just above: n + 1 >= 1 fields.
+    let Some((index_column, index_text)) = row.next() else { return Fed::Nothing };
+    let index = match parse_scan_index(index_text) {
+        Ok(i) => i,
+        Err(m) => return Fed::Bad(fail(number, index_column, m)),
+    };
+    if let Some(previous) = *last_scan {
+        if index <= previous {
+            return Fed::Bad(fail(
+                number,
+                index_column,
+                format!("scan index {index} does not increase: the previous row is scan {previous}"),
+            ));
+        }
+    }
+    let mut values = Vec::with_capacity(n);
+    for ((column, text), name) in row.zip(&header.channels) {
+        match parse_number(text) {
+            Ok(x) => values.push(x),
+            Err(m) => return Fed::Bad(fail(number, column, format!("channel `{name}`: value {m}"))),
+        }
+    }
+    let gap = match *last_scan {
+        // `index > previous` was checked above, so `previous + 1` cannot overflow.
+        Some(previous) if index != previous + 1 => Some(if index - previous == 2 {
+            format!("scan index {index} skips scan {} (previous row is scan {previous})", previous + 1)
+        } else {
+            format!(
+                "scan index {index} skips scans {} to {} (previous row is scan {previous})",
+                previous + 1,
+                index - 1
+            )
+        }),
+        _ => None,
+    };
+    *last_scan = Some(index);
+    let row = Row { line: number, scan_index: index, values };
+    match gap {
+        Some(message) => Fed::Gap { row, gap: fail(number, index_column, message) },
+        None => Fed::Row(row),
+    }
+}
+
+/// Reads a record from the text of a file; `file_name` only labels errors. Never panics;
+/// every refusal is an [`IdentificationError::Parse`] naming the line and column (see the
+/// module docs for the rules). The whole-file form of [`LineReader`]: the first problem of
+/// any kind, in a data row too, refuses the file.
+pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> {
+    let mut reader = LineReader::new(file_name);
+    let mut scan_index: Vec<u64> = Vec::new();
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    for (i, line) in text.split('\n').enumerate() {
+        match reader.feed(i + 1, line)? {
+            Fed::Nothing => {}
+            Fed::Header(header) => columns = vec![Vec::new(); header.channels.len()],
+            Fed::Row(row) => {
+                for (column, x) in columns.iter_mut().zip(row.values) {
+                    column.push(x);
+                }
+                scan_index.push(row.scan_index);
+            }
+            Fed::Gap { gap: e, .. } | Fed::Bad(e) => return Err(e),
+        }
+    }
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let (header, column_line) = reader.finish(text.lines().count().max(1))?;
     if scan_index.is_empty() {
-        return Err(fail(
-            column_line_number,
+        return Err(parse_error(
+            file_name,
+            column_line,
             0,
             "no data: no scan rows follow the column line".into(),
         ));
     }
-    Ok(Record { header, scan_index, columns })
+    Ok(Record { header: header.clone(), scan_index, columns })
 }
 
 /// The version from the format line, or (column, message).
@@ -740,7 +912,7 @@ fn parse_format_line(line: &str) -> Result<u32, (usize, String)> {
 /// Header values and the column line, checked.
 fn parse_header(
     version: u32,
-    entries: &HashMap<&str, Entry>,
+    entries: &HashMap<&'static str, Entry>,
     column_line_number: usize,
     column_line: &str,
     fail: &dyn Fn(usize, usize, String) -> IdentificationError,
@@ -755,14 +927,14 @@ fn parse_header(
                   check: fn(f64) -> Result<(), String>|
      -> Result<f64, IdentificationError> {
         let e = get(key)?;
-        let x = parse_number(e.value).map_err(|m| fail(e.line, e.column, format!("{key}: {m}")))?;
+        let x = parse_number(&e.value).map_err(|m| fail(e.line, e.column, format!("{key}: {m}")))?;
         check(x).map_err(|m| fail(e.line, e.column, m))?;
         Ok(x)
     };
     let rig = {
         let e = get("rig")?;
-        check_rig(e.value).map_err(|m| fail(e.line, e.column, m))?;
-        e.value.to_string()
+        check_rig(&e.value).map_err(|m| fail(e.line, e.column, m))?;
+        e.value.clone()
     };
     let sample_rate_hz = number("sample_rate_hz", check_sample_rate)?;
     let channel_interval_s = number("channel_interval_s", check_interval)?;
@@ -785,7 +957,7 @@ fn parse_header(
     };
     let units = {
         let e = get("units")?;
-        match e.value {
+        match e.value.as_str() {
             "si" => Units::Si,
             "volts" => Units::Volts,
             other => {
@@ -802,7 +974,7 @@ fn parse_header(
         None => None,
         Some(e) => {
             let mut values = Vec::new();
-            for (c, text) in fields(e.value) {
+            for (c, text) in fields(&e.value) {
                 let column = e.column + c - 1;
                 let x = parse_number(text)
                     .map_err(|m| fail(e.line, column, format!("channel_offsets_s: {m}")))?;

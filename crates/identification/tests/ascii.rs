@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use oilfilm_identification::ascii::{
-    self, Header, Record, Units, Writer, CHANNEL_NAMES, CHANNEL_UNITS_SI,
+    self, Fed, Header, LineReader, Record, Row, Units, Writer, CHANNEL_NAMES, CHANNEL_UNITS_SI,
 };
 use oilfilm_identification::IdentificationError;
 use rand::{RngExt, SeedableRng};
@@ -535,4 +535,77 @@ fn a_record_of_the_papers_size_streams_and_reads() {
     println!("read {} scans ({} bytes) in {:?}", r.len(), text.len(), started.elapsed());
     assert_eq!(r.len(), 50_000);
     assert_eq!(r.time_of(49_999, 0), 49_999.0 / 5000.0);
+}
+
+/// Feeds `text` line by line; returns what each line gave.
+fn feed_all(reader: &mut LineReader, text: &str) -> Vec<Result<Fed, IdentificationError>> {
+    text.split('\n').enumerate().map(|(i, line)| reader.feed(i + 1, line)).collect()
+}
+
+#[test]
+fn the_line_reader_gives_the_header_then_rows_and_skips_bad_rows_with_their_position() {
+    // A good record fed line by line: the header once, then each row with its scan index.
+    let mut reader = LineReader::new("stream");
+    let fed = feed_all(&mut reader, GOOD);
+    let record = ascii::read(GOOD, "good").expect("good");
+    let header: Vec<&Header> =
+        fed.iter().filter_map(|f| match f { Ok(Fed::Header(h)) => Some(h), _ => None }).collect();
+    assert_eq!(header, [&record.header]);
+    let rows: Vec<&Row> = fed.iter().filter_map(|f| match f { Ok(Fed::Row(r)) => Some(r), _ => None }).collect();
+    assert_eq!(rows.len(), 2);
+    assert_eq!((rows[1].line, rows[1].scan_index), (9, 1));
+    assert_eq!(rows[1].values, record.columns.iter().map(|c| c[1]).collect::<Vec<_>>());
+    assert_eq!(reader.last_scan(), Some(1));
+
+    // Bad rows after it: each reported with its line and column, none stops the reader.
+    let more = [
+        ("2 1 2 3", 0, "expected 11 fields"),
+        ("2 5e-05 -8e-05 5e-05 -8e-05 1e-08 -2e-08 0.5 0.9 5600 29 extra", 58, "found 12"),
+        ("2 5e-05 -8e-05 5e-05 -8e-05 1e-08 nan 0.5 0.9 5600 29", 35, "not a finite number"),
+        ("x2 5e-05 -8e-05 5e-05 -8e-05 1e-08 -2e-08 0.5 0.9 5600 29", 1, "not a non-negative integer"),
+        ("1 5e-05 -8e-05 5e-05 -8e-05 1e-08 -2e-08 0.5 0.9 5600 29", 1, "does not increase"),
+        ("  # units: volts", 3, "header line after the column line"),
+    ];
+    for (k, (line, column, words)) in more.iter().enumerate() {
+        match reader.feed(10 + k, line) {
+            Ok(Fed::Bad(IdentificationError::Parse { file, line: l, column: c, message })) => {
+                assert_eq!((file.as_str(), l, c), ("stream", 10 + k, *column), "{message}");
+                assert!(message.contains(words), "{message}");
+            }
+            other => panic!("{line}: {other:?}"),
+        }
+    }
+    assert_eq!(reader.last_scan(), Some(1), "no bad row moved the scan index");
+    // Blank, comment and CR LF lines are fine; the next good row is read.
+    assert_eq!(reader.feed(16, "\r\n"), Ok(Fed::Nothing));
+    assert_eq!(reader.feed(17, "## note"), Ok(Fed::Nothing));
+    let row = "2 5e-05 -8e-05 5e-05 -8e-05 1e-08 -2e-08 0.5 0.9 5600 29\r\n";
+    assert!(matches!(reader.feed(18, row), Ok(Fed::Row(Row { line: 18, scan_index: 2, .. }))));
+    // A gap: the row is delivered and the missing scans named.
+    match reader.feed(19, "5 5e-05 -8e-05 5e-05 -8e-05 1e-08 -2e-08 0.5 0.9 5600 29") {
+        Ok(Fed::Gap { row, gap }) => {
+            assert_eq!((row.line, row.scan_index), (19, 5));
+            assert_eq!(gap.to_string(), "stream:19:1: scan index 5 skips scans 3 to 4 (previous row is scan 2)");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(reader.last_scan(), Some(5));
+}
+
+#[test]
+fn a_header_error_stops_the_line_reader_for_good() {
+    let text = good_with("# units: si", "# units: furlongs");
+    let mut reader = LineReader::new("s");
+    let fed = feed_all(&mut reader, &text);
+    let first = fed.iter().position(Result::is_err).expect("an error");
+    // The header is checked whole at the column line (line 7); the error names line 5.
+    assert_eq!(first, 6, "at the column line");
+    assert!(fed[first..].iter().all(|f| f == &fed[first]), "every later line gives the same error");
+    assert_eq!(fed[first].as_ref().unwrap_err().to_string(), "s:5:10: units must be `si` or `volts`, found `furlongs`");
+    assert!(reader.header().is_none());
+    assert_eq!(reader.finish(9).unwrap_err(), fed[first].clone().unwrap_err());
+    // A stream that ends in its header.
+    let mut reader = LineReader::new("s");
+    feed_all(&mut reader, "# oilfilm-ascii 1\n# rig: r");
+    assert!(reader.finish(2).unwrap_err().to_string().starts_with("s:2:0: the file ends before the column line"));
 }
