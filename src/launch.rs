@@ -23,11 +23,19 @@ pub struct LaunchArgs {
     /// Directory of the node binaries (default: next to this executable).
     #[arg(long, value_name = "DIR")]
     bin_dir: Option<PathBuf>,
+    /// Launch arguments, `NAME:=VALUE` (as `ros2 launch` takes them), e.g. `file:=out/run.txt`.
+    #[arg(value_name = "NAME:=VALUE")]
+    launch_args: Vec<String>,
 }
 
 pub fn run(args: &LaunchArgs) -> Result<()> {
     anyhow::ensure!(args.seconds.is_finite() && args.seconds >= 0.0, "--seconds must be >= 0, got {}", args.seconds);
-    let nodes = launch::read(&args.file)?;
+    let mut launch_args = Vec::new();
+    for a in &args.launch_args {
+        let (k, v) = a.split_once(":=").with_context(|| format!("launch argument `{a}`: write NAME:=VALUE"))?;
+        launch_args.push((k.to_string(), v.to_string()));
+    }
+    let nodes = launch::read_with(&args.file, &launch_args)?;
     let bin_dir = match &args.bin_dir {
         Some(d) => d.clone(),
         None => std::env::current_exe().context("locating this executable")?.parent().map(PathBuf::from).unwrap_or_default(),
@@ -43,26 +51,37 @@ pub fn run(args: &LaunchArgs) -> Result<()> {
     let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|m| if m.is_empty() { Ok(()) } else { Err("the launcher has no parameters".into()) }))?;
     let mut estimates = ros.subscription::<CoefficientEstimate>(&topics::ESTIMATES)?;
     let mut graph = Supervisor::start(&nodes, &bin_dir)?;
-    println!("launched {} from {} in namespace {namespace}: {}", graph.names().join(", "), args.file.display(), "estimates print as they arrive");
+    println!("launched {} from {} in namespace {namespace}; estimates print as they arrive", graph.names().join(", "), args.file.display());
     println!("frame: {}", oilfilm_identification::pipeline::FRAME);
     let started = Instant::now();
     let mut failure = None;
     let mut count = 0;
+    // A node that finishes cleanly (a replay at the end of its file, a DAQ at the end of its
+    // duration) ends the run once the rest have drained: no estimate for DRAIN.
+    const DRAIN: Duration = Duration::from_secs(3);
+    let mut finished: Option<Instant> = None;
+    let mut last_output = Instant::now();
     while !stop.load(Ordering::SeqCst) {
         if args.seconds > 0.0 && started.elapsed().as_secs_f64() >= args.seconds {
+            break;
+        }
+        if finished.is_some_and(|f| f.elapsed() >= DRAIN && last_output.elapsed() >= DRAIN) {
             break;
         }
         if let Some((name, status)) = graph.exited() {
             if !status.success() {
                 failure = Some(format!("node {name} died ({status})"));
-            } else {
-                println!("node {name} finished");
+                break;
             }
-            break;
+            if finished.is_none() {
+                println!("node {name} finished; stopping the graph once it has drained");
+                finished = Some(Instant::now());
+            }
         }
         match estimates.receive()? {
             Some(e) => {
                 count += 1;
+                last_output = Instant::now();
                 print_estimate(&e);
             }
             None => std::thread::sleep(Duration::from_millis(5)),
@@ -93,11 +112,10 @@ fn print_estimate(e: &CoefficientEstimate) {
         "#{} samples {}..{} ({span:.1} s)  F_Y {:.3}  d {:.3}  cond {:.1}  T {:.1} C",
         e.sequence, e.window_start_sample, e.window_end_sample, e.load_parameter_fy, e.amplitude_d, e.condition_number, e.bearing_temperature_degc
     );
-    let names = ["xx", "xy", "yx", "yy"];
-    for k in 0..4 {
+    for (k, name) in ["xx", "xy", "yx", "yy"].iter().enumerate() {
         println!(
-            "    k{} {:>12.4e} ± {:>9.2e} N/m    d{} {:>12.4e} ± {:>9.2e} N s/m",
-            names[k], e.stiffness_n_m[k], e.stiffness_se_n_m[k], names[k], e.damping_n_s_m[k], e.damping_se_n_s_m[k]
+            "    k{name} {:>12.4e} ± {:>9.2e} N/m    d{name} {:>12.4e} ± {:>9.2e} N s/m",
+            e.stiffness_n_m[k], e.stiffness_se_n_m[k], e.damping_n_s_m[k], e.damping_se_n_s_m[k]
         );
     }
     for f in &e.flags {

@@ -172,8 +172,7 @@ impl ConditionerCore {
             col.extend((0..n_scans).map(|k| frame.values[k * width + c]));
         }
         let mut out = Vec::new();
-        loop {
-            let Some(stream) = self.stream.as_ref() else { break };
+        while let Some(stream) = self.stream.as_ref() {
             if stream.end_scan() < stream.next_out + (self.block + stream.edge) as u64 {
                 break;
             }

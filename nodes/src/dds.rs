@@ -163,10 +163,27 @@ impl RosNode {
         Some(self.params.lock().unwrap_or_else(PoisonError::into_inner).clone())
     }
 
-    /// Stops the spinner (the context says goodbye to DDS when dropped).
-    pub fn shutdown(mut self) {
-        self.node.stop_spinner();
-        if let Some(h) = self.spinner.take() {
+    /// Waits (at most `timeout`) until `topic` has a matched subscription, so that what is
+    /// published next is not lost to a reader still being discovered; false on timeout.
+    pub fn wait_for_subscribers(&self, topic: &Topic, timeout: std::time::Duration) -> bool {
+        let full = crate::topics::qualified(&self.namespace, topic);
+        let deadline = std::time::Instant::now() + timeout;
+        while self.node.subscription_count(&full) == 0 {
+            if std::time::Instant::now() >= deadline {
+                return false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        true
+    }
+
+    /// Drops the node (which signals its spinner) while the spinner still holds the DDS
+    /// participant, so the node's own entities are removed from a live participant; then
+    /// waits for the spinner, whose end lets the participant say goodbye to DDS.
+    pub fn shutdown(self) {
+        let RosNode { node, spinner, .. } = self;
+        drop(node);
+        if let Some(h) = spinner {
             let _ = h.join();
         }
     }

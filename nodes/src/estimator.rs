@@ -196,7 +196,7 @@ impl EstimatorCore {
             }
         }
         let has_acc = frame.x_ddot_m_s2.len() == n && frame.y_ddot_m_s2.len() == n;
-        if !has_acc && !(frame.x_ddot_m_s2.is_empty() && frame.y_ddot_m_s2.is_empty()) {
+        if !(has_acc || frame.x_ddot_m_s2.is_empty() && frame.y_ddot_m_s2.is_empty()) {
             return Err(bad(format!("x_ddot_m_s2 / y_ddot_m_s2 have {} / {} samples: either none or {n}", frame.x_ddot_m_s2.len(), frame.y_ddot_m_s2.len())));
         }
         let config = self.params.config(frame.sample_rate_hz)?;

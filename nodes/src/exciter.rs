@@ -141,7 +141,7 @@ impl ExciterParams {
     /// Checks every parameter; the error names the first bad one.
     pub fn validate(&self, hard: &Limits) -> Result<(), NodeError> {
         let r = self.setpoint_rate_hz;
-        if !(r.is_finite() && r >= SETPOINT_RATE_RANGE_HZ[0] && r <= SETPOINT_RATE_RANGE_HZ[1]) {
+        if !(SETPOINT_RATE_RANGE_HZ[0]..=SETPOINT_RATE_RANGE_HZ[1]).contains(&r) {
             return Err(NodeError::parameter(
                 "setpoint_rate_hz",
                 format!("must be in [{}, {}] Hz, got {r}", SETPOINT_RATE_RANGE_HZ[0], SETPOINT_RATE_RANGE_HZ[1]),

@@ -40,14 +40,14 @@ pub struct GraphParams {
 /// every topic carried and the simulated film's operating point (its linear coefficients are
 /// the truth tests judge against; no node reads it).
 pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, OperatingPoint), NodeError> {
-    if !(params.daq.duration_s > 0.0) {
+    if params.daq.duration_s.is_nan() || params.daq.duration_s <= 0.0 {
         return Err(NodeError::parameter("duration_s", "the in-memory graph needs a finite run (> 0 s)"));
     }
     let hard = oilfilm_identification::simulate::limits_of(rig);
     let mut exciter = ExciterCore::new(hard, &params.exciter)?;
     let epoch = Stamp(if params.daq.start_stamp_ns != 0 { params.daq.start_stamp_ns } else { 1_700_000_000_000_000_000 });
     let mut daq = SimDaqCore::new(rig, &params.daq, epoch)?;
-    let truth = daq.operating_point().clone();
+    let truth = *daq.operating_point();
     let mut conditioner = ConditionerCore::new(rig.clone(), &params.conditioner)?;
     let mut estimator = EstimatorCore::new(rig.clone(), params.estimator.clone())?;
 

@@ -19,11 +19,22 @@ struct LaunchFile {
     launch: Vec<Entry>,
 }
 
-/// One entry of `launch:`; only `node` entries are supported.
+/// One entry of `launch:`: a `node` or an `arg` (a launch argument with a default, used as
+/// `$(var NAME)` and set as `NAME:=VALUE` on the command line).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Entry {
-    node: NodeEntry,
+    node: Option<NodeEntry>,
+    arg: Option<ArgEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ArgEntry {
+    name: String,
+    default: Option<String>,
+    #[allow(dead_code)]
+    description: Option<String>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -55,6 +66,11 @@ pub struct NodeLaunch {
 
 /// Reads a launch file; the error names the file and what is wrong.
 pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
+    read_with(path, &[])
+}
+
+/// Reads a launch file with launch arguments `(name, value)` (`name:=value`).
+pub fn read_with(path: &Path, launch_args: &[(String, String)]) -> Result<Vec<NodeLaunch>, NodeError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
     let doc: LaunchFile = serde_yaml_ng::from_str(&text).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
@@ -62,8 +78,36 @@ pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
     let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
     // Absolute, so `$(dirname)/x` and `x` mean the same file wherever the nodes start.
     let dir = std::fs::canonicalize(&dir).map_err(|e| NodeError::File { file: file.clone(), reason: format!("its directory: {e}") })?;
+    let mut vars: Vec<(String, Option<String>)> = Vec::new();
+    let mut nodes = Vec::new();
+    for (i, e) in doc.launch.into_iter().enumerate() {
+        match (e.node, e.arg) {
+            (Some(n), None) => nodes.push(n),
+            (None, Some(a)) => vars.push((a.name, a.default)),
+            _ => return Err(NodeError::File { file, reason: format!("launch[{i}]: each entry is one `node` or one `arg`") }),
+        }
+    }
+    for (k, _) in launch_args {
+        if !vars.iter().any(|(n, _)| n == k) {
+            return Err(NodeError::File { file, reason: format!("no launch argument `{k}` (declared: {})", vars.iter().map(|v| v.0.as_str()).collect::<Vec<_>>().join(", ")) });
+        }
+    }
+    let mut values = Vec::new();
+    for (name, default) in vars {
+        match launch_args.iter().rev().find(|(k, _)| *k == name).map(|(_, v)| v.clone()).or(default) {
+            Some(v) => values.push((name, v)),
+            None => return Err(NodeError::File { file, reason: format!("launch argument `{name}` has no default: give {name}:=VALUE") }),
+        }
+    }
+    let substitute = |text: &str| -> String {
+        let mut t = text.to_string();
+        for (k, v) in &values {
+            t = t.replace(&format!("$(var {k})"), v);
+        }
+        t
+    };
     let mut out = Vec::new();
-    for Entry { node: n } in doc.launch {
+    for n in nodes {
         if n.pkg != "oilfilm" {
             return Err(NodeError::File { file, reason: format!("node `{}`: package `{}` is not ours (pkg: oilfilm)", n.exec, n.pkg) });
         }
@@ -73,7 +117,7 @@ pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
         for p in &n.param {
             match p {
                 ParamEntry::From { from } => {
-                    let resolved = from.replace("$(dirname)", &dir.display().to_string());
+                    let resolved = substitute(from).replace("$(dirname)", &dir.display().to_string());
                     let resolved = if Path::new(&resolved).is_absolute() { PathBuf::from(resolved) } else { dir.join(resolved) };
                     if !resolved.exists() {
                         return Err(NodeError::File { file, reason: format!("node `{name}`: params file {} does not exist", resolved.display()) });
@@ -82,7 +126,7 @@ pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
                 }
                 ParamEntry::Value { name: k, value } => {
                     let v = serde_yaml_ng::to_string(value).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
-                    args.extend(["-p".into(), format!("{k}:={}", v.trim())]);
+                    args.extend(["-p".into(), format!("{k}:={}", substitute(v.trim()))]);
                 }
             }
         }
@@ -94,13 +138,14 @@ pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
 /// The running nodes.
 pub struct Supervisor {
     children: Vec<(NodeLaunch, Child)>,
+    reported: Vec<String>,
 }
 
 impl Supervisor {
     /// Starts each node from `bin_dir` with its arguments plus `extra_args` (e.g.
     /// `-p duration_s:=10` for the DAQ is added by the caller through the launch entries).
     pub fn start(nodes: &[NodeLaunch], bin_dir: &Path) -> Result<Self, NodeError> {
-        let mut s = Self { children: Vec::new() };
+        let mut s = Self { children: Vec::new(), reported: Vec::new() };
         for n in nodes {
             let exe = bin_dir.join(&n.exec);
             match Command::new(&exe).args(&n.args).spawn() {
@@ -114,10 +159,14 @@ impl Supervisor {
         Ok(s)
     }
 
-    /// The first node that has exited, with its status.
+    /// A node that has exited since the last call, with its status (each reported once).
     pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
         for (n, c) in &mut self.children {
+            if self.reported.contains(&n.name) {
+                continue;
+            }
             if let Ok(Some(status)) = c.try_wait() {
+                self.reported.push(n.name.clone());
                 return Some((n.name.clone(), status));
             }
         }
@@ -183,6 +232,35 @@ mod tests {
             };
             r.unwrap_or_else(|e| panic!("{}: {e}", n.name));
         }
+    }
+
+    #[test]
+    fn every_launch_file_reads_and_its_params_load() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch_configs");
+        let mut seen = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if !path.to_string_lossy().ends_with(".launch.yaml") {
+                continue;
+            }
+            seen += 1;
+            let nodes = read_with(&path, &[]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            for n in &nodes {
+                let args = crate::params::parse_args(&n.name, n.args.clone()).unwrap();
+                let r = match n.name.as_str() {
+                    "exciter" => crate::params::load::<crate::exciter::ExciterParams>(&args).map(|_| ()),
+                    "daq" => crate::params::load::<crate::daq::DaqParams>(&args).and_then(|(p, _)| p.validate()),
+                    "conditioner" => crate::params::load::<crate::conditioner::ConditionerParams>(&args).map(|_| ()),
+                    _ => crate::params::load::<crate::estimator::EstimatorParams>(&args).map(|_| ()),
+                };
+                r.unwrap_or_else(|e| panic!("{} / {}: {e}", path.display(), n.name));
+            }
+        }
+        assert!(seen >= 3, "sim_rig, replay and live_rig");
+        let replay = dir.join("replay.launch.yaml");
+        let nodes = read_with(&replay, &[("file".into(), "/tmp/x.txt".into())]).unwrap();
+        assert!(nodes.iter().any(|n| n.args.iter().any(|a| a == "file:=/tmp/x.txt")), "{nodes:?}");
+        assert!(read_with(&replay, &[("fil".into(), "x".into())]).unwrap_err().to_string().contains("no launch argument `fil`"));
     }
 
     #[test]

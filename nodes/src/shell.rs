@@ -95,6 +95,14 @@ fn read_only(node: &'static str, initial: serde_json::Map<String, serde_json::Va
     })
 }
 
+/// Frames published before a subscriber is discovered are lost to it (volatile topic): give
+/// the graph up to 10 s to come up, then go on regardless (a DAQ does not wait for ever).
+fn wait_for_conditioner(ros: &RosNode) {
+    if !ros.wait_for_subscribers(&topics::DAQ_FRAMES, Duration::from_secs(10)) {
+        tracing::warn!("no subscriber on {} after 10 s: publishing anyway", topics::DAQ_FRAMES.name);
+    }
+}
+
 pub fn daq_main() -> Result<(), NodeError> {
     let (args, p, map) = setup::<DaqParams>("daq")?;
     p.validate()?;
@@ -111,6 +119,7 @@ pub fn daq_main() -> Result<(), NodeError> {
         let mut ros = RosNode::new(&args, &map, read_only("daq", map.clone()))?;
         let mut frames = ros.publisher(&topics::DAQ_FRAMES)?;
         let mut status = ros.publisher(&topics::RIG_STATUS)?;
+        wait_for_conditioner(&ros);
         let stop = shutdown_flag()?;
         let stopped = || stop.load(Ordering::SeqCst);
         let mut emit = |out: Produced| -> Result<(), NodeError> {
@@ -139,6 +148,7 @@ pub fn daq_main() -> Result<(), NodeError> {
                 run_tcp_source(&p.address, &mut core, &backoff, &stopped, &mut emit)?;
             }
         }
+        drop((frames, status));
         ros.shutdown();
         return Ok(());
     }
@@ -148,6 +158,7 @@ pub fn daq_main() -> Result<(), NodeError> {
     let mut commands = ros.subscription(&topics::EXCITER_COMMAND)?;
     let mut frames = ros.publisher(&topics::DAQ_FRAMES)?;
     let mut status = ros.publisher(&topics::RIG_STATUS)?;
+    wait_for_conditioner(&ros);
     let stop = shutdown_flag()?;
     let pace = Pace { rate_factor: p.rate_factor, wall_start: Stamp::now(), command_timeout_s: p.command_timeout_s, duration_s: p.duration_s };
     let mut state = SimDaqState::default();

@@ -52,7 +52,7 @@ impl Xorshift {
     fn value(&mut self) -> f64 {
         let pool = [0.0, -0.0, 1.0, 37.0, 80.0, 80.0001, 1e3, 1499.9, 1500.0, 1500.1, 1e9, 1e308, -1e308, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, f64::MIN_POSITIVE, -5.0, 0.5, 1e-12];
         let v = pool[(self.next() % pool.len() as u64) as usize];
-        if self.next() % 3 == 0 {
+        if self.next().is_multiple_of(3) {
             v * (self.next() % 1000) as f64 / 100.0
         } else {
             v
@@ -88,7 +88,7 @@ fn hostile_requests_never_exceed_the_limit() {
         if i % 2 == 0 {
             // Plausible: sines or multisines up to the exact limits (1500 N, 80 Hz).
             for j in 0..2 {
-                r.waveform[j] = if rng.next() % 2 == 0 { ExciterCommand::WAVEFORM_SINE } else { ExciterCommand::WAVEFORM_MULTISINE };
+                r.waveform[j] = if rng.next().is_multiple_of(2) { ExciterCommand::WAVEFORM_SINE } else { ExciterCommand::WAVEFORM_MULTISINE };
                 r.amplitude_n[j] = rng.plausible(1500.0);
                 r.frequency_hz[j] = 1.0 + rng.plausible(79.0);
                 r.rms_n[j] = rng.plausible(600.0);

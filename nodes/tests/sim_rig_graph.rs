@@ -7,7 +7,7 @@
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::cdr::encode;
 use oilfilm_msgs::{CoefficientEstimate, DaqFrame};
-use oilfilm_nodes::harness::{reanalyse, run_sim_rig, GraphParams, Recording};
+use oilfilm_nodes::harness::{reanalyse, run_sim_rig, Recording};
 use oilfilm_physics::config::RigConfig;
 
 mod common;

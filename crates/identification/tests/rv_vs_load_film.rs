@@ -196,9 +196,9 @@ fn film_rv_is_smaller_at_the_high_load_parameter_for_force_driven_and_line_orbit
             assert!(mean_abs(&p.rv[1]) > 2.5 * mean_abs(&p.rv[0]), "{}: {:?}", p.label, p.rv);
         }
         // The paper's claim fails at both d: the high load parameter varies clearly less.
-        for i in 0..at.len() {
+        for (i, d) in at.iter().enumerate() {
             let (l, h) = (mean_abs(&low.rv[i]), mean_abs(&high.rv[i]));
-            assert!(h < 0.75 * l, "d {}: mean |RV| {h} at F_Y 1.3 vs {l} at F_Y 0.35", at[i]);
+            assert!(h < 0.75 * l, "d {d}: mean |RV| {h} at F_Y 1.3 vs {l} at F_Y 0.35");
         }
         // Coefficient by coefficient at d = 0.12: smaller at F_Y 1.3 for at least five of eight.
         let smaller = (0..8).filter(|&k| high.rv[1][k].abs() < low.rv[1][k].abs()).count();
