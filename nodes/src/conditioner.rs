@@ -224,6 +224,12 @@ impl ConditionerCore {
         };
         let calibration = calibration_for(&self.rig, &probe, &offsets_s)?;
         let edge = conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?;
+        // A restart before the previous stream published anything keeps its note: every gap
+        // is reported, even when gaps come closer together than a block.
+        let note = match self.stream.as_mut().and_then(|s| s.start_note.take()) {
+            Some(earlier) => format!("{earlier}; {note}"),
+            None => note,
+        };
         self.stream = Some(Stream {
             rate_hz: frame.sample_rate_hz,
             units: frame.units,
