@@ -271,7 +271,7 @@ impl ExciterCore {
 
     /// The rig clock says `rig_time`: the setpoints due up to `rig_time + lookahead_s`
     /// (at most [`MAX_BLOCK_S`] of them), or `None` when nothing new is due.
-    pub fn on_rig_time(&mut self, rig_time: Stamp, stamp: Stamp) -> Option<ExciterCommand> {
+    pub fn on_rig_time(&mut self, rig_time: Stamp) -> Option<ExciterCommand> {
         let origin = *self.origin.get_or_insert(rig_time);
         let horizon_s = rig_time.seconds_since(origin) + self.lookahead_s;
         let last = (horizon_s * self.rate_hz).floor() as i64;
@@ -289,7 +289,7 @@ impl ExciterCore {
             f2.push(f[1]);
         }
         self.next_index = end + 1;
-        Some(self.command(origin.after_samples(start, self.rate_hz), f1, f2, stamp))
+        Some(self.command(origin.after_samples(start, self.rate_hz), f1, f2))
     }
 
     /// Setpoint `k` of the current plan, clamped, with the stop ramp applied.
@@ -311,7 +311,7 @@ impl ExciterCore {
 
     /// The final command on shutdown: the ramp to zero from the next setpoint, then zeros,
     /// `stop = true`. `None` if the exciter never started (no rig time seen).
-    pub fn shutdown(&mut self, stamp: Stamp) -> Option<ExciterCommand> {
+    pub fn shutdown(&mut self) -> Option<ExciterCommand> {
         let origin = self.origin?;
         self.stop();
         let ramp_s = self.stopping.map_or(MIN_STOP_RAMP_S, |s| s.ramp_s);
@@ -327,10 +327,10 @@ impl ExciterCore {
         f1.push(0.0);
         f2.push(0.0);
         self.next_index = start + n + 1;
-        Some(self.command(origin.after_samples(start, self.rate_hz), f1, f2, stamp))
+        Some(self.command(origin.after_samples(start, self.rate_hz), f1, f2))
     }
 
-    fn command(&mut self, first: Stamp, force_1_n: Vec<f64>, force_2_n: Vec<f64>, _stamp: Stamp) -> ExciterCommand {
+    fn command(&mut self, first: Stamp, force_1_n: Vec<f64>, force_2_n: Vec<f64>) -> ExciterCommand {
         let mut m = spec_of(&self.plan);
         m.header = Header { stamp: first.to_time(), frame_id: BEARING_FRAME_ID.into() };
         m.sequence = self.sequence;

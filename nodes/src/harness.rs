@@ -64,7 +64,7 @@ pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, 
     loop {
         let wall = Stamp(0);
         let d = poll::sim_daq(&mut daq, &mut daq_state, &mut DaqPorts { commands: &mut daq_cmd, frames: &mut daq_frames, status: &mut daq_status }, &pace, wall)?;
-        let e = poll::exciter(&mut exciter, &mut ExciterPorts { requests: &mut no_requests, status: &mut ex_status, commands: &mut ex_out }, wall)?;
+        let e = poll::exciter(&mut exciter, &mut ExciterPorts { requests: &mut no_requests, status: &mut ex_status, commands: &mut ex_out })?;
         let c = poll::conditioner(&mut conditioner, &mut ConditionerPorts { frames: &mut co_in, conditioned: &mut co_out })?;
         let s = poll::estimator(&mut estimator, &mut EstimatorPorts { conditioned: &mut es_in, status: &mut es_status, estimates: &mut es_out })?;
         if d.finished && e.handled + c.handled + s.handled == 0 {

@@ -35,7 +35,7 @@ pub struct ExciterPorts<'a> {
 }
 
 /// Requests first (a new plan applies from the next setpoint), then the newest rig time.
-pub fn exciter(core: &mut ExciterCore, ports: &mut ExciterPorts, wall: Stamp) -> Result<Turn, NodeError> {
+pub fn exciter(core: &mut ExciterCore, ports: &mut ExciterPorts) -> Result<Turn, NodeError> {
     let mut turn = Turn::default();
     while let Some(req) = ports.requests.receive()? {
         turn.handled += 1;
@@ -50,7 +50,7 @@ pub fn exciter(core: &mut ExciterCore, ports: &mut ExciterPorts, wall: Stamp) ->
         rig_time = Some(Stamp::from_time(&status.header.stamp));
     }
     if let Some(t) = rig_time {
-        if let Some(cmd) = core.on_rig_time(t, wall) {
+        if let Some(cmd) = core.on_rig_time(t) {
             ports.commands.publish(cmd)?;
             turn.handled += 1;
         }

@@ -66,13 +66,13 @@ pub fn exciter_main() -> Result<(), NodeError> {
                 Err(e) => tracing::warn!("parameter change not applied: {e}"),
             }
         }
-        let turn = poll::exciter(&mut core, &mut ExciterPorts { requests: &mut requests, status: &mut status, commands: &mut commands }, Stamp::now())?;
+        let turn = poll::exciter(&mut core, &mut ExciterPorts { requests: &mut requests, status: &mut status, commands: &mut commands })?;
         if turn.handled == 0 {
             std::thread::sleep(IDLE);
         }
     }
     // Safe stop: ramp both exciters to zero and hold.
-    if let Some(cmd) = core.shutdown(Stamp::now()) {
+    if let Some(cmd) = core.shutdown() {
         tracing::info!("stopping: ramp to zero over {} setpoints", cmd.force_1_n.len());
         commands.publish(cmd)?;
         std::thread::sleep(Duration::from_millis(200));

@@ -14,7 +14,7 @@ fn run(core: &mut ExciterCore, from: Stamp, seconds: f64) -> Vec<ExciterCommand>
     let mut out = Vec::new();
     let steps = (seconds * 10.0) as i64;
     for k in 0..=steps {
-        if let Some(c) = core.on_rig_time(Stamp(from.0 + k * 100_000_000), from) {
+        if let Some(c) = core.on_rig_time(Stamp(from.0 + k * 100_000_000)) {
             out.push(c);
         }
     }
@@ -164,7 +164,7 @@ fn stop_ramps_to_zero_and_holds() {
     let mut core = ExciterCore::new(HARD, &ExciterParams { ramp_s: 0.2, ..Default::default() }).unwrap();
     let t0 = Stamp(0);
     run(&mut core, t0, 2.0);
-    let last = core.shutdown(Stamp(2_000_000_000)).expect("a final command");
+    let last = core.shutdown().expect("a final command");
     assert!(last.stop);
     assert_eq!(*last.force_1_n.last().unwrap(), 0.0);
     assert_eq!(*last.force_2_n.last().unwrap(), 0.0);
