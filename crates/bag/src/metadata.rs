@@ -225,37 +225,6 @@ impl MetadataFile {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn qos_text_round_trips_and_uses_v9_names() {
-        let q = vec![QosProfile::keep_last(200, true, false), QosProfile::keep_last(10, false, true)];
-        let text = qos_to_channel_metadata(&q);
-        assert!(text.contains("history: keep_last"), "{text}");
-        assert!(text.contains("reliability: best_effort"), "{text}");
-        assert!(text.contains("durability: transient_local"), "{text}");
-        assert_eq!(parse_qos_text(&text).unwrap(), q);
-    }
-
-    #[test]
-    fn numeric_v8_qos_parses() {
-        let text = "- history: 1\n  depth: 5\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false";
-        let q = parse_qos_text(text).unwrap();
-        assert_eq!(q[0].history, History::KeepLast);
-        assert_eq!(q[0].durability, Durability::Volatile);
-        assert_eq!(q[0].depth, 5);
-    }
-
-    #[test]
-    fn newer_version_is_refused_by_name() {
-        let text = "rosbag2_bagfile_information:\n  version: 10\n  storage_identifier: mcap\n  duration: {nanoseconds: 0}\n  starting_time: {nanoseconds_since_epoch: 0}\n  message_count: 0\n  topics_with_message_count: []\n  relative_file_paths: []\n";
-        let e = MetadataFile::parse(text).unwrap_err();
-        assert!(e.contains("version 10"), "{e}");
-    }
-}
-
 impl MetadataFile {
     /// The metadata of an MCAP bag of `files` (in order) holding `topics` (with their total
     /// message counts). Compression is inside the MCAP chunks, so format and mode are empty.
@@ -286,5 +255,36 @@ impl MetadataFile {
                 ros_distro: ros_distro.into(),
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn qos_text_round_trips_and_uses_v9_names() {
+        let q = vec![QosProfile::keep_last(200, true, false), QosProfile::keep_last(10, false, true)];
+        let text = qos_to_channel_metadata(&q);
+        assert!(text.contains("history: keep_last"), "{text}");
+        assert!(text.contains("reliability: best_effort"), "{text}");
+        assert!(text.contains("durability: transient_local"), "{text}");
+        assert_eq!(parse_qos_text(&text).unwrap(), q);
+    }
+
+    #[test]
+    fn numeric_v8_qos_parses() {
+        let text = "- history: 1\n  depth: 5\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false";
+        let q = parse_qos_text(text).unwrap();
+        assert_eq!(q[0].history, History::KeepLast);
+        assert_eq!(q[0].durability, Durability::Volatile);
+        assert_eq!(q[0].depth, 5);
+    }
+
+    #[test]
+    fn newer_version_is_refused_by_name() {
+        let text = "rosbag2_bagfile_information:\n  version: 10\n  storage_identifier: mcap\n  duration: {nanoseconds: 0}\n  starting_time: {nanoseconds_since_epoch: 0}\n  message_count: 0\n  topics_with_message_count: []\n  relative_file_paths: []\n";
+        let e = MetadataFile::parse(text).unwrap_err();
+        assert!(e.contains("version 10"), "{e}");
     }
 }
