@@ -101,7 +101,7 @@ pub fn run(args: &LaunchArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_estimate(e: &CoefficientEstimate) {
+pub fn print_estimate(e: &CoefficientEstimate) {
     let t = |x: &oilfilm_msgs::Time| x.as_seconds();
     let span = t(&e.window_end) - t(&e.window_start);
     if !e.solved {

@@ -30,6 +30,33 @@ struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
+enum BagCommand {
+    /// Make a bag whose recorder was killed (no footer, no metadata.yaml) valid again, keeping
+    /// every message of every complete chunk; damaged originals are kept as *.mcap.damaged.
+    Recover {
+        /// The bag directory.
+        dir: std::path::PathBuf,
+    },
+}
+
+fn bag_recover(dir: &std::path::Path) -> Result<()> {
+    let r = oilfilm_bag::recover(dir)?;
+    for f in &r.files {
+        let what = match (&f.original, f.dropped) {
+            (_, true) => "dropped (not even an MCAP header)".to_string(),
+            (Some(orig), false) => format!("rewritten from {} complete chunk(s); original kept as {}", f.chunks, orig.display()),
+            (None, false) => "sound, kept as it was".to_string(),
+        };
+        println!("{}: {} message(s): {what}", f.path.display(), f.messages);
+        if let Some(stop) = &f.stop {
+            println!("    the original {} at byte {}: {}", if stop.truncated { "ended early" } else { "held bad bytes" }, stop.offset, stop.what);
+        }
+    }
+    println!("{}: {} message(s) in {} file(s); metadata.yaml written", dir.display(), r.messages(), r.files.len());
+    Ok(())
+}
+
+#[derive(Debug, Subcommand)]
 enum Command {
     /// Run the rig: operating point, film coefficients, and a simulated two-tone record
     /// through the multiplexed DAQ chain.
@@ -37,6 +64,9 @@ enum Command {
     /// Start a launch file's nodes (ROS 2 launch YAML), supervise them, print the estimates
     /// as they arrive, and stop them all after --seconds or on Ctrl-C.
     Launch(launch::LaunchArgs),
+    /// rosbag2 bag tools.
+    #[command(subcommand)]
+    Bag(BagCommand),
     /// The film's static equilibrium and linear coefficients at an operating point.
     Coefficients(CoefficientArgs),
     /// Simulate a record of the rig (any excitation, any injected effect) in the ASCII format.
@@ -126,6 +156,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Rig(args) => run_rig(&args),
         Command::Launch(args) => launch::run(&args),
+        Command::Bag(BagCommand::Recover { dir }) => bag_recover(&dir),
         Command::Coefficients(args) => run_coefficients(&args),
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),

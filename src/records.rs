@@ -194,8 +194,15 @@ pub enum SolverArg {
 
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
-    /// An ASCII record (see the README for the format).
+    /// An ASCII record (see the README for the format), or a rosbag2 bag directory (MCAP)
+    /// recorded from the node graph: its DAQ frames and rig status go through the very
+    /// conditioner and estimator the nodes run, so the estimates equal the live ones.
     file: PathBuf,
+    /// For a bag: a ROS 2 params file for the conditioner and estimator
+    /// (`/oilfilm/conditioner`, `/oilfilm/estimator` sections, e.g.
+    /// launch_configs/params/sim_rig.yaml); default: the nodes' defaults.
+    #[arg(long, value_name = "FILE")]
+    params: Option<PathBuf>,
     #[command(flatten)]
     source: RigSource,
     /// Shaft speed, rpm, if the record does not state it.
@@ -207,10 +214,12 @@ pub struct IdentifyArgs {
     /// Samples between window starts (default: the window).
     #[arg(long)]
     hop: Option<usize>,
-    #[arg(long, value_enum, default_value = "kc")]
-    model: ModelArg,
-    #[arg(long, value_enum, default_value = "qr")]
-    solver: SolverArg,
+    /// Model order (default kc; for a bag: the params file's, else kc).
+    #[arg(long, value_enum)]
+    model: Option<ModelArg>,
+    /// Solver (default qr; for a bag: the params file's, else qr).
+    #[arg(long, value_enum)]
+    solver: Option<SolverArg>,
     /// Skip the de-skew stage (only to see what the multiplex skew does).
     #[arg(long)]
     no_deskew: bool,
@@ -220,6 +229,10 @@ pub struct IdentifyArgs {
 }
 
 pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
+    if args.file.is_dir() {
+        return identify_bag(args);
+    }
+    anyhow::ensure!(args.params.is_none(), "--params applies to bags (the node parameters); an ASCII record takes --window, --hop, --model, --solver");
     let rig = args.source.load()?;
     let name = args.file.display().to_string();
     let text = std::fs::read_to_string(&args.file).with_context(|| format!("cannot read {name}"))?;
@@ -238,11 +251,11 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
     config.estimator.window = args.window.unwrap_or(config.estimator.window);
     config.estimator.hop = args.hop.unwrap_or(config.estimator.window);
     config.estimator.sample_rate_hz = record.header.sample_rate_hz;
-    config.estimator.model = match args.model {
+    config.estimator.model = match args.model.unwrap_or(ModelArg::Kc) {
         ModelArg::Kc => ModelOrder::Kc,
         ModelArg::Kcm => ModelOrder::Kcm,
     };
-    config.estimator.solver = match args.solver {
+    config.estimator.solver = match args.solver.unwrap_or(SolverArg::Qr) {
         SolverArg::Qr => Solver::Qr,
         SolverArg::Svd => Solver::Svd,
         SolverArg::Paper => Solver::NormalEquations,
@@ -314,4 +327,82 @@ fn print_identification(name: &str, id: &Identification) {
     if let Some(n) = &id.frequency_domain_note {
         println!("{n}");
     }
+}
+
+/// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
+/// and estimator (the node cores, `oilfilm_nodes::harness::reanalyse`).
+fn identify_bag(args: &IdentifyArgs) -> Result<()> {
+    use oilfilm_nodes::conditioner::ConditionerParams;
+    use oilfilm_nodes::estimator::EstimatorParams;
+    use oilfilm_nodes::params::{self, NodeArgs};
+
+    let rig = args.source.load()?;
+    let name = args.file.display().to_string();
+    let node_args = |node: &str| NodeArgs {
+        name: node.into(),
+        namespace: oilfilm_nodes::topics::NAMESPACE.into(),
+        params_files: args.params.iter().cloned().collect(),
+        ..Default::default()
+    };
+    let (conditioner, _) = params::load::<ConditionerParams>(&node_args("conditioner"))?;
+    let (mut estimator, _) = params::load::<EstimatorParams>(&node_args("estimator"))?;
+    if let Some(w) = args.window {
+        estimator.window = w as i64;
+        estimator.hop = args.hop.unwrap_or(w) as i64;
+    } else if let Some(h) = args.hop {
+        estimator.hop = h as i64;
+    }
+    if let Some(m) = args.model {
+        estimator.model = match m {
+            ModelArg::Kc => "kc",
+            ModelArg::Kcm => "kcm",
+        }
+        .into();
+    }
+    if let Some(s) = args.solver {
+        estimator.solver = match s {
+            SolverArg::Qr => "qr",
+            SolverArg::Svd => "svd",
+            SolverArg::Paper => "normal_equations",
+        }
+        .into();
+    }
+    if let Some(rpm) = args.speed_rpm {
+        estimator.speed_rpm = rpm;
+    }
+    if args.no_deskew {
+        bail!("{name}: --no-deskew is for ASCII records; for a bag set `deskew: false` in the conditioner's params");
+    }
+    let bag = oilfilm_bag::Bag::open(&args.file)?;
+    let (mut frames, mut status) = (Vec::new(), Vec::new());
+    for m in bag.messages()? {
+        match m.decode_ours()? {
+            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
+            oilfilm_bag::OilfilmMessage::RigStatus(s) => status.push(s),
+            _ => {}
+        }
+    }
+    if frames.is_empty() {
+        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to identify", oilfilm_nodes::topics::DAQ_FRAMES.name);
+    }
+    let out = oilfilm_nodes::harness::reanalyse(&rig, &conditioner, &estimator, &frames, &status)?;
+    if args.json {
+        let doc = serde_json::json!({
+            "bag": name,
+            "frame": pipeline::FRAME,
+            "frames": frames.len(),
+            "conditioner": conditioner,
+            "estimator": estimator,
+            "estimates": out.estimates,
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    println!("{name}: {} DAQ frames, {} rig status messages through the node conditioner and estimator", frames.len(), status.len());
+    println!("frame: {}", pipeline::FRAME);
+    for e in &out.estimates {
+        crate::launch::print_estimate(e);
+    }
+    println!("{} estimate(s), {} solved", out.estimates.len(), out.estimates.iter().filter(|e| e.solved).count());
+    Ok(())
 }

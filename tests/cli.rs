@@ -104,3 +104,62 @@ fn bad_input_names_file_line_and_column_and_exits_non_zero() {
     let _ = std::fs::remove_file(&bad);
     let _ = std::fs::remove_file(&rig);
 }
+
+/// `oilfilm identify BAG`: a bag recorded from the node graph re-analysed offline through
+/// the node conditioner and estimator gives the live estimates exactly (JSON floats print
+/// shortest-round-trip, so equality of the parsed numbers is equality of the bits).
+#[test]
+fn identify_a_bag_gives_the_live_estimates() {
+    use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
+    use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
+    use oilfilm_nodes::topics;
+
+    let mut p = GraphParams::default();
+    p.daq.duration_s = 12.0;
+    p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
+    p.conditioner.lowpass_cutoff_hz = 55.5;
+    p.estimator.window = 25_000;
+    p.estimator.hop = 25_000;
+    let rig = oilfilm_physics::config::RigConfig::zhou2004().unwrap();
+    let (live, _) = run_sim_rig(&rig, &p).unwrap();
+    assert!(!live.estimates.is_empty());
+
+    let dir = scratch("graph-bag");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
+    let spec = |t: &topics::Topic| {
+        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()
+    };
+    let (frames, status) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap());
+    let ns = |h: &oilfilm_msgs::Header| (h.stamp.sec as u64) * 1_000_000_000 + h.stamp.nanosec as u64;
+    for s in &live.status[..1] {
+        w.write_message(status, ns(&s.header), s).unwrap();
+    }
+    for f in &live.frames {
+        w.write_message(frames, ns(&f.header), f).unwrap();
+    }
+    w.close().unwrap();
+    let params = scratch("graph-bag-params.yaml");
+    std::fs::write(&params, "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n").unwrap();
+
+    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let got = doc["estimates"].as_array().expect("estimates");
+    assert_eq!(got.len(), live.estimates.len());
+    for (g, e) in got.iter().zip(&live.estimates) {
+        assert!(e.solved);
+        let k: Vec<f64> = g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let d: Vec<f64> = g["damping_n_s_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        assert_eq!(k, e.stiffness_n_m.to_vec(), "stiffness of window {}", e.window_start_sample);
+        assert_eq!(d, e.damping_n_s_m.to_vec(), "damping of window {}", e.window_start_sample);
+    }
+    // Human output, and a directory that is no bag is an error naming it.
+    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("solved"));
+    let empty = scratch("not-a-bag");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = oilfilm(&["identify", empty.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not-a-bag"), "{}", String::from_utf8_lossy(&out.stderr));
+}
