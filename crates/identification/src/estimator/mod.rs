@@ -431,19 +431,6 @@ pub fn estimate_window(signals: &Signals, range: Range<usize>, config: &Estimato
     Ok(analyse_window(&cols, range.start, None, None, config))
 }
 
-/// Windows at least this long run their line search and one FFT pair of the standard errors
-/// on a helper thread (shorter ones are done before a thread would have started).
-const PARALLEL_SAMPLES: usize = 16_384;
-
-/// What a QR or SVD window computes before its checks: the scaled factor (`None`: it
-/// overflowed), its solution (`None`: rank-deficient) and the residual half of the standard
-/// errors for that solution.
-struct Presolved {
-    factor: Option<ScaledFactor>,
-    solution: Option<solve::Solution>,
-    residual: Option<uncertainty::ResidualDensity>,
-}
-
 /// [`estimate_window`] with the window's line search fed while its samples arrived
 /// ([`LineSearch`], for a window of `range.len()` samples at `config.sample_rate_hz`; another
 /// search is ignored). The result is [`estimate_window`]'s, bit for bit: only the time after
@@ -508,52 +495,19 @@ pub(crate) fn analyse_window(
         return est;
     }
     let data: Vec<&[f64]> = cols.iter().map(|(_, c)| &c[..n]).collect();
-    // 3. Excitation lines, and (QR, SVD) the factor, its solution and the residual half of
-    // the standard errors: independent of each other, so on long windows the line search runs
-    // on a helper thread meanwhile. The solution is computed before the checks that may refuse
-    // the window; a refused window just discards it. Same bits on every path.
-    let line_search = || spectrum::analyse(data[0], data[1], data[2], data[3], config.sample_rate_hz);
-    // A search fed while the samples arrived (same bits as `line_search`), if it is this window's.
-    let search = search.filter(|s| s.window() == (n, config.sample_rate_hz));
+    // 3. Excitation lines (from the search fed while the samples arrived, if it is this
+    // window's: the same bits).
     let (x, y, vx, vy) = (data[0], data[1], data[2], data[3]);
-    let fed_search = move || search.map(|s| s.finish(x, y, vx, vy));
-    let presolve = || -> Option<Presolved> {
-        if config.solver == Solver::NormalEquations {
-            return None;
-        }
-        let owned = match summary {
-            Some(_) => None,
-            None => Some(BlockSummary::from_columns(&data)),
-        };
-        let factor = ScaledFactor::new(summary.or(owned.as_ref())?, p);
-        let solution = factor.as_ref().and_then(|f| f.solve(config.solver));
-        let residual = match (&factor, &solution) {
-            (Some(f), Some(sol)) => uncertainty::residual_density(&data, p, &f.mean, &sol.coef),
-            _ => None,
-        };
-        Some(Presolved { factor, solution, residual })
+    let lines = match search.filter(|s| s.window() == (n, config.sample_rate_hz)) {
+        Some(s) => s.finish(x, y, vx, vy),
+        None => spectrum::analyse(x, y, vx, vy, config.sample_rate_hz),
     };
-    let parallel = n >= PARALLEL_SAMPLES;
-    let (lines, presolved) = std::thread::scope(|s| {
-        let (helper, lines) = if parallel {
-            let h = std::thread::Builder::new().name("oilfilm-lines".into()).spawn_scoped(s, move || fed_search().unwrap_or_else(line_search));
-            (h.ok(), None)
-        } else {
-            (None, Some(fed_search().unwrap_or_else(line_search)))
-        };
-        let presolved = presolve();
-        // A helper that died (or could not start) is redone here: the line search is a pure
-        // function of the window.
-        let lines = lines.or_else(|| helper.and_then(|h| h.join().ok())).unwrap_or_else(line_search);
-        (lines, presolved)
-    });
     est.frequencies_hz = lines.merged.clone();
     let names = model.regressor_names();
     let structural = explain::structural_rank(model, &lines);
     excitation_flags(&mut est.flags, model, &lines);
 
     // 4. Solve.
-    let mut residual = None;
     let (mean, scale, coef, ginv) = match config.solver {
         Solver::NormalEquations => {
             let ne = normal_equations::solve(&data, p);
@@ -581,13 +535,15 @@ pub(crate) fn analyse_window(
             }
         }
         Solver::Qr | Solver::Svd => {
-            let Some(Presolved { factor, solution, residual: pre }) = presolved else {
-                // Not reached: the QR and SVD solvers always presolve.
-                est.condition_number = f64::NAN;
-                return est;
+            let owned;
+            let summary = match summary {
+                Some(s) => s,
+                None => {
+                    owned = BlockSummary::from_columns(&data);
+                    &owned
+                }
             };
-            residual = pre;
-            let Some(factor) = factor else {
+            let Some(factor) = ScaledFactor::new(summary, p) else {
                 est.condition_number = f64::INFINITY;
                 est.result = Err(Refusal::IllConditioned {
                     condition: f64::INFINITY,
@@ -624,7 +580,7 @@ pub(crate) fn analyse_window(
                 });
                 return est;
             }
-            let Some(sol) = solution else {
+            let Some(sol) = factor.solve(config.solver) else {
                 est.result = Err(Refusal::RankDeficient {
                     rank: est.rank,
                     needed: p,
@@ -637,7 +593,7 @@ pub(crate) fn analyse_window(
     };
 
     // 5. Residuals and standard errors (fixed-regressor spectral form, see `uncertainty`).
-    let hac = uncertainty::spectral_with(&data, p, &mean, &scale, &coef, &ginv, residual, parallel);
+    let hac = uncertainty::spectral(&data, p, &mean, &scale, &coef, &ginv);
     est.residual_rms_n = [hac.residual_rms[0], hac.residual_rms[1]];
     let coefficients = assemble(model, &coef, &hac.se);
     let accel_noise = (model == ModelOrder::Kcm).then(|| spectrum::noise_fraction(data[4], data[5], &lines, config.sample_rate_hz));

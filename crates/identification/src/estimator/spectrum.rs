@@ -200,24 +200,25 @@ struct Tables {
     ts: Vec<f64>,
 }
 
-/// The tables of the last segment length used, shared by every thread (the estimator's
-/// helper thread runs the line search): every window of a run has the same length, and
-/// building them costs ~5 trigonometric calls per sample.
-static TABLES: std::sync::Mutex<Option<std::sync::Arc<Tables>>> = std::sync::Mutex::new(None);
+thread_local! {
+    /// The tables of the last segment length used on this thread: every window of a run has
+    /// the same length, and building them costs ~5 trigonometric calls per sample.
+    static TABLES: std::cell::RefCell<Option<std::rc::Rc<Tables>>> = const { std::cell::RefCell::new(None) };
+}
 
 impl Tables {
-    fn cached(seg: usize) -> std::sync::Arc<Tables> {
-        // A poisoned lock only means another thread panicked while holding it; the slot
-        // holds either nothing or complete tables.
-        let mut slot = TABLES.lock().unwrap_or_else(|e| e.into_inner());
-        match slot.as_ref() {
-            Some(t) if t.taper.len() == seg => t.clone(),
-            _ => {
-                let t = std::sync::Arc::new(Tables::new(seg));
-                *slot = Some(t.clone());
-                t
+    fn cached(seg: usize) -> std::rc::Rc<Tables> {
+        TABLES.with(|cell| {
+            let mut slot = cell.borrow_mut();
+            match slot.as_ref() {
+                Some(t) if t.taper.len() == seg => t.clone(),
+                _ => {
+                    let t = std::rc::Rc::new(Tables::new(seg));
+                    *slot = Some(t.clone());
+                    t
+                }
             }
-        }
+        })
     }
 
     fn new(seg: usize) -> Self {
@@ -302,7 +303,7 @@ pub struct LineSearch {
     n: usize,
     sample_rate_hz: f64,
     /// `None` when the window is too short for the analysis (or the rate not positive).
-    tables: Option<std::sync::Arc<Tables>>,
+    tables: Option<std::rc::Rc<Tables>>,
     starts: Vec<usize>,
     /// Segments transformed so far.
     done: usize,

@@ -137,26 +137,27 @@ pub fn parzen_lag(n: usize) -> (usize, bool) {
     if l > cap { (cap, true) } else { (l, false) }
 }
 
-/// FFT twiddles of the last length used, shared by every thread (the estimator splits a
-/// window's transforms over two): every window of a run has the same length, and building
-/// them costs two trigonometric calls per point.
-static TWIDDLES: std::sync::Mutex<Option<std::sync::Arc<Twiddles>>> = std::sync::Mutex::new(None);
+thread_local! {
+    /// FFT twiddles of the last length used on this thread: every window of a run has the same
+    /// length, and building them costs two trigonometric calls per point.
+    static TWIDDLES: std::cell::RefCell<Option<std::rc::Rc<Twiddles>>> = const { std::cell::RefCell::new(None) };
+}
 
 /// Cosines and sines of every FFT stage ([`twiddles`]).
 type Twiddles = (Vec<f64>, Vec<f64>);
 
-fn cached_twiddles(nfft: usize) -> std::sync::Arc<Twiddles> {
-    // A poisoned lock only means another thread panicked while holding it; the slot holds
-    // either nothing or a complete table.
-    let mut slot = TWIDDLES.lock().unwrap_or_else(|e| e.into_inner());
-    match slot.as_ref() {
-        Some(t) if t.0.len() + 1 == nfft => t.clone(),
-        _ => {
-            let t = std::sync::Arc::new(twiddles(nfft));
-            *slot = Some(t.clone());
-            t
+fn cached_twiddles(nfft: usize) -> std::rc::Rc<Twiddles> {
+    TWIDDLES.with(|cell| {
+        let mut slot = cell.borrow_mut();
+        match slot.as_ref() {
+            Some(t) if t.0.len() + 1 == nfft => t.clone(),
+            _ => {
+                let t = std::rc::Rc::new(twiddles(nfft));
+                *slot = Some(t.clone());
+                t
+            }
         }
-    }
+    })
 }
 
 /// Parzen's lag window at `u = l / L` (zero for `|u| ≥ 1`).
@@ -209,62 +210,34 @@ fn fft_even_pair(a: Vec<f64>, b: Vec<f64>, tc: &[f64], ts: &[f64]) -> (Vec<f64>,
 /// and outputs as [`newey_west`]: `cols` are the window's regressors (`p`, 1 to 8) then
 /// right-hand sides (`m`); `mean`, `scale` as in the factor; `coef[j * m + k]` the solution;
 /// `ginv_s` the inverse Gram of the scaled regressors. Malformed sizes give NaN errors.
-///
-/// The work comes in two independent halves, [`residual_density`] (the residuals and their
-/// lag-window densities, `3 ⌈m/2⌉` FFTs) and the regressors' spectra (`⌈p/2⌉` FFTs), which
-/// [`spectral_with`] can run on two threads; every path gives the same bits.
 pub fn spectral(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64]) -> Hac {
-    spectral_with(cols, p, mean, scale, coef, ginv_s, None, false)
-}
-
-/// Window length, lag and FFT length of the spectral estimator for `n` samples.
-struct Grid {
-    lag: usize,
-    capped: bool,
-    nfft: usize,
-}
-
-impl Grid {
-    fn new(n: usize) -> Self {
-        let (lag, capped) = parzen_lag(n);
-        Self { lag, capped, nfft: (n + lag + 1).next_power_of_two() }
-    }
-
-    fn nb(&self) -> usize {
-        self.nfft / 2 + 1
-    }
-}
-
-/// The residual half of [`spectral`]: RMS residuals and the residuals' spectral densities
-/// (lag-window estimate, misfit lines kept at their own height) on the FFT grid, bins
-/// `0..=N/2`. Depends on the solution but not on the regressors' spectra, so it can be
-/// computed while they are.
-#[derive(Debug, Clone)]
-pub struct ResidualDensity {
-    n: usize,
-    p: usize,
-    m: usize,
-    residual_rms: Vec<f64>,
-    /// Per right-hand side.
-    density: Vec<Vec<f64>>,
-}
-
-/// [`ResidualDensity`] of the window `cols` (regressors then right-hand sides) for the
-/// solution `coef`; `None` for sizes [`spectral`] refuses.
-pub fn residual_density(cols: &[&[f64]], p: usize, mean: &[f64], coef: &[f64]) -> Option<ResidualDensity> {
     let q = cols.len();
     let m = q.saturating_sub(p);
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
-    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || mean.len() < q {
-        return None;
+    let mut out = Hac::nan(p, m);
+    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < q {
+        return out;
     }
-    let grid = Grid::new(n);
-    let (lag, nfft) = (grid.lag, grid.nfft);
+    let dof = n as f64 / (n - p - 1) as f64;
+    let (lag, capped) = parzen_lag(n);
+    out.lag_capped = capped;
+    let nfft = (n + lag + 1).next_power_of_two();
     let tw = cached_twiddles(nfft);
     let (tc, ts) = (&tw.0, &tw.1);
-    let nb = grid.nb();
-    let mut residual_rms = vec![f64::NAN; m];
-    let mut density = vec![Vec::new(); m];
+    let nb = nfft / 2 + 1;
+    // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
+    let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
+
+    // Spectra of the centred, scaled regressors, two per FFT.
+    let scaled: Vec<Vec<f64>> = (0..p).map(|j| cols[j][..n].iter().map(|v| (v - mean[j]) / scale[j]).collect()).collect();
+    let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
+    for j in (0..p).step_by(2) {
+        let (a, b) = fft_pair(&scaled[j], scaled.get(j + 1).map(|v| v.as_slice()), tc, ts);
+        spec.push(a);
+        if j + 1 < p {
+            spec.push(b);
+        }
+    }
 
     // Residuals of every right-hand side.
     let mut resid: Vec<Vec<f64>> = Vec::with_capacity(m);
@@ -282,10 +255,12 @@ pub fn residual_density(cols: &[&[f64]], p: usize, mean: &[f64], coef: &[f64]) -
                 e
             })
             .collect();
-        residual_rms[k] = (sse / n as f64).sqrt();
+        out.residual_rms[k] = (sse / n as f64).sqrt();
         resid.push(e);
     }
 
+    // Residual spectral densities per right-hand side, bins 0..=N/2.
+    let mut density = vec![Vec::new(); m];
     for k0 in (0..m).step_by(2) {
         let pair = [Some(k0), (k0 + 1 < m).then_some(k0 + 1)];
         // Periodograms |E_k|², full length N (real and even).
@@ -326,83 +301,12 @@ pub fn residual_density(cols: &[&[f64]], p: usize, mean: &[f64], coef: &[f64]) -
                 .collect();
         }
     }
-    Some(ResidualDensity { n, p, m, residual_rms, density })
-}
-
-/// Spectra (re, im; bins `0..=N/2`) of the centred, scaled regressors `j` and `j + 1` (if
-/// `j + 1 < p`), sharing one FFT.
-fn regressor_pair(cols: &[&[f64]], j: usize, p: usize, n: usize, mean: &[f64], scale: &[f64], tw: &Twiddles) -> Vec<[Vec<f64>; 2]> {
-    let scaled = |j: usize| -> Vec<f64> { cols[j][..n].iter().map(|v| (v - mean[j]) / scale[j]).collect() };
-    let a = scaled(j);
-    let b = (j + 1 < p).then(|| scaled(j + 1));
-    let (sa, sb) = fft_pair(&a, b.as_deref(), &tw.0, &tw.1);
-    if b.is_some() { vec![sa, sb] } else { vec![sa] }
-}
-
-/// [`spectral`] with the residual half already computed (`residual`, from
-/// [`residual_density`] with the same `cols`, `p`, `mean`, `coef`; `None`: computed here)
-/// and, if `parallel`, the first pair of regressor spectra on a second thread. The result
-/// does not depend on either choice, bit for bit.
-#[allow(clippy::too_many_arguments)] // spectral's inputs plus the two choices
-pub fn spectral_with(
-    cols: &[&[f64]],
-    p: usize,
-    mean: &[f64],
-    scale: &[f64],
-    coef: &[f64],
-    ginv_s: &[f64],
-    residual: Option<ResidualDensity>,
-    parallel: bool,
-) -> Hac {
-    let q = cols.len();
-    let m = q.saturating_sub(p);
-    let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
-    let mut out = Hac::nan(p, m);
-    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < q {
-        return out;
-    }
-    let grid = Grid::new(n);
-    out.lag_capped = grid.capped;
-    let (lag, nfft, nb) = (grid.lag, grid.nfft, grid.nb());
-    let tw = cached_twiddles(nfft);
-    let dof = n as f64 / (n - p - 1) as f64;
-    // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
-    let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
-
-    // Spectra of the centred, scaled regressors, two per FFT; the residual half unless given.
-    let pairs: Vec<usize> = (0..p).step_by(2).collect();
-    let residual = residual.filter(|r| r.n == n && r.p == p && r.m == m);
-    let (spec, residual) = std::thread::scope(|s| {
-        let first = if parallel && pairs.len() + usize::from(residual.is_none()) > 1 {
-            std::thread::Builder::new().name("oilfilm-spectra".into()).spawn_scoped(s, || regressor_pair(cols, 0, p, n, mean, scale, &tw)).ok()
-        } else {
-            None
-        };
-        let residual = residual.or_else(|| residual_density(cols, p, mean, coef));
-        let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
-        let rest = match first {
-            Some(h) => {
-                let mut later: Vec<[Vec<f64>; 2]> = pairs[1..].iter().flat_map(|&j| regressor_pair(cols, j, p, n, mean, scale, &tw)).collect();
-                // A helper that died is redone here (its work is a pure function).
-                spec.extend(h.join().unwrap_or_else(|_| regressor_pair(cols, 0, p, n, mean, scale, &tw)));
-                spec.append(&mut later);
-                Vec::new()
-            }
-            None => pairs.clone(),
-        };
-        for j in rest {
-            spec.extend(regressor_pair(cols, j, p, n, mean, scale, &tw));
-        }
-        (spec, residual)
-    });
-    let Some(residual) = residual else { return out };
-    out.residual_rms.clone_from(&residual.residual_rms);
 
     // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k), every right-hand side in one pass over the
     // regressors' spectra (each sum still in bin order).
     let mut sums = vec![vec![0.0; p * p]; m];
     for i in 0..nb {
-        for (s, dens) in sums.iter_mut().zip(&residual.density) {
+        for (s, dens) in sums.iter_mut().zip(&density) {
             let d = dens[i].max(0.0) * bin_weight(i);
             if d == 0.0 {
                 continue;
