@@ -9,9 +9,8 @@
 //! Speed: the `speed_rpm` parameter if set, else the latest `rig/status`, else the rig
 //! file's, and the estimate's flags say which.
 
-use std::collections::VecDeque;
-
 use nalgebra::Matrix2;
+use oilfilm_identification::estimator::spectrum::LineSearch;
 use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver};
 use oilfilm_identification::pipeline::{window_report, WindowReport};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, Header, RigStatus, BEARING_FRAME_ID};
@@ -99,16 +98,16 @@ impl EstimatorParams {
 struct Buffer {
     /// Sample index of element 0.
     first: u64,
-    x: VecDeque<f64>,
-    y: VecDeque<f64>,
-    vx: VecDeque<f64>,
-    vy: VecDeque<f64>,
-    ax: VecDeque<f64>,
-    ay: VecDeque<f64>,
-    fx: VecDeque<f64>,
-    fy: VecDeque<f64>,
-    temperature: VecDeque<f64>,
-    valid: VecDeque<bool>,
+    x: Vec<f64>,
+    y: Vec<f64>,
+    vx: Vec<f64>,
+    vy: Vec<f64>,
+    ax: Vec<f64>,
+    ay: Vec<f64>,
+    fx: Vec<f64>,
+    fy: Vec<f64>,
+    temperature: Vec<f64>,
+    valid: Vec<bool>,
 }
 
 impl Buffer {
@@ -138,6 +137,9 @@ pub struct EstimatorCore {
     status_speed_rpm: Option<f64>,
     sequence: u64,
     restart_note: Option<String>,
+    /// The line search of the window at `next_start` (its first sample, and the search), fed
+    /// as conditioned frames arrive so that little of it is left when the window completes.
+    search: Option<(u64, LineSearch)>,
 }
 
 impl EstimatorCore {
@@ -153,6 +155,7 @@ impl EstimatorCore {
             status_speed_rpm: None,
             sequence: 0,
             restart_note: None,
+            search: None,
         })
     }
 
@@ -166,6 +169,7 @@ impl EstimatorCore {
         let hop = params.hop as u64;
         self.params = params;
         self.next_start = self.buffer.end().div_ceil(hop) * hop;
+        self.search = None;
         Ok(())
     }
 
@@ -209,6 +213,7 @@ impl EstimatorCore {
                 ));
             }
             self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
+            self.search = None;
             self.rate_hz = frame.sample_rate_hz;
             self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
             let hop = config.hop as u64;
@@ -239,16 +244,37 @@ impl EstimatorCore {
             self.next_start += hop;
         }
         self.buffer.drop_before(self.next_start);
+        self.feed_search(&config);
         Ok(out)
+    }
+
+    /// Feeds the samples buffered for the window at `next_start` to its line search (started
+    /// here if there is none for that window yet). Only when the estimate runs the Kc or Kcm
+    /// model on x, y, x', y': the search depends on nothing else.
+    fn feed_search(&mut self, config: &EstimatorConfig) {
+        let start = self.next_start;
+        if self.buffer.end() <= start || self.buffer.first > start {
+            return;
+        }
+        let fresh = !matches!(&self.search, Some((s, ls)) if *s == start && ls.window() == (config.window, config.sample_rate_hz));
+        if fresh {
+            self.search = Some((start, LineSearch::new(config.window, config.sample_rate_hz)));
+        }
+        let b = &self.buffer;
+        let from = (start - b.first) as usize;
+        let to = b.x.len().min(from + config.window);
+        if let Some((_, ls)) = self.search.as_mut() {
+            ls.advance(&b.x[from..to], &b.y[from..to], &b.vx[from..to], &b.vy[from..to]);
+        }
     }
 
     /// The window at `next_start` (at the front of the buffer).
     fn estimate(&mut self, config: &EstimatorConfig) -> Result<CoefficientEstimate, NodeError> {
         let w = config.window;
-        let b = &mut self.buffer;
-        let col = |c: &mut VecDeque<f64>| -> Vec<f64> { c.make_contiguous()[..w].to_vec() };
-        let (x, y, vx, vy, ax, ay, fx, fy) =
-            (col(&mut b.x), col(&mut b.y), col(&mut b.vx), col(&mut b.vy), col(&mut b.ax), col(&mut b.ay), col(&mut b.fx), col(&mut b.fy));
+        // The window's search, if it was fed for this window (else the estimate searches).
+        let search = self.search.take().filter(|(s, _)| *s == self.next_start).map(|(_, ls)| ls);
+        let b = &self.buffer;
+        let (x, y, vx, vy, ax, ay, fx, fy) = (&b.x[..w], &b.y[..w], &b.vx[..w], &b.vy[..w], &b.ax[..w], &b.ay[..w], &b.fx[..w], &b.fy[..w]);
         let temperature = b.temperature.iter().take(w).sum::<f64>() / w as f64;
         let invalid: Vec<usize> = b.valid.iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
         let start = self.next_start;
@@ -285,17 +311,12 @@ impl EstimatorCore {
             return Ok(msg);
         }
         let acc = config.model == ModelOrder::Kcm;
-        let signals = Signals {
-            x_m: &x,
-            y_m: &y,
-            vx_m_s: &vx,
-            vy_m_s: &vy,
-            ax_m_s2: acc.then_some(&ax[..]),
-            ay_m_s2: acc.then_some(&ay[..]),
-            fx_n: &fx,
-            fy_n: &fy,
+        let signals = Signals { x_m: x, y_m: y, vx_m_s: vx, vy_m_s: vy, ax_m_s2: acc.then_some(ax), ay_m_s2: acc.then_some(ay), fx_n: fx, fy_n: fy };
+        // Same bits with or without the fed search (it only moves work before the window's end).
+        let estimate = match search {
+            Some(ls) => estimator::estimate_window_with_search(&signals, 0..w, config, ls)?,
+            None => estimator::estimate_window(&signals, 0..w, config)?,
         };
-        let estimate = estimator::estimate_window(&signals, 0..w, config)?;
         let report = window_report(&signals, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
         fill(&mut msg, &report);
         Ok(msg)
@@ -375,6 +396,66 @@ fn fill(msg: &mut CoefficientEstimate, r: &WindowReport) {
         Err(refusal) => {
             msg.solved = false;
             msg.refusal_reason = refusal.to_string();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Conditioned frames of `size` samples (the last may be shorter) of a two-tone record
+    /// with a linear film and deterministic pseudo-noise.
+    fn frames(total: usize, size: usize, fs: f64) -> Vec<ConditionedFrame> {
+        let mut state: u64 = 0x2545_F491_4F6C_DD1D;
+        let mut noise = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (w1, w2) = (2.0 * std::f64::consts::PI * 23.0, 2.0 * std::f64::consts::PI * 37.0);
+        let mut out = Vec::new();
+        let mut first = 0;
+        while first < total {
+            let n = size.min(total - first);
+            let mut f = ConditionedFrame { sequence: out.len() as u64, first_sample: first as u64, sample_rate_hz: fs, bearing_temperature_degc: 40.0, ..Default::default() };
+            for i in first..first + n {
+                let t = i as f64 / fs;
+                let (x, vx) = (5e-6 * (w1 * t).cos() + 3e-6 * (w2 * t).sin(), -5e-6 * w1 * (w1 * t).sin() + 3e-6 * w2 * (w2 * t).cos());
+                let (y, vy) = (4e-6 * (w2 * t).cos() + 2e-6 * (w1 * t).sin(), -4e-6 * w2 * (w2 * t).sin() + 2e-6 * w1 * (w1 * t).cos());
+                f.x_m.push(x - 2e-5 + 1e-9 * noise());
+                f.y_m.push(y - 6e-5 + 1e-9 * noise());
+                f.x_dot_m_s.push(vx);
+                f.y_dot_m_s.push(vy);
+                f.fx_n.push(150.0 - (1.2e8 * x + 3e7 * y + 2e5 * vx + 1.5e4 * vy) + 5.0 * noise());
+                f.fy_n.push(8000.0 - (-2e7 * x + 2e8 * y + 1.2e4 * vx + 3e5 * vy) + 5.0 * noise());
+                f.valid.push(true);
+            }
+            out.push(f);
+            first += n;
+        }
+        out
+    }
+
+    fn run(frames: &[ConditionedFrame], params: &EstimatorParams) -> Vec<String> {
+        let mut core = EstimatorCore::new(RigConfig::zhou2004().expect("built-in rig"), params.clone()).expect("valid parameters");
+        frames.iter().flat_map(|f| core.push(f).expect("good frame")).map(|e| format!("{e:?}")).collect()
+    }
+
+    /// Windows completed by many small frames (line search fed while they arrive) and by one
+    /// frame each (the search done at the end) give the same estimates, to the bit.
+    #[test]
+    fn fed_line_search_gives_the_batch_estimate() {
+        let fs = 5000.0;
+        for (window, hop) in [(25_000, 25_000), (20_000, 12_000)] {
+            let params = EstimatorParams { window, hop, speed_rpm: 1500.0, ..EstimatorParams::default() };
+            let total = 3 * window as usize;
+            let batch = run(&frames(total, window as usize, fs), &params);
+            assert!(batch.len() >= 2 && batch.iter().all(|e| e.contains("solved: true")), "{batch:?}");
+            for size in [1_000, 777] {
+                assert_eq!(run(&frames(total, size, fs), &params), batch, "frames of {size}, window {window}, hop {hop}");
+            }
         }
     }
 }

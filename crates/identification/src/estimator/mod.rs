@@ -85,7 +85,7 @@ pub use frequency::{frequency_domain, Axis, FrequencyEstimate, LinePhasors};
 pub use streaming::{Sample, StreamingEstimator, WindowFactors};
 
 use solve::ScaledFactor;
-use spectrum::LineAnalysis;
+use spectrum::{LineAnalysis, LineSearch};
 use window::BlockSummary;
 
 /// Which coefficients are fitted.
@@ -407,7 +407,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     let mut start = 0;
     while start <= n - config.window {
         let cols = signals.design(config.model, start..start + config.window);
-        out.push(analyse_window(&cols, start, None, config));
+        out.push(analyse_window(&cols, start, None, None, config));
         match start.checked_add(config.hop) {
             Some(next) => start = next,
             None => break,
@@ -428,7 +428,30 @@ pub fn estimate_window(signals: &Signals, range: Range<usize>, config: &Estimato
         ));
     }
     let cols = signals.design(config.model, range.clone());
-    Ok(analyse_window(&cols, range.start, None, config))
+    Ok(analyse_window(&cols, range.start, None, None, config))
+}
+
+/// [`estimate_window`] with the window's line search fed while its samples arrived
+/// ([`LineSearch`], for a window of `range.len()` samples at `config.sample_rate_hz`; another
+/// search is ignored). The result is [`estimate_window`]'s, bit for bit: only the time after
+/// the last sample is shorter.
+pub fn estimate_window_with_search(
+    signals: &Signals,
+    range: Range<usize>,
+    config: &EstimatorConfig,
+    search: LineSearch,
+) -> Result<WindowEstimate, IdentificationError> {
+    config.validate()?;
+    signals.check(config.model)?;
+    let n = signals.len();
+    if range.start >= range.end || range.end > n {
+        return Err(IdentificationError::invalid(
+            "range",
+            format!("{}..{} is empty or outside the record of {n} samples", range.start, range.end),
+        ));
+    }
+    let cols = signals.design(config.model, range.clone());
+    Ok(analyse_window(&cols, range.start, None, Some(search), config))
 }
 
 /// The common path of batch and streaming estimation. `cols` are the regressors then fx, fy,
@@ -438,6 +461,7 @@ pub(crate) fn analyse_window(
     cols: &[(&'static str, &[f64])],
     start: usize,
     summary: Option<&BlockSummary>,
+    search: Option<LineSearch>,
     config: &EstimatorConfig,
 ) -> WindowEstimate {
     let model = config.model;
@@ -471,8 +495,13 @@ pub(crate) fn analyse_window(
         return est;
     }
     let data: Vec<&[f64]> = cols.iter().map(|(_, c)| &c[..n]).collect();
-    // 3. Excitation lines.
-    let lines = spectrum::analyse(data[0], data[1], data[2], data[3], config.sample_rate_hz);
+    // 3. Excitation lines (from the search fed while the samples arrived, if it is this
+    // window's: the same bits).
+    let (x, y, vx, vy) = (data[0], data[1], data[2], data[3]);
+    let lines = match search.filter(|s| s.window() == (n, config.sample_rate_hz)) {
+        Some(s) => s.finish(x, y, vx, vy),
+        None => spectrum::analyse(x, y, vx, vy, config.sample_rate_hz),
+    };
     est.frequencies_hz = lines.merged.clone();
     let names = model.regressor_names();
     let structural = explain::structural_rank(model, &lines);

@@ -248,37 +248,136 @@ fn segment_starts(n: usize, seg: usize) -> Vec<usize> {
     (0..count).map(|i| (i * span + (count - 1) / 2) / (count - 1)).collect()
 }
 
-/// Welch power spectra (bins `0..=N/2`) of two real signals computed together.
-fn welch_pair(a: &[f64], b: &[f64], tables: &Tables) -> (Vec<f64>, Vec<f64>) {
-    let seg = tables.taper.len();
-    let taper = &tables.taper;
-    let n = a.len().min(b.len());
-    let starts = segment_starts(n, seg);
-    let nb = seg / 2 + 1;
-    let (mut pa, mut pb) = (vec![0.0; nb], vec![0.0; nb]);
-    let mut re = vec![0.0; seg];
-    let mut im = vec![0.0; seg];
-    // Taper-weighted means: removing them leaves the tapered segment with exactly zero DC
-    // (a plain mean would leave a small constant that leaks into the lowest bins).
-    let wsum: f64 = taper.iter().sum();
-    for &s0 in &starts {
-        let ma = a[s0..s0 + seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
-        let mb = b[s0..s0 + seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
+/// Welch sums of two real signals computed together (`z = a + i b`), one segment at a time.
+#[derive(Clone)]
+struct WelchPair {
+    pa: Vec<f64>,
+    pb: Vec<f64>,
+    re: Vec<f64>,
+    im: Vec<f64>,
+}
+
+impl WelchPair {
+    fn new(seg: usize) -> Self {
+        let nb = seg / 2 + 1;
+        Self { pa: vec![0.0; nb], pb: vec![0.0; nb], re: vec![0.0; seg], im: vec![0.0; seg] }
+    }
+
+    /// Adds the periodograms of one segment (`a`, `b` at least a segment long; the first
+    /// segment's worth is used).
+    fn add_segment(&mut self, a: &[f64], b: &[f64], tables: &Tables) {
+        let taper = &tables.taper;
+        let seg = taper.len();
+        let nb = seg / 2 + 1;
+        let (re, im) = (&mut self.re, &mut self.im);
+        // Taper-weighted means: removing them leaves the tapered segment with exactly zero DC
+        // (a plain mean would leave a small constant that leaks into the lowest bins).
+        let wsum: f64 = taper.iter().sum();
+        let ma = a[..seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
+        let mb = b[..seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
         for k in 0..seg {
-            re[k] = (a[s0 + k] - ma) * taper[k];
-            im[k] = (b[s0 + k] - mb) * taper[k];
+            re[k] = (a[k] - ma) * taper[k];
+            im[k] = (b[k] - mb) * taper[k];
         }
-        fft_with(&mut re, &mut im, &tables.tc, &tables.ts);
+        fft_with(re, im, &tables.tc, &tables.ts);
         for k in 0..nb {
             let kn = (seg - k) % seg;
             // X_k = (Z_k + conj Z_{N-k}) / 2, Y_k = (Z_k - conj Z_{N-k}) / (2i).
             let (xr, xi) = (0.5 * (re[k] + re[kn]), 0.5 * (im[k] - im[kn]));
             let (yr, yi) = (0.5 * (im[k] + im[kn]), -0.5 * (re[k] - re[kn]));
-            pa[k] += xr * xr + xi * xi;
-            pb[k] += yr * yr + yi * yi;
+            self.pa[k] += xr * xr + xi * xi;
+            self.pb[k] += yr * yr + yi * yi;
         }
     }
-    (pa, pb)
+}
+
+/// The line search of one window of `n` samples, fed as its samples arrive.
+///
+/// The Welch segments sit at fixed offsets in the window, so each can be transformed as
+/// soon as its samples are in; [`LineSearch::finish`] transforms the rest and analyses the
+/// spectra. Segments are summed in the same order as [`analyse`] sums them, so the result is
+/// [`analyse`]'s, bit for bit, however the samples were fed. What a node does while waiting
+/// for the end of a window, instead of after it.
+#[derive(Clone)]
+pub struct LineSearch {
+    n: usize,
+    sample_rate_hz: f64,
+    /// `None` when the window is too short for the analysis (or the rate not positive).
+    tables: Option<std::rc::Rc<Tables>>,
+    starts: Vec<usize>,
+    /// Segments transformed so far.
+    done: usize,
+    displacement: WelchPair,
+    velocity: WelchPair,
+}
+
+impl std::fmt::Debug for LineSearch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LineSearch").field("n", &self.n).field("segments", &self.starts.len()).field("done", &self.done).finish()
+    }
+}
+
+impl LineSearch {
+    /// The search of a window of `n` samples at `sample_rate_hz`.
+    pub fn new(n: usize, sample_rate_hz: f64) -> Self {
+        let usable = n >= MIN_SEGMENT && sample_rate_hz > 0.0;
+        let seg = if usable { (1usize << (usize::BITS - 1 - n.leading_zeros())).min(MAX_SEGMENT) } else { 0 };
+        let tables = usable.then(|| Tables::cached(seg));
+        Self {
+            n,
+            sample_rate_hz,
+            tables,
+            starts: if usable { segment_starts(n, seg) } else { Vec::new() },
+            done: 0,
+            displacement: WelchPair::new(seg),
+            velocity: WelchPair::new(seg),
+        }
+    }
+
+    /// Window length and rate this search is for.
+    pub fn window(&self) -> (usize, f64) {
+        (self.n, self.sample_rate_hz)
+    }
+
+    /// Transform every segment that lies within the first samples of the window given
+    /// (`x`, `y`, `vx`, `vy` from the window's first sample; the shortest length counts).
+    pub fn advance(&mut self, x: &[f64], y: &[f64], vx: &[f64], vy: &[f64]) {
+        let Some(tables) = self.tables.clone() else { return };
+        let have = x.len().min(y.len()).min(vx.len()).min(vy.len()).min(self.n);
+        let seg = tables.taper.len();
+        while let Some(&s0) = self.starts.get(self.done) {
+            if s0 + seg > have {
+                break;
+            }
+            self.displacement.add_segment(&x[s0..], &y[s0..], &tables);
+            self.velocity.add_segment(&vx[s0..], &vy[s0..], &tables);
+            self.done += 1;
+        }
+    }
+
+    /// The analysis of the whole window (`x`, `y`, `vx`, `vy`: all `n` samples of it, the
+    /// same as were fed to [`LineSearch::advance`]).
+    pub fn finish(mut self, x: &[f64], y: &[f64], vx: &[f64], vy: &[f64]) -> LineAnalysis {
+        self.advance(x, y, vx, vy);
+        let Some(tables) = &self.tables else { return LineAnalysis::empty() };
+        if self.done < self.starts.len() {
+            // Fewer samples than the window: nothing honest to report.
+            return LineAnalysis::empty();
+        }
+        let df = self.sample_rate_hz / tables.taper.len() as f64;
+        lines_of(&self.displacement.pa, &self.displacement.pb, &self.velocity.pa, &self.velocity.pb, df)
+    }
+}
+
+/// Welch power spectra (bins `0..=N/2`) of two real signals computed together.
+fn welch_pair(a: &[f64], b: &[f64], tables: &Tables) -> (Vec<f64>, Vec<f64>) {
+    let seg = tables.taper.len();
+    let n = a.len().min(b.len());
+    let mut w = WelchPair::new(seg);
+    for s0 in segment_starts(n, seg) {
+        w.add_segment(&a[s0..], &b[s0..], tables);
+    }
+    (w.pa, w.pb)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -372,22 +471,19 @@ pub fn merge_lines(mut all: Vec<f64>, tol: f64) -> Vec<f64> {
 /// Analyse one window: lines of `x`, `y`; noise fractions of `vx`, `vy` at those lines.
 pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64) -> LineAnalysis {
     let n = x.len().min(y.len()).min(vx.len()).min(vy.len());
-    if n < MIN_SEGMENT || !(sample_rate_hz > 0.0) {
-        return LineAnalysis::empty();
-    }
-    let seg = (1usize << (usize::BITS - 1 - n.leading_zeros())).min(MAX_SEGMENT);
-    let df = sample_rate_hz / seg as f64;
-    let tables = Tables::cached(seg);
-    let (px, py) = welch_pair(&x[..n], &y[..n], &tables);
-    let (pvx, pvy) = welch_pair(&vx[..n], &vy[..n], &tables);
-    let bx = find_lines(&px);
-    let by = find_lines(&py);
-    let line_fraction = [fraction_in(&px, &bx), fraction_in(&py, &by)];
-    let velocity_noise_fraction = [1.0 - fraction_in(&pvx, &bx), 1.0 - fraction_in(&pvy, &by)];
+    LineSearch::new(n, sample_rate_hz).finish(&x[..n], &y[..n], &vx[..n], &vy[..n])
+}
+
+/// The lines and fractions from the Welch spectra of the displacements and velocities.
+fn lines_of(px: &[f64], py: &[f64], pvx: &[f64], pvy: &[f64], df: f64) -> LineAnalysis {
+    let bx = find_lines(px);
+    let by = find_lines(py);
+    let line_fraction = [fraction_in(px, &bx), fraction_in(py, &by)];
+    let velocity_noise_fraction = [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)];
     let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
         line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
     };
-    let line_snr = [snr(&px, &pvx, &bx), snr(&py, &pvy, &by)];
+    let line_snr = [snr(px, pvx, &bx), snr(py, pvy, &by)];
     let lx: Vec<f64> = bx.iter().map(|b| b * df).collect();
     let ly: Vec<f64> = by.iter().map(|b| b * df).collect();
     let merged = merge_lines(lx.iter().chain(ly.iter()).cloned().collect(), MAIN_LOBE_BINS as f64 * df);
@@ -430,6 +526,27 @@ mod tests {
             }
             assert!((sr - re[f]).abs() < 1e-12 && (si - im[f]).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn line_search_fed_in_pieces_is_bitwise_analyse() {
+        let fs = 5000.0;
+        let n = 150_001;
+        let sig = |f: f64, ph: f64| -> Vec<f64> { (0..n).map(|t| (2.0 * std::f64::consts::PI * f * t as f64 / fs + ph).sin() + 1e-4 * ((t * 7919) % 101) as f64).collect() };
+        let (x, y, vx, vy) = (sig(23.0, 0.1), sig(37.0, 0.7), sig(23.0, 1.1), sig(37.0, 2.0));
+        let whole = format!("{:?}", analyse(&x, &y, &vx, &vy, fs));
+        for step in [1_000, 33_333, n] {
+            let mut search = LineSearch::new(n, fs);
+            let mut have = 0;
+            while have < n {
+                have = (have + step).min(n);
+                search.advance(&x[..have], &y[..have], &vx[..have], &vy[..have]);
+            }
+            assert_eq!(format!("{:?}", search.finish(&x, &y, &vx, &vy)), whole, "fed {step} at a time");
+        }
+        // Finishing with fewer samples than the window reports nothing.
+        let short = LineSearch::new(n, fs).finish(&x[..n - 1], &y[..n - 1], &vx[..n - 1], &vy[..n - 1]);
+        assert!(short.merged.is_empty() && short.line_fraction[0].is_nan());
     }
 
     #[test]

@@ -259,6 +259,8 @@ pub fn spectral(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[
         resid.push(e);
     }
 
+    // Residual spectral densities per right-hand side, bins 0..=N/2.
+    let mut density = vec![Vec::new(); m];
     for k0 in (0..m).step_by(2) {
         let pair = [Some(k0), (k0 + 1 < m).then_some(k0 + 1)];
         // Periodograms |E_k|², full length N (real and even).
@@ -291,45 +293,51 @@ pub fn spectral(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[
         for ((slot, dens), raw) in pair.iter().zip([&sa, &sb]).zip([&ea, &eb]) {
             let Some(k) = *slot else { continue };
             // Lines in the residual (misfit) stay at their own height.
-            let dens: Vec<f64> = (0..nb)
+            density[k] = (0..nb)
                 .map(|i| {
                     let p = (raw[0][i] * raw[0][i] + raw[1][i] * raw[1][i]) / n as f64;
                     if p > MISFIT_RATIO * dens[i] { p } else { dens[i] }
                 })
                 .collect();
-            out.lag[k] = lag;
-            // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k).
-            let mut s = vec![0.0; p * p];
-            for i in 0..nb {
-                let d = dens[i].max(0.0) * bin_weight(i);
-                if d == 0.0 {
-                    continue;
-                }
-                for a in 0..p {
-                    let (ar, ai) = (spec[a][0][i], spec[a][1][i]);
-                    for b in a..p {
-                        s[a * p + b] += (ar * spec[b][0][i] + ai * spec[b][1][i]) * d;
-                    }
-                }
+        }
+    }
+
+    // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k), every right-hand side in one pass over the
+    // regressors' spectra (each sum still in bin order).
+    let mut sums = vec![vec![0.0; p * p]; m];
+    for i in 0..nb {
+        for (s, dens) in sums.iter_mut().zip(&density) {
+            let d = dens[i].max(0.0) * bin_weight(i);
+            if d == 0.0 {
+                continue;
             }
             for a in 0..p {
+                let (ar, ai) = (spec[a][0][i], spec[a][1][i]);
                 for b in a..p {
-                    s[a * p + b] /= nfft as f64;
-                    s[b * p + a] = s[a * p + b];
+                    s[a * p + b] += (ar * spec[b][0][i] + ai * spec[b][1][i]) * d;
                 }
             }
-            // Cov_z = G⁻¹ S G⁻¹ (scaled); b_j = z_j / scale_j.
-            for j in 0..p {
-                let mut v = 0.0;
-                for l in 0..p {
-                    let mut row = 0.0;
-                    for r in 0..p {
-                        row += s[l * p + r] * ginv_s[r * p + j];
-                    }
-                    v += ginv_s[j * p + l] * row;
-                }
-                out.se[j * m + k] = (v.max(0.0) * dof).sqrt() / scale[j];
+        }
+    }
+    for (k, mut s) in sums.into_iter().enumerate() {
+        out.lag[k] = lag;
+        for a in 0..p {
+            for b in a..p {
+                s[a * p + b] /= nfft as f64;
+                s[b * p + a] = s[a * p + b];
             }
+        }
+        // Cov_z = G⁻¹ S G⁻¹ (scaled); b_j = z_j / scale_j.
+        for j in 0..p {
+            let mut v = 0.0;
+            for l in 0..p {
+                let mut row = 0.0;
+                for r in 0..p {
+                    row += s[l * p + r] * ginv_s[r * p + j];
+                }
+                v += ginv_s[j * p + l] * row;
+            }
+            out.se[j * m + k] = (v.max(0.0) * dof).sqrt() / scale[j];
         }
     }
     out
