@@ -10,7 +10,7 @@ use std::net::TcpListener;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use oilfilm_identification::ascii::{Record, Units, Writer};
+use oilfilm_identification::ascii::{self, Record, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{DaqFrame, RigStatus};
 use oilfilm_nodes::conditioner::ConditionerParams;
@@ -36,7 +36,7 @@ struct Fixture {
 }
 
 /// 5 s of the simulated Zhou rig under the exciter's default two-tone (23 and 37 Hz), in
-/// volts, written with the ASCII `Writer`. Simulated once for all tests.
+/// volts, written with `ascii::write`. Simulated once for all tests.
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
@@ -44,15 +44,7 @@ fn fixture() -> &'static Fixture {
         let plan = ExciterParams::default().plan().unwrap();
         let sim = simulate::simulate(&rig, &plan, 5.0, SimulateOptions::default(), &mut |_| {}).unwrap();
         let record = sim.to_ascii(&rig, Units::Volts).unwrap();
-        let mut writer = Writer::new(Vec::new(), &record.header).unwrap();
-        let mut row = vec![0.0; record.header.channels.len()];
-        for (i, &scan) in record.scan_index.iter().enumerate() {
-            for (r, c) in row.iter_mut().zip(&record.columns) {
-                *r = c[i];
-            }
-            writer.push(scan, &row).unwrap();
-        }
-        let text = String::from_utf8(writer.finish().unwrap()).unwrap();
+        let text = ascii::write(&record).unwrap();
         Fixture { rig, truth: sim.truth, record, text }
     })
 }

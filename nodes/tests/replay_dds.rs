@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use oilfilm_identification::ascii::{Units, Writer};
+use oilfilm_identification::ascii::{self, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame};
 use oilfilm_nodes::dds::RosNode;
@@ -28,15 +28,7 @@ fn a_damaged_record_replays_on_dds_and_still_identifies() {
     let plan = ExciterParams { amplitude_n: 300.0, ..ExciterParams::default() }.plan().unwrap();
     let sim = simulate::simulate(&rig, &plan, 13.0, SimulateOptions::default(), &mut |_| {}).unwrap();
     let record = sim.to_ascii(&rig, Units::Volts).unwrap();
-    let mut writer = Writer::new(Vec::new(), &record.header).unwrap();
-    let mut row = vec![0.0; record.header.channels.len()];
-    for (i, &scan) in record.scan_index.iter().enumerate() {
-        for (r, c) in row.iter_mut().zip(&record.columns) {
-            *r = c[i];
-        }
-        writer.push(scan, &row).unwrap();
-    }
-    let text = String::from_utf8(writer.finish().unwrap()).unwrap();
+    let text = ascii::write(&record).unwrap();
     // Damage three rows early in the record: a ragged row, a bad number, a row cut short.
     let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
     let first_row = lines.iter().position(|l| l.starts_with("0 ") || l.starts_with("0\t")).expect("row of scan 0");

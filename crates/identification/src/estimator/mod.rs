@@ -418,17 +418,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
 
 /// Estimate one window, `range` of the record (its length overrides `config.window`).
 pub fn estimate_window(signals: &Signals, range: Range<usize>, config: &EstimatorConfig) -> Result<WindowEstimate, IdentificationError> {
-    config.validate()?;
-    signals.check(config.model)?;
-    let n = signals.len();
-    if range.start >= range.end || range.end > n {
-        return Err(IdentificationError::invalid(
-            "range",
-            format!("{}..{} is empty or outside the record of {n} samples", range.start, range.end),
-        ));
-    }
-    let cols = signals.design(config.model, range.clone());
-    Ok(analyse_window(&cols, range.start, None, None, config))
+    estimate_window_searched(signals, range, config, None)
 }
 
 /// [`estimate_window`] with the window's line search fed while its samples arrived
@@ -441,6 +431,16 @@ pub fn estimate_window_with_search(
     config: &EstimatorConfig,
     search: LineSearch,
 ) -> Result<WindowEstimate, IdentificationError> {
+    estimate_window_searched(signals, range, config, Some(search))
+}
+
+/// The checks and the analysis both single-window entry points share.
+fn estimate_window_searched(
+    signals: &Signals,
+    range: Range<usize>,
+    config: &EstimatorConfig,
+    search: Option<LineSearch>,
+) -> Result<WindowEstimate, IdentificationError> {
     config.validate()?;
     signals.check(config.model)?;
     let n = signals.len();
@@ -451,7 +451,7 @@ pub fn estimate_window_with_search(
         ));
     }
     let cols = signals.design(config.model, range.clone());
-    Ok(analyse_window(&cols, range.start, None, Some(search), config))
+    Ok(analyse_window(&cols, range.start, None, search, config))
 }
 
 /// The common path of batch and streaming estimation. `cols` are the regressors then fx, fy,
