@@ -114,12 +114,7 @@ fn identify_a_bag_gives_the_live_estimates() {
     use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
     use oilfilm_nodes::topics;
 
-    let mut p = GraphParams::default();
-    p.daq.duration_s = 12.0;
-    p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
-    p.conditioner.lowpass_cutoff_hz = 55.5;
-    p.estimator.window = 25_000;
-    p.estimator.hop = 25_000;
+    let p = GraphParams::sim_rig(12.0, 25_000, 25_000);
     let rig = oilfilm_physics::config::RigConfig::zhou2004().unwrap();
     let (live, _) = run_sim_rig(&rig, &p).unwrap();
     assert!(!live.estimates.is_empty());

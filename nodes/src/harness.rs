@@ -36,6 +36,24 @@ pub struct GraphParams {
     pub estimator: EstimatorParams,
 }
 
+impl GraphParams {
+    /// The `sim_rig` graph as `launch_configs/params/sim_rig.yaml` sets it up (the default
+    /// 23/37 Hz two-tone, 500-scan DAQ frames, the low-pass at 1.5 x 37 Hz, 1000-scan
+    /// conditioned frames), run for `duration_s` of rig time from a fixed epoch, with
+    /// estimator windows of `window` samples every `hop`.
+    pub fn sim_rig(duration_s: f64, window: i64, hop: i64) -> Self {
+        let mut p = Self::default();
+        p.daq.duration_s = duration_s;
+        p.daq.block_scans = 500;
+        p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
+        p.conditioner.lowpass_cutoff_hz = 55.5;
+        p.conditioner.block_scans = 1000;
+        p.estimator.window = window;
+        p.estimator.hop = hop;
+        p
+    }
+}
+
 /// Runs `sim_rig` for `params.daq.duration_s` of rig time (which must be > 0). Returns what
 /// every topic carried and the simulated film's operating point (its linear coefficients are
 /// the truth tests judge against; no node reads it).

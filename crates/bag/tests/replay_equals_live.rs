@@ -13,14 +13,7 @@ use oilfilm_physics::config::RigConfig;
 
 #[test]
 fn estimates_from_a_bag_equal_the_live_ones_bit_for_bit() {
-    let mut p = GraphParams::default();
-    p.daq.duration_s = 12.0;
-    p.daq.block_scans = 500;
-    p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
-    p.conditioner.lowpass_cutoff_hz = 55.5;
-    p.conditioner.block_scans = 1000;
-    p.estimator.window = 25_000;
-    p.estimator.hop = 12_500;
+    let p = GraphParams::sim_rig(12.0, 25_000, 12_500);
     let rig = RigConfig::zhou2004().unwrap();
     let (live, _) = run_sim_rig(&rig, &p).unwrap();
     assert!(live.estimates.len() >= 2, "{} estimates", live.estimates.len());

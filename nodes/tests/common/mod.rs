@@ -25,13 +25,5 @@ pub fn rig_at_40_db(plan: &ExcitationPlan) -> RigConfig {
 /// The sim_rig parameters of the accuracy tests: 10 s windows every 5 s, the low-pass at
 /// 1.5 x the highest line of the two-tone (37 Hz).
 pub fn params(duration_s: f64) -> GraphParams {
-    let mut p = GraphParams::default();
-    p.daq.duration_s = duration_s;
-    p.daq.block_scans = 500;
-    p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
-    p.conditioner.lowpass_cutoff_hz = 55.5;
-    p.conditioner.block_scans = 1000;
-    p.estimator.window = 50_000;
-    p.estimator.hop = 25_000;
-    p
+    GraphParams::sim_rig(duration_s, 50_000, 25_000)
 }

@@ -24,14 +24,7 @@ pub struct Published {
 /// `duration_s` of the Zhou rig with the default two-tone plan, 5 kHz in blocks of 500
 /// scans, estimates over 1 s windows every 0.5 s (so every topic carries messages).
 pub fn short_run(duration_s: f64) -> Recording {
-    let mut p = GraphParams::default();
-    p.daq.duration_s = duration_s;
-    p.daq.block_scans = 500;
-    p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
-    p.conditioner.lowpass_cutoff_hz = 55.5;
-    p.conditioner.block_scans = 1000;
-    p.estimator.window = 5_000;
-    p.estimator.hop = 2_500;
+    let p = GraphParams::sim_rig(duration_s, 5_000, 2_500);
     // The crate's examples and tests run only with a rig the physics crate builds itself.
     let rig = RigConfig::zhou2004().expect("the built-in Zhou 2004 rig is valid");
     run_sim_rig(&rig, &p).expect("the short sim_rig run works").0
