@@ -1,0 +1,1 @@
+//! Show what the simulation gets wrong (issue 6, part 1).
