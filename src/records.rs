@@ -11,7 +11,7 @@ use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::effects::{ChannelDelay, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
+use oilfilm_physics::effects::{ChannelDelay, FilmRelaxation, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
 
 use crate::RigSource;
 
@@ -75,7 +75,8 @@ pub struct SimulateArgs {
     plan: Option<PathBuf>,
     /// Inject an effect (repeatable): fluid_inertia=KG, thermal_drift=C_PER_S,
     /// synchronous_runout=M, channel_delay=CHANNEL:S, probe_saturation=CHANNEL:M,
-    /// support_friction=N, housing_mass_mismatch=KG.
+    /// support_friction=N, housing_mass_mismatch=KG, and outside the diagnosis catalog
+    /// film_relaxation=K_N_M:TAU_S.
     #[arg(long = "inject", value_name = "EFFECT=VALUE")]
     inject: Vec<String>,
     /// Seed of the sensor noise (default: the rig file's).
@@ -117,7 +118,11 @@ fn parse_injection(config: &mut RigConfig, spec: &str) -> Result<()> {
         }
         "support_friction" => e.support_friction = Some(SupportFriction { friction_force_n: number(value)? }),
         "housing_mass_mismatch" => e.housing_mass_mismatch = Some(HousingMassMismatch { mass_error_kg: number(value)? }),
-        other => bail!("--inject: unknown effect `{other}` (fluid_inertia, thermal_drift, synchronous_runout, channel_delay, probe_saturation, support_friction, housing_mass_mismatch)"),
+        "film_relaxation" => {
+            let (k, tau) = value.split_once(':').with_context(|| format!("--inject `{spec}`: expected film_relaxation=K_N_M:TAU_S"))?;
+            e.film_relaxation = Some(FilmRelaxation { stiffness_n_m: number(k)?, time_constant_s: number(tau)? });
+        }
+        other => bail!("--inject: unknown effect `{other}` (fluid_inertia, thermal_drift, synchronous_runout, channel_delay, probe_saturation, support_friction, housing_mass_mismatch, film_relaxation)"),
     }
     Ok(())
 }

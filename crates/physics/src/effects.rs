@@ -1,5 +1,6 @@
 //! Injectable effects: each is off unless configured, and each is set by one magnitude
-//! (plus, where it must be said, which channel). Later work hides them in simulated data and
+//! (plus, where it must be said, which channel; `film_relaxation` by a stiffness and its
+//! time constant). Later work hides them in simulated data and
 //! requires the diagnosis to find them; the names here are the diagnosis catalog's names.
 //!
 //! | effect | where it acts | magnitude |
@@ -11,8 +12,13 @@
 //! | `probe_saturation` | one probe clips at a smaller range than calibrated | `limit_m` on `channel` |
 //! | `support_friction` | Coulomb friction in the support rollers on the housing | `friction_force_n` |
 //! | `housing_mass_mismatch` | true housing mass differs from the configured one | `mass_error_kg` |
+//! | `film_relaxation` | a Maxwell element (spring `k_r` in series with a dashpot `k_r tau`) in parallel with the film; **not in the diagnosis catalog** | `stiffness_n_m`, `time_constant_s` |
 //!
 //! Amplitude nonlinearity needs no switch: it comes from the nonlinear film.
+//!
+//! `film_relaxation` is deliberately outside the catalog: it is a frequency-dependent film
+//! that no candidate extension explains, so the diagnosis must call a record carrying it
+//! `unexplained` rather than give it a catalog name (see [`FilmRelaxation`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -76,6 +82,50 @@ pub struct HousingMassMismatch {
     pub mass_error_kg: f64,
 }
 
+/// Film relaxation: a frequency-dependent film, OUTSIDE the diagnosis catalog. It exists so
+/// that tests can hide an effect the catalog does not name and require the verdict
+/// `unexplained`.
+///
+/// A Maxwell element (a spring `k_r` in series with a dashpot `k_r tau`) acts in parallel with
+/// the film, the same on both axes. With `r` the journal relative to the bearing and `z` the
+/// element's internal coordinate (the spring-dashpot junction), per axis
+///
+/// ```text
+/// tau z' = r - z,        dF_on_journal = -k_r (r - z)
+/// ```
+///
+/// (Lund's sign convention, as the film's `-(K dr + C dr')`). Under harmonic motion
+/// `r = R e^{i w t}` the element adds the complex stiffness `k_r i w tau / (1 + i w tau)`, so
+/// the apparent film coefficients depend on frequency:
+///
+/// ```text
+/// K_app(w) = K + k_r (w tau)^2 / (1 + (w tau)^2)     rises from K towards K + k_r,
+/// C_app(w) = C + k_r tau / (1 + (w tau)^2)           falls back towards C,
+/// ```
+///
+/// both changing across the band around `1 / (2 pi tau)`. No K-C-M model with constant
+/// coefficients reproduces this (an added mass makes the stiffness fall with `w^2`; this
+/// rises and saturates). It carries no static load: at rest `z = r` and the element's force
+/// vanishes, so the equilibrium is the film's own.
+///
+/// Physically it stands for a viscoelastic or aerated (compressible) oil film, whose squeeze
+/// pressure lags the motion by a relaxation time. That a gas phase in an oscillating squeeze
+/// film makes its force depend on frequency (stiffening, with less damping, as the frequency
+/// rises) is shown by Haber & Etsion, "Analysis of an oscillatory oil squeeze film containing
+/// a central gas bubble", ASLE Trans. 28(2), 1985, 253-260, and Hashimoto, "Squeeze film
+/// characteristics between parallel circular plates containing a single central air bubble in
+/// the inertial flow regime", ASME J. Tribol. 117(3), 1995, 513-518. The single Maxwell
+/// element here is a modelling device with that qualitative behaviour, not a fit to their
+/// results.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FilmRelaxation {
+    /// `k_r`: the stiffness the element adds well above `1 / (2 pi tau)`, N/m.
+    pub stiffness_n_m: f64,
+    /// `tau`: the element's relaxation time, s.
+    pub time_constant_s: f64,
+}
+
 /// The set of injected effects. All off by default.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -87,6 +137,8 @@ pub struct Effects {
     pub probe_saturation: Option<ProbeSaturation>,
     pub support_friction: Option<SupportFriction>,
     pub housing_mass_mismatch: Option<HousingMassMismatch>,
+    /// Outside the diagnosis catalog: see [`FilmRelaxation`].
+    pub film_relaxation: Option<FilmRelaxation>,
 }
 
 impl Effects {
@@ -131,6 +183,13 @@ impl Effects {
         }
         if let Some(e) = &self.housing_mass_mismatch {
             check("housing_mass_mismatch.mass_error_kg", e.mass_error_kg, true)?;
+        }
+        if let Some(e) = &self.film_relaxation {
+            check("film_relaxation.stiffness_n_m", e.stiffness_n_m, false)?;
+            let tau = e.time_constant_s;
+            if !tau.is_finite() || tau <= 0.0 {
+                return Err(PhysicsError::invalid(format!("{prefix}.film_relaxation.time_constant_s"), format!("must be finite and > 0, got {tau}")));
+            }
         }
         Ok(())
     }

@@ -8,7 +8,8 @@
 //! relative to the bearing (what the film sees and the bearing probes measure):
 //!
 //! ```text
-//! (m + M_a) X'' = F_exc(t) + F_bellows(t) e_y - m g e_y - F_film(r, r') + M_a J'' + F_friction(X')
+//! (m + M_a) X'' = F_exc(t) + F_bellows(t) e_y - m g e_y - F_film(r, r') - F_relax + M_a J'' + F_friction(X')
+//! tau z' = r - z                   (only with `film_relaxation`)
 //! ```
 //!
 //! * `F_exc = f1 (cos 45, sin 45) + f2 (cos 135, sin 135)` (exciter angles configurable);
@@ -16,6 +17,9 @@
 //!   (the bellows are set to float the housing the rig's operators believe it weighs);
 //! * `F_film` is the film force on the journal; the housing feels its reaction;
 //! * `M_a` is the injected fluid-inertia added mass (0 unless `fluid_inertia` is set);
+//! * `F_relax = -k_r (r - z)` is the injected film relaxation (a Maxwell element in parallel
+//!   with the film, [`crate::effects::FilmRelaxation`]; absent unless `film_relaxation` is
+//!   set), with its internal coordinate `z` starting relaxed at the equilibrium (`z = r`);
 //! * `F_friction` is the injected Coulomb friction, regularised as
 //!   `-F_c X' / sqrt(|X'|^2 + v_s^2)` with `v_s` = 1 um/s.
 //!
@@ -28,7 +32,12 @@
 //! second-order Rosenbrock method ROS2 of Verwer, Spee, Blom & Hundsdorfer (1999, SIAM J.
 //! Sci. Comput. 20), which needs one film Jacobian and two film forces per step and keeps
 //! order two with an approximate Jacobian (it is a W-method), so the explicit time
-//! dependence of the forcing needs no special treatment. Between steps the state is
+//! dependence of the forcing needs no special treatment. With `film_relaxation` the
+//! element's coordinate `z` joins the integrated state (six unknowns instead of four, its
+//! exact Jacobian in the stage matrix), so the element keeps the method's order and
+//! L-stability even when `tau` is far below the step. Without it the integrator runs the very
+//! same four-unknown arithmetic, so records without the effect are unchanged bit for bit.
+//! Between steps the state is
 //! interpolated by cubic Hermite polynomials on position and velocity, which is what the
 //! multiplexed DAQ samples.
 //!
@@ -37,12 +46,12 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
+use nalgebra::{Const, DimMin, Matrix2, SMatrix, SVector, Vector2};
 use serde::{Deserialize, Serialize};
 
 use crate::config::RigConfig;
 use crate::daq::{ChannelId, PhysicalSignals};
-use crate::effects::Effects;
+use crate::effects::{Effects, FilmRelaxation};
 use crate::error::PhysicsError;
 use crate::film::{Film, FilmState, Running};
 use crate::oil::Oil;
@@ -69,7 +78,7 @@ pub struct RigSample {
     /// Journal relative to bearing, `r = J - X` (what the bearing probes see).
     pub relative_m: Vector2<f64>,
     pub relative_m_s: Vector2<f64>,
-    /// Film force on the journal, including any injected added-mass force.
+    /// Film force on the journal, including any injected added-mass and film-relaxation force.
     pub film_force_n: Vector2<f64>,
     pub exciter_n: [f64; 2],
     pub bellows_n: f64,
@@ -83,15 +92,18 @@ struct Node {
     t_s: f64,
     x: Vector2<f64>,
     v: Vector2<f64>,
+    /// The film-relaxation element's internal coordinate (unused, zero, without the effect).
+    z: Vector2<f64>,
     input: RigInput,
 }
 
-/// The right-hand side of the equations of motion at one state.
-struct Derivative {
-    /// d/dt of (X, X').
-    rate: Vector4<f64>,
-    /// Its Jacobian with respect to (X, X'), when asked for.
-    jacobian: Option<Matrix4<f64>>,
+/// The right-hand side of the equations of motion at one state of `N` unknowns: (X, X') with
+/// `N = 4`, (X, X', z) with `N = 6` (film relaxation).
+struct Derivative<const N: usize> {
+    /// d/dt of the state.
+    rate: SVector<f64, N>,
+    /// Its Jacobian with respect to the state, when asked for.
+    jacobian: Option<SMatrix<f64, N, N>>,
     /// The film force as the journal feels it, including any added-mass reaction.
     film_on_journal: Vector2<f64>,
 }
@@ -113,6 +125,7 @@ struct Params {
     friction_n: f64,
     orbit_m: f64,
     orbit_phase_rad: f64,
+    relaxation: Option<FilmRelaxation>,
     oil: Oil,
 }
 
@@ -174,6 +187,7 @@ impl Rig {
             friction_n: effects.support_friction.map_or(0.0, |e| e.friction_force_n),
             orbit_m: config.journal.orbit_amplitude_m,
             orbit_phase_rad: config.journal.orbit_phase_deg.to_radians(),
+            relaxation: effects.film_relaxation,
             oil: config.oil.clone(),
         };
 
@@ -191,7 +205,8 @@ impl Rig {
 
         let journal0 = Self::journal_at(&params, start_s);
         let r0 = Vector2::new(operating_point.journal.x_m, operating_point.journal.y_m);
-        let node = Node { t_s: start_s, x: journal0.0 - r0, v: journal0.1, input: RigInput::default() };
+        // The relaxation element starts relaxed (z = r): it carries no static load.
+        let node = Node { t_s: start_s, x: journal0.0 - r0, v: journal0.1, z: r0, input: RigInput::default() };
         let substeps = config.simulation.substeps;
         let period = 1.0 / config.daq.sample_rate_hz;
         let history_capacity = ((lookback_s.max(0.0) / (period / substeps as f64)).ceil() as usize + 4 * substeps + 4).max(8);
@@ -256,11 +271,27 @@ impl Rig {
         Ok(Running { omega_rad_s: self.params.omega_rad_s, viscosity_pa_s: viscosity })
     }
 
-    /// Time derivative of `(X, X')` and, if asked, its Jacobian.
-    fn rhs(&mut self, t: f64, y: &Vector4<f64>, input: &RigInput, jacobian: bool) -> Result<Derivative, PhysicsError> {
+    /// The integrated state of `node`: `(X, X')`, and `z` when `N = 6`.
+    fn state_of<const N: usize>(node: &Node) -> SVector<f64, N> {
+        let mut y = SVector::<f64, N>::zeros();
+        y[0] = node.x.x;
+        y[1] = node.x.y;
+        y[2] = node.v.x;
+        y[3] = node.v.y;
+        if N == 6 {
+            y[4] = node.z.x;
+            y[5] = node.z.y;
+        }
+        y
+    }
+
+    /// Time derivative of the state (see [`Derivative`]) and, if asked, its Jacobian.
+    fn rhs<const N: usize>(&mut self, t: f64, y: &SVector<f64, N>, input: &RigInput, jacobian: bool) -> Result<Derivative<N>, PhysicsError> {
         let p = &self.params;
         let x = Vector2::new(y[0], y[1]);
         let v = Vector2::new(y[2], y[3]);
+        // The relaxation element and its coordinate, when the state carries it.
+        let relaxation = if N == 6 { p.relaxation.map(|e| (e, Vector2::new(y[4], y[5]))) } else { None };
         let (j, jd, jdd) = Self::journal_at(p, t);
         let r = j - x;
         let rd = jd - v;
@@ -278,25 +309,49 @@ impl Rig {
         let speed_s = (v.norm_squared() + FRICTION_SMOOTHING_M_S * FRICTION_SMOOTHING_M_S).sqrt();
         let friction = -v * (p.friction_n / speed_s);
         let m_dyn = p.mass_true_kg + p.added_mass_kg;
-        let accel = (exciter + Vector2::new(0.0, vertical) - film_force + jdd * p.added_mass_kg + friction) / m_dyn;
-        let f = Vector4::new(v.x, v.y, accel.x, accel.y);
+        // Film plus relaxation element on the journal: F_relax = -k_r (r - z).
+        let film_total = match relaxation {
+            Some((e, z)) => film_force - (r - z) * e.stiffness_n_m,
+            None => film_force,
+        };
+        let accel = (exciter + Vector2::new(0.0, vertical) - film_total + jdd * p.added_mass_kg + friction) / m_dyn;
+        let mut f = SVector::<f64, N>::zeros();
+        f[0] = v.x;
+        f[1] = v.y;
+        f[2] = accel.x;
+        f[3] = accel.y;
+        if let Some((e, z)) = relaxation {
+            let zd = (r - z) / e.time_constant_s;
+            f[4] = zd.x;
+            f[5] = zd.y;
+        }
         let jac = film_jac.map(|fj| {
             // d accel / d X = (dF/dr)/m (r = J - X); d accel / d X' = (dF/dr')/m + friction.
-            let d_pos: Matrix2<f64> = fj.fixed_view::<2, 2>(0, 0).into_owned() / m_dyn;
+            let mut d_pos: Matrix2<f64> = fj.fixed_view::<2, 2>(0, 0).into_owned() / m_dyn;
             let mut d_vel: Matrix2<f64> = fj.fixed_view::<2, 2>(0, 2).into_owned() / m_dyn;
             if p.friction_n > 0.0 {
                 let s3 = speed_s * speed_s * speed_s;
                 d_vel -= (Matrix2::identity() / speed_s - v * v.transpose() / s3) * (p.friction_n / m_dyn);
             }
-            let mut a = Matrix4::zeros();
+            let mut a = SMatrix::<f64, N, N>::zeros();
             a[(0, 2)] = 1.0;
             a[(1, 3)] = 1.0;
+            if let Some((e, _)) = relaxation {
+                // F_relax depends on r = J - X and z: d accel / d X gains -k_r/m, d accel / d z
+                // is -k_r/m, and z' = (r - z)/tau gives -1/tau on both X and z.
+                let k_m = Matrix2::identity() * (e.stiffness_n_m / m_dyn);
+                let inv_tau = Matrix2::identity() * (1.0 / e.time_constant_s);
+                d_pos -= k_m;
+                a.fixed_view_mut::<2, 2>(2, 4).copy_from(&-k_m);
+                a.fixed_view_mut::<2, 2>(4, 0).copy_from(&-inv_tau);
+                a.fixed_view_mut::<2, 2>(4, 4).copy_from(&-inv_tau);
+            }
             a.fixed_view_mut::<2, 2>(2, 0).copy_from(&d_pos);
             a.fixed_view_mut::<2, 2>(2, 2).copy_from(&d_vel);
             a
         });
         // The film force as the journal feels it, including the added-mass reaction.
-        let film_on_journal = film_force + (accel - jdd) * p.added_mass_kg;
+        let film_on_journal = film_total + (accel - jdd) * p.added_mass_kg;
         Ok(Derivative { rate: f, jacobian: jac, film_on_journal })
     }
 
@@ -311,6 +366,16 @@ impl Rig {
         if stamp_s <= start.t_s {
             return Err(PhysicsError::invalid("stamp", format!("rig time must advance: stamp {stamp_s} s is not after {} s", start.t_s)));
         }
+        let node = if self.params.relaxation.is_some() { self.advance::<6>(start, input, stamp_s)? } else { self.advance::<4>(start, input, stamp_s)? };
+        self.sample_at_node(&node)
+    }
+
+    /// The substeps of [`Rig::step`] from `start` to `stamp_s` on a state of `N` unknowns;
+    /// returns the last node (also pushed to the history).
+    fn advance<const N: usize>(&mut self, start: Node, input: &RigInput, stamp_s: f64) -> Result<Node, PhysicsError>
+    where
+        Const<N>: DimMin<Const<N>, Output = Const<N>>,
+    {
         let h = (stamp_s - start.t_s) / self.substeps as f64;
         let gamma = 1.0 + std::f64::consts::FRAC_1_SQRT_2;
         let mut node = start;
@@ -319,32 +384,36 @@ impl Rig {
             let t1 = if k + 1 == self.substeps { stamp_s } else { t0 + h };
             let in0 = lerp_input(&start.input, input, (t0 - start.t_s) / (stamp_s - start.t_s));
             let in1 = lerp_input(&start.input, input, (t1 - start.t_s) / (stamp_s - start.t_s));
-            let y0 = Vector4::new(node.x.x, node.x.y, node.v.x, node.v.y);
+            let y0 = Self::state_of::<N>(&node);
             let d0 = self.rhs(t0, &y0, &in0, true)?;
             let f0 = d0.rate;
             // `rhs` asked with jacobian = true always returns Some.
-            let jac = d0.jacobian.unwrap_or_else(Matrix4::zeros);
-            let w = Matrix4::identity() - jac * (gamma * h);
+            let jac = d0.jacobian.unwrap_or_else(SMatrix::<f64, N, N>::zeros);
+            let w = SMatrix::<f64, N, N>::identity() - jac * (gamma * h);
             let lu = w.lu();
             let k1 = lu.solve(&f0).ok_or_else(|| PhysicsError::Singular { what: "rig Rosenbrock stage matrix".into(), row: 0 })?;
             let f1 = self.rhs(t1, &(y0 + k1 * h), &in1, false)?.rate;
             let k2 = lu.solve(&(f1 - k1 * 2.0)).ok_or_else(|| PhysicsError::Singular { what: "rig Rosenbrock stage matrix".into(), row: 0 })?;
             let y1 = y0 + (k1 * 1.5 + k2 * 0.5) * h;
-            for i in 0..4 {
+            for i in 0..N {
                 PhysicsError::check_finite("rig state", y1[i])?;
             }
-            node = Node { t_s: t1, x: Vector2::new(y1[0], y1[1]), v: Vector2::new(y1[2], y1[3]), input: in1 };
+            let z = if N == 6 { Vector2::new(y1[4], y1[5]) } else { node.z };
+            node = Node { t_s: t1, x: Vector2::new(y1[0], y1[1]), v: Vector2::new(y1[2], y1[3]), z, input: in1 };
             self.history.push_back(node);
             while self.history.len() > self.history_capacity {
                 self.history.pop_front();
             }
         }
-        self.sample_at_node(&node)
+        Ok(node)
     }
 
     fn sample_at_node(&mut self, node: &Node) -> Result<RigSample, PhysicsError> {
-        let y = Vector4::new(node.x.x, node.x.y, node.v.x, node.v.y);
-        let film_force_n = self.rhs(node.t_s, &y, &node.input, false)?.film_on_journal;
+        let film_force_n = if self.params.relaxation.is_some() {
+            self.rhs(node.t_s, &Self::state_of::<6>(node), &node.input, false)?.film_on_journal
+        } else {
+            self.rhs(node.t_s, &Self::state_of::<4>(node), &node.input, false)?.film_on_journal
+        };
         let (j, jd, _) = Self::journal_at(&self.params, node.t_s);
         let running = self.running_at(node.t_s)?;
         Ok(RigSample {
