@@ -196,7 +196,7 @@ impl Candidate for FluidInertia {
 /// `support_friction`: Coulomb friction of the housing's supports, seen in eq. 2's force.
 pub struct SupportFriction;
 
-/// The friction regressor's smoothing velocity, as a fraction of the housing's RMS speed.
+/// The friction regressor's smallest smoothing velocity, as a fraction of the RMS speed.
 const FRICTION_SMOOTHING: f64 = 0.02;
 
 impl Candidate for SupportFriction {
@@ -210,17 +210,31 @@ impl Candidate for SupportFriction {
         // taken from the bearing probes' r', the very signal the baseline regresses on: a
         // velocity from the frame probes would carry independent sensor noise and act as an
         // instrumental variable, "explaining" the baseline's errors-in-variables bias with a
-        // friction that is not there.
+        // friction that is not there. The frame probes do give the noise level: with the
+        // journal fixed, r' + X' is the two measurements' noise alone.
         let vx: Vec<f64> = s.vx_m_s.iter().map(|v| -v).collect();
         let vy: Vec<f64> = s.vy_m_s.iter().map(|v| -v).collect();
+        let disagreement = |a: &[f64], b: &[f64]| -> f64 {
+            let d: Vec<f64> = a.iter().zip(b).map(|(a, b)| b - a).collect();
+            let d = about_block_mean(p, &d);
+            (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64 / 2.0).sqrt()
+        };
+        let sigma = 0.5 * (disagreement(&vx, &s.housing_vx_m_s) + disagreement(&vy, &s.housing_vy_m_s));
         let rms = (vx.iter().zip(&vy).map(|(a, b)| a * a + b * b).sum::<f64>() / vx.len() as f64).sqrt();
-        let eps = FRICTION_SMOOTHING * rms;
-        let (mut ux, mut uy) = (Vec::with_capacity(vx.len()), Vec::with_capacity(vx.len()));
-        for (a, b) in vx.iter().zip(&vy) {
-            let speed = (a * a + b * b + eps * eps).sqrt();
-            ux.push(a / speed);
-            uy.push(b / speed);
+        // E[sign(v) | measured v] for Gaussian noise of that level (regression calibration):
+        // a plain sign of the noisy velocity would bias the friction force low.
+        let width = (std::f64::consts::SQRT_2 * sigma).max(FRICTION_SMOOTHING * rms).max(f64::MIN_POSITIVE);
+        let (fvx, fvy) = (&p.full_motion[2], &p.full_motion[3]);
+        let (mut ux, mut uy) = (Vec::with_capacity(fvx.len()), Vec::with_capacity(fvx.len()));
+        for (a, b) in fvx.iter().zip(fvy) {
+            let (a, b) = (-a, -b);
+            let speed = (a * a + b * b).sqrt();
+            let g = if speed > 0.0 { crate::statistics::erf(speed / width) / speed } else { 0.0 };
+            ux.push(a * g);
+            uy.push(b * g);
         }
+        // Through the conditioning's low-pass, like the eq. 2 force the friction hides in.
+        let (ux, uy) = (p.filtered_picks(&ux)?, p.filtered_picks(&uy)?);
         let mut design = p.kc_design(s, 1);
         p.set_column(&mut design, 8, &ux, &uy);
         let target = p.target(s, 0.0);
@@ -250,10 +264,13 @@ impl Candidate for AmplitudeNonlinearity {
 
     fn fit(&self, p: &Prepared, train: &[bool]) -> Result<Fitted, DiagnosisError> {
         let s = &p.series;
-        let x = about_block_mean(p, &s.x_m);
-        let y = about_block_mean(p, &s.y_m);
-        let (vx, vy) = (&s.vx_m_s, &s.vy_m_s);
-        let n = p.len();
+        // Terms formed at full rate about the record's mean position, then low-passed like
+        // the force: a cube of an 80 Hz line has a 240 Hz part the force no longer has.
+        let [fx, fy, fvx, fvy] = &p.full_motion;
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (mx, my) = (mean(fx), mean(fy));
+        let x: Vec<f64> = fx.iter().map(|v| v - mx).collect();
+        let y: Vec<f64> = fy.iter().map(|v| v - my).collect();
         let term = |k: usize, i: usize| -> f64 {
             match k {
                 0 => x[i] * x[i],
@@ -261,16 +278,17 @@ impl Candidate for AmplitudeNonlinearity {
                 2 => y[i] * y[i],
                 3 => x[i] * x[i] * x[i],
                 4 => y[i] * y[i] * y[i],
-                5 => x[i] * vx[i],
-                6 => y[i] * vy[i],
-                7 => x[i] * vy[i],
-                _ => y[i] * vx[i],
+                5 => x[i] * fvx[i],
+                6 => y[i] * fvy[i],
+                7 => x[i] * fvy[i],
+                _ => y[i] * fvx[i],
             }
         };
         let mut design = p.kc_design(s, 2 * NONLINEAR_TERMS);
-        for axis in 0..2 {
-            for k in 0..NONLINEAR_TERMS {
-                let v: Vec<f64> = (0..n).map(|i| term(k, i)).collect();
+        for k in 0..NONLINEAR_TERMS {
+            let full: Vec<f64> = (0..x.len()).map(|i| term(k, i)).collect();
+            let v = p.filtered_picks(&full)?;
+            for axis in 0..2 {
                 set_axis_column(p, &mut design, 8 + axis * NONLINEAR_TERMS + k, axis, &v);
             }
         }
@@ -413,7 +431,14 @@ impl ThermalDrift {
         let s = &p.series;
         let n = p.len();
         let mut design = DMatrix::zeros(4 * n, 9);
-        let src = [&s.x_m, &s.y_m, &s.vx_m_s, &s.vy_m_s];
+        // The coefficients act on the motion about the (drifting) equilibrium: detrended per
+        // block before the temperature scales it, or the equilibrium's own drift times dT
+        // would pose as a coefficient change.
+        let src: [Vec<f64>; 4] = [&s.x_m, &s.y_m, &s.vx_m_s, &s.vy_m_s].map(|v| {
+            let mut v = v.clone();
+            p.detrend(&mut v);
+            v
+        });
         let mut slope = [vec![0.0; n], vec![0.0; n]];
         for axis in 0..2 {
             for (j, col) in src.iter().enumerate() {

@@ -203,6 +203,10 @@ pub struct Prepared {
     pub mean_temperature_c: f64,
     /// Static film force on the journal (eq. 2 mean), N.
     pub static_force_n: [f64; 2],
+    /// Full-rate conditioned motion `[x, y, x', y']` (every scan), for regressors that are
+    /// nonlinear in it: they are formed at full rate and passed through the conditioning's
+    /// low-pass like the force they are compared with ([`Prepared::filtered_picks`]).
+    pub full_motion: [Vec<f64>; 4],
 }
 
 /// Settings of a diagnosis.
@@ -305,6 +309,7 @@ pub fn prepare(
         force_rms_n: 0.0,
         mean_temperature_c,
         static_force_n: conditioned.static_force_n,
+        full_motion: [conditioned.x_m.clone(), conditioned.y_m.clone(), conditioned.vx_m_s.clone(), conditioned.vy_m_s.clone()],
     };
     let mut fx = prepared.series.fx_n.clone();
     let mut fy = prepared.series.fy_n.clone();
@@ -411,6 +416,20 @@ impl Prepared {
                 *y -= mean + slope * (i as f64 - tm);
             }
         }
+    }
+
+    /// A full-rate signal formed from the conditioned record, through the conditioning's
+    /// zero-phase low-pass, at the decimated samples: a nonlinear regressor's harmonics above
+    /// the band are removed as they were from the force (and cannot alias on decimation).
+    pub fn filtered_picks(&self, full: &[f64]) -> Result<Vec<f64>, DiagnosisError> {
+        let filtered = conditioning::lowpass::filtfilt(
+            oilfilm_physics::daq::ChannelId::ProbeAX,
+            full,
+            self.conditioning.lowpass_order,
+            self.conditioning.lowpass_cutoff_hz,
+            self.raw.sample_rate_hz,
+        )?;
+        Ok(self.picks.iter().map(|&i| filtered[i]).collect())
     }
 
     /// Rows of the stacked problem: `fx`, `fy`, `k_bar tilt_x`, `k_bar tilt_y`, each `len()`.

@@ -78,6 +78,16 @@ fn gamma_q(a: f64, x: f64) -> f64 {
     }
 }
 
+/// The error function, `erf(x) = sign(x) P(1/2, x^2)`.
+pub fn erf(x: f64) -> f64 {
+    let p = 1.0 - gamma_q(0.5, x * x);
+    if x < 0.0 {
+        -p
+    } else {
+        p
+    }
+}
+
 /// Upper tail of the chi-square distribution with `dof` degrees of freedom.
 pub fn chi2_sf(x: f64, dof: f64) -> f64 {
     if !(x.is_finite()) {
@@ -234,6 +244,13 @@ pub fn line_structure(motion: [&[f64]; 4], force: [&[f64]; 2], t: &[f64], lines_
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn erf_matches_tabled_values() {
+        assert!((erf(0.5) - 0.520_499_877_813_046_5).abs() < 1e-12);
+        assert!((erf(-1.0) + 0.842_700_792_949_714_9).abs() < 1e-12);
+        assert!((erf(3.0) - 0.999_977_909_503_001_4).abs() < 1e-12);
+    }
 
     #[test]
     fn chi_square_tail_matches_tabled_values() {

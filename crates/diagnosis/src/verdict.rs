@@ -61,7 +61,7 @@ impl Default for DiagnosisOptions {
         Self {
             prepare: PrepareOptions::default(),
             significance: 1e-4,
-            min_gain: 0.01,
+            min_gain: 0.005,
             min_fold_fraction: 0.7,
             structure_p: 1e-6,
             min_structure: 0.01,

@@ -18,6 +18,7 @@ fn explore() {
         "synchronous_runout" => e.synchronous_runout = Some(SynchronousRunout { amplitude_m: size, phase_deg: 30.0 }),
         "channel_delay" => e.channel_delay = Some(ChannelDelay { channel: chan.clone(), delay_s: size }),
         "probe_saturation" => e.probe_saturation = Some(ProbeSaturation { channel: chan.clone(), limit_m: size }),
+        "film_relaxation" => e.film_relaxation = Some(FilmRelaxation { stiffness_n_m: size, time_constant_s: 5.3e-3 }),
         "support_friction" => e.support_friction = Some(SupportFriction { friction_force_n: size }),
         _ => {}
     }
