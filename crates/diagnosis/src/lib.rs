@@ -12,3 +12,4 @@ pub mod error;
 pub mod show;
 
 pub use error::DiagnosisError;
+pub use show::{show, Show, ShowConfig};
