@@ -6,7 +6,7 @@
 //! 0.02 um rms noise (about 40 dB below the motion); force, load and temperature sensors keep
 //! the rig file's noise.
 
-use oilfilm_diagnosis::show::{ComponentKind, TrendVariable, COEFFICIENT_NAMES};
+use oilfilm_diagnosis::show::{TrendVariable, COEFFICIENT_NAMES};
 use oilfilm_diagnosis::{show, DiagnosisError, Show, ShowConfig};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, SpeedSource};
@@ -25,8 +25,11 @@ fn rig() -> RigConfig {
 /// Simulates `rig` and shows the record against `model` (the rig file the show is given:
 /// the same rig without the hidden effect).
 fn run(rig: &RigConfig, model: &RigConfig) -> (Show, f64) {
-    let plan = ExcitationPlan::two_tone(23.0, 37.0, 150.0);
-    let rec = simulate::simulate(rig, &plan, SECONDS, SimulateOptions::default(), &mut |_| {}).unwrap();
+    run_plan(rig, model, &ExcitationPlan::two_tone(23.0, 37.0, 150.0))
+}
+
+fn run_plan(rig: &RigConfig, model: &RigConfig, plan: &ExcitationPlan) -> (Show, f64) {
+    let rec = simulate::simulate(rig, plan, SECONDS, SimulateOptions::default(), &mut |_| {}).unwrap();
     let raw = rec.raw().unwrap();
     let cal = pipeline::calibration_for(model, &raw, &pipeline::rig_offsets(model, &raw).unwrap()).unwrap();
     let t = std::time::Instant::now();
@@ -63,11 +66,13 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     let rig = rig();
     let (s, secs) = run(&rig, &rig);
     summary("no effect", &s, secs);
-    // Measured: NRMSE about 0.0xx on both axes (noise and the film map's tabulation).
-    assert!(worst_nrmse(&s) < 0.05, "NRMSE {:.4} exceeds 0.05", worst_nrmse(&s));
+    // Measured: NRMSE 0.0052 (x), 0.0072 (y): probe noise and the force sensors' noise that
+    // drives the simulation. Bound with ~3x margin.
+    assert!(worst_nrmse(&s) < 0.02, "NRMSE {:.4} exceeds 0.02", worst_nrmse(&s));
     for a in &s.motion.axes {
         for l in &a.lines {
-            assert!((l.amplitude_ratio - 1.0).abs() < 0.03, "{} {} Hz: amplitude ratio {}", a.axis, l.frequency_hz, l.amplitude_ratio);
+            // Measured: within 0.3 % and 0.7 deg (the weak 3 Hz bellows ripple is the worst).
+            assert!((l.amplitude_ratio - 1.0).abs() < 0.01, "{} {} Hz: amplitude ratio {}", a.axis, l.frequency_hz, l.amplitude_ratio);
             assert!(l.phase_difference_deg.abs() < 2.0, "{} {} Hz: phase {}", a.axis, l.frequency_hz, l.phase_difference_deg);
         }
     }
@@ -75,9 +80,8 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     assert!(s.coefficients.windows.len() >= 5, "{} windows accepted", s.coefficients.windows.len());
     let m = s.coefficients.mean_relative_difference.unwrap();
     for (n, r) in COEFFICIENT_NAMES.iter().zip(m) {
-        // Cross-coupling terms are smaller; their relative difference is noisier.
-        let bound = if n.ends_with("xx") || n.ends_with("yy") { 0.03 } else { 0.06 };
-        assert!(r.abs() < bound, "{n}: identified differs from the model by {:.2} %", 100.0 * r);
+        // Measured: all within 1.2 % (9 one-second windows).
+        assert!(r.abs() < 0.03, "{n}: identified differs from the model by {:.2} %", 100.0 * r);
     }
     // The film model equilibrium sits where the probes say the journal is.
     let (mp, pp) = (s.operating.measured_position_m, s.operating.model_position_m);
@@ -88,30 +92,40 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     assert!(secs < 3.0, "show took {secs:.2} s");
 }
 
+/// Largest |mean relative difference| of the direct stiffnesses kxx, kyy.
+fn direct_stiffness_gap(s: &Show) -> f64 {
+    let m = s.coefficients.mean_relative_difference.unwrap();
+    m[0].abs().max(m[3].abs())
+}
+
 #[test]
-fn fluid_inertia_makes_the_prediction_worse_and_shows_at_the_lines() {
-    let model = rig();
-    let (base, _) = run(&model, &model);
+fn fluid_inertia_makes_the_prediction_worse_and_the_stiffness_disagree() {
+    // Added mass matters against stiffness as w^2 M_a / K: high lines, a large mass, quiet
+    // probes (5 nm) so that the noise does not set the NRMSE.
+    let mut model = rig();
+    model.daq.set_displacement_probe_noise(5.0e-9);
+    let plan = ExcitationPlan::two_tone(41.0, 73.0, 150.0);
+    let (base, _) = run_plan(&model, &model, &plan);
+    summary("no effect, 41/73 Hz", &base, 0.0);
     let mut hidden = model.clone();
-    hidden.effects.fluid_inertia = Some(FluidInertia { added_mass_kg: 15.0 });
-    let (s, secs) = run(&hidden, &model);
-    summary("fluid inertia 15 kg", &s, secs);
-    assert!(worst_nrmse(&s) > 3.0 * worst_nrmse(&base), "NRMSE {:.4} vs {:.4} without the effect", worst_nrmse(&s), worst_nrmse(&base));
-    // The residual of the K-C fit carries the inertia force at the excitation lines.
-    let line_db = s.residual.components.iter().filter(|c| c.kind == ComponentKind::Excitation).map(|c| c.db_above_floor[0].max(c.db_above_floor[1])).fold(f64::NEG_INFINITY, f64::max);
-    let base_db = base.residual.components.iter().filter(|c| c.kind == ComponentKind::Excitation).map(|c| c.db_above_floor[0].max(c.db_above_floor[1])).fold(f64::NEG_INFINITY, f64::max);
-    assert!(line_db > base_db + 6.0, "residual at the lines {line_db:.1} dB vs {base_db:.1} dB without the effect");
+    hidden.effects.fluid_inertia = Some(FluidInertia { added_mass_kg: 80.0 });
+    let (s, secs) = run_plan(&hidden, &model, &plan);
+    summary("fluid inertia 80 kg, 41/73 Hz", &s, secs);
+    assert!(worst_nrmse(&s) > 2.0 * worst_nrmse(&base), "NRMSE {:.4} vs {:.4} without the effect", worst_nrmse(&s), worst_nrmse(&base));
+    // The K-C fit absorbs -w^2 M_a into the stiffness: identified kxx, kyy fall below the model.
+    assert!(direct_stiffness_gap(&base) < 0.02, "without the effect: {:.2} %", 100.0 * direct_stiffness_gap(&base));
+    assert!(direct_stiffness_gap(&s) > 0.04, "with 80 kg: {:.2} %", 100.0 * direct_stiffness_gap(&s));
 }
 
 #[test]
 fn thermal_drift_shows_as_a_significant_trend_against_temperature() {
     let model = rig();
     let mut hidden = model.clone();
-    hidden.effects.thermal_drift = Some(ThermalDrift { heating_rate_c_per_s: 0.5 });
+    hidden.effects.thermal_drift = Some(ThermalDrift { heating_rate_c_per_s: 0.2 });
     let (s, secs) = run(&hidden, &model);
-    summary("thermal drift 0.5 C/s", &s, secs);
+    summary("thermal drift 0.2 C/s", &s, secs);
     let span = s.operating.temperature_range_c[1] - s.operating.temperature_range_c[0];
-    assert!(span > 3.0, "temperature span {span}");
+    assert!(span > 1.5, "temperature span {span}");
     let significant: Vec<_> = s
         .trends
         .iter()
