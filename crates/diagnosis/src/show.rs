@@ -13,8 +13,9 @@
 //! 3. **Trends.** Each identified coefficient against the amplitude `d`, the load parameter
 //!    `F_Y`, the temperature and time: a straight-line slope with its standard error.
 //! 4. **Residual spectra.** What the baseline K-C fit leaves in the film force, per axis: the
-//!    power at the excitation lines, their 2x and 3x harmonics, the shaft's 1X and the
-//!    broadband floor, in dB above the floor.
+//!    power at the excitation lines, their 2x and 3x harmonics, the sums and differences of
+//!    the strongest lines (intermodulation), the shaft's 1X and the broadband floor, in dB
+//!    above the floor.
 //!
 //! ## How the simulation is driven (and what it assumes)
 //! * The applied forces are taken from the conditioned record: eq. 2 solved for
@@ -344,7 +345,30 @@ pub struct Trend {
     pub mean: f64,
     /// slope / |mean|: the fractional change per unit of the variable (x100 for %/unit).
     pub relative_slope_per_unit: f64,
+    /// The fitted change across the observed range of the variable, as a fraction of the
+    /// mean: what the trend amounts to in this record (a steep slope over a range of noise
+    /// amounts to nothing).
+    pub relative_change_over_range: f64,
+    /// Smallest and largest value of the variable over the windows.
+    pub range: [f64; 2],
 }
+
+impl Trend {
+    /// Worth a reader's attention: at least [`TREND_MIN_WINDOWS`] windows, |t| above
+    /// [`TREND_SIGNIFICANT_T`] and a change over the observed range above
+    /// [`TREND_MIN_CHANGE`]. The thresholds are stated, not tuned: 32 trends are tested at
+    /// once, so a |t| of 3 on a handful of windows is no evidence.
+    pub fn is_notable(&self) -> bool {
+        self.points.len() >= TREND_MIN_WINDOWS && self.t_statistic.abs() > TREND_SIGNIFICANT_T && self.relative_change_over_range.abs() > TREND_MIN_CHANGE
+    }
+}
+
+/// See [`Trend::is_notable`].
+pub const TREND_MIN_WINDOWS: usize = 6;
+/// See [`Trend::is_notable`].
+pub const TREND_SIGNIFICANT_T: f64 = 4.0;
+/// See [`Trend::is_notable`]: 2 %.
+pub const TREND_MIN_CHANGE: f64 = 0.02;
 
 /// The kind of a named residual component.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -353,6 +377,8 @@ pub enum ComponentKind {
     Excitation,
     /// `order` x an excitation line.
     Harmonic { order: u32 },
+    /// Sum or difference of two excitation lines (a nonlinearity mixes them).
+    Intermodulation,
     /// Once per shaft revolution.
     Shaft1x,
     /// Everything in the band that is not a named line.
@@ -535,7 +561,7 @@ fn measured_operating_point(c: &Conditioned, rig: &RigConfig, speed_rpm: f64) ->
     let bellows_load_n = bellows_mean_n - rig.housing.mass_kg * rig.housing.gravity_m_s2;
     let static_force_n = c.static_force_n;
     let load_n = static_force_n[0].hypot(static_force_n[1]);
-    if !(load_n > 0.0) {
+    if load_n.is_nan() || load_n <= 0.0 {
         return Err(DiagnosisError::bad_input("f3", format!("the measured static film load is {load_n} N: no operating point to simulate")));
     }
     let running = Running::from_rpm(speed_rpm, viscosity_pa_s);
@@ -579,7 +605,7 @@ fn motion_comparison(
     cfg.static_load.ripple_fraction = 0.0;
     cfg.operating.speed_rpm = op.speed_rpm;
     cfg.operating.bearing_temperature_c = op.temperature_c;
-    if !(op.bellows_load_n > 0.0) {
+    if op.bellows_load_n.is_nan() || op.bellows_load_n <= 0.0 {
         return Err(DiagnosisError::bad_input(
             "f3",
             format!("the bellows carry {:.1} N, less than the housing's weight: the static load f3 - m g = {:.1} N must be positive", op.bellows_mean_n, op.bellows_load_n),
@@ -796,6 +822,8 @@ fn trends(windows: &[WindowComparison], notes: &mut Vec<String>) -> Vec<Trend> {
             let v: Vec<f64> = windows.iter().map(|w| w.identified[k]).collect();
             let Some((slope, se, m)) = stats::line_fit(&u, &v) else { continue };
             any = true;
+            let lo = u.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = u.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             out.push(Trend {
                 coefficient: name.to_string(),
                 variable: var,
@@ -805,6 +833,8 @@ fn trends(windows: &[WindowComparison], notes: &mut Vec<String>) -> Vec<Trend> {
                 t_statistic: slope / se,
                 mean: m,
                 relative_slope_per_unit: slope / m.abs(),
+                relative_change_over_range: slope * (hi - lo) / m.abs(),
+                range: [lo, hi],
             });
         }
         if !any {
@@ -892,6 +922,19 @@ fn residual_spectra(
                 continue;
             }
             named.push((format!("{order}x {f:.2} Hz ({h:.2} Hz)"), ComponentKind::Harmonic { order }, h));
+        }
+    }
+    // Sums and differences of the strongest lines (at most four of them).
+    let strong = &lines[..lines.len().min(4)];
+    for (i, &a) in strong.iter().enumerate() {
+        for &b in &strong[i + 1..] {
+            for (h, sign) in [(a + b, '+'), ((a - b).abs(), '-')] {
+                if h < band[0] || h > band[1] || named.iter().any(|(_, _, g)| (g - h).abs() <= lobe_hz) {
+                    continue;
+                }
+                let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
+                named.push((format!("{hi:.2} {sign} {lo:.2} Hz ({h:.2} Hz)"), ComponentKind::Intermodulation, h));
+            }
         }
     }
     if let Some((name, _, _)) = named.iter().find(|(_, _, g)| (g - shaft_hz).abs() <= lobe_hz) {

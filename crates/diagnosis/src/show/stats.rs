@@ -17,7 +17,8 @@ pub(crate) fn line_fit(u: &[f64], v: &[f64]) -> Option<(f64, f64, f64)> {
     let suu: f64 = u[..n].iter().map(|a| (a - mu) * (a - mu)).sum();
     let suv: f64 = u[..n].iter().zip(&v[..n]).map(|(a, b)| (a - mu) * (b - mv)).sum();
     let scale = u[..n].iter().map(|a| a.abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    if !(suu > (1e-12 * scale) * (1e-12 * scale) * nf) {
+    let threshold = (1e-12 * scale) * (1e-12 * scale) * nf;
+    if suu.is_nan() || suu <= threshold {
         return None;
     }
     let slope = suv / suu;
