@@ -113,7 +113,7 @@ fn motion_time(show: &Show, record: &str, path: &Path) -> Result<()> {
     let panels = body.split_evenly((2, 1));
     for (k, panel) in panels.iter().enumerate() {
         let (meas, pred) = if k == 0 { (&ts.measured_x_m, &ts.predicted_x_m) } else { (&ts.measured_y_m, &ts.predicted_y_m) };
-        let axis = &show.motion.axes[k];
+        let Some(axis) = show.motion.axes.get(k) else { continue };
         let um = |v: &[f64]| -> Vec<f64> { v.iter().map(|a| a * 1e6).collect() };
         let (m, p) = (um(meas), um(pred));
         let (y0, y1) = padded(m.iter().chain(&p).copied());
@@ -157,7 +157,7 @@ fn motion_spectrum(show: &Show, record: &str, path: &Path) -> Result<()> {
         let top = m.iter().chain(&p).copied().filter(|v| v.is_finite()).fold(-300.0, f64::max);
         let x1 = s.frequency_hz.last().copied().unwrap_or(1.0).max(1.0);
         let mut chart = ChartBuilder::on(panel)
-            .caption(format!("{} amplitude per bin", show.motion.axes[k].axis), (FONT, 17))
+            .caption(format!("{} amplitude per bin", ["x", "y"][k]), (FONT, 17))
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(70)

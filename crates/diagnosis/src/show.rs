@@ -29,8 +29,9 @@
 //!   constant (the baseline model's assumption: a drift during the record shows up as
 //!   disagreement, which is the point). Injected effects are cleared; the journal's configured
 //!   1X orbit (a property of the shaft) is kept. The rig simulation has no sensor noise.
-//! * **Start-up.** The simulated rig starts at static equilibrium at the first valid sample,
-//!   while the real one was already moving. The difference decays as the linear film's
+//! * **Start-up.** The simulated rig starts at static equilibrium at the first valid sample
+//!   with its exciters at rest (the first step ramps them to the measured force), while the
+//!   real one was already moving. The difference decays as the linear film's
 //!   slowest mode; `settle_time_constants` of its time constants are discarded before any
 //!   comparison (reported as `transient_discarded_s`).
 //! * Comparisons are on the dynamic parts (each signal minus its own mean over the compared
@@ -689,7 +690,8 @@ fn motion_comparison(
         });
     }
 
-    // Time-series excerpt: the last `plot_seconds` of the compared span.
+    // Time-series excerpt: the last `plot_seconds` of the compared span. `cmp` holds at least
+    // half of the >= 64 valid samples, so the clamp's bounds are ordered.
     let len = ((config.plot_seconds * fs).round() as usize).clamp(2, cmp.len());
     let from = n_valid - len;
     let stride = len.div_ceil(config.plot_points).max(1);

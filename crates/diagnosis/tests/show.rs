@@ -92,7 +92,6 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     // The whole record survives as JSON.
     let json = serde_json::to_string(&s).unwrap();
     assert!(json.contains("\"excitation\"") && json.contains("\"broadband\""));
-    assert!(secs < 3.0, "show took {secs:.2} s");
 }
 
 /// Largest |mean relative difference| of the direct stiffnesses kxx, kyy.
@@ -153,4 +152,31 @@ fn bad_settings_and_speeds_are_named() {
     let bad = ShowConfig { spectrum_segment: 1000, ..ShowConfig::default() };
     let e = show(&raw, &cal, &rig, 1500.0, SpeedSource::User, &bad).unwrap_err();
     assert!(e.to_string().contains("spectrum_segment"), "{e}");
+}
+
+/// Benchmark (a printed table, no timing asserted): the show of a 10 s, 5 kHz record on the
+/// Zhou rig with each film model, best of three. Run with `-- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn bench_show_of_a_10_s_record() {
+    use oilfilm_physics::film::FilmModelConfig;
+    println!("| film model | record | show, best of 3 (s) | x real time |\n|---|---|---|---|");
+    for (label, film) in [("finite 72x8, tabulated", None), ("short (Ocvirk)", Some(FilmModelConfig::Short))] {
+        let mut r = rig();
+        if let Some(f) = film {
+            r.film = f;
+        }
+        let plan = ExcitationPlan::two_tone(23.0, 37.0, 150.0);
+        let rec = simulate::simulate(&r, &plan, SECONDS, SimulateOptions::default(), &mut |_| {}).unwrap();
+        let raw = rec.raw().unwrap();
+        let cal = pipeline::calibration_for(&r, &raw, &pipeline::rig_offsets(&r, &raw).unwrap()).unwrap();
+        let mut best = f64::INFINITY;
+        for _ in 0..3 {
+            let t = std::time::Instant::now();
+            let s = show(&raw, &cal, &r, rec.speed_rpm, SpeedSource::Record, &ShowConfig::default()).unwrap();
+            best = best.min(t.elapsed().as_secs_f64());
+            assert!(!s.motion.axes.is_empty());
+        }
+        println!("| {label} | {SECONDS} s at {} Hz | {best:.3} | {:.1} |", raw.sample_rate_hz, SECONDS / best);
+    }
 }
