@@ -180,3 +180,19 @@ fn bench_show_of_a_10_s_record() {
         println!("| {label} | {SECONDS} s at {} Hz | {best:.3} | {:.1} |", raw.sample_rate_hz, SECONDS / best);
     }
 }
+
+#[test]
+fn one_window_gives_no_trends_and_says_why() {
+    let mut r = rig();
+    r.film = oilfilm_physics::film::FilmModelConfig::Short;
+    let rec = simulate::simulate(&r, &ExcitationPlan::two_tone(23.0, 37.0, 150.0), 3.0, SimulateOptions::default(), &mut |_| {}).unwrap();
+    let raw = rec.raw().unwrap();
+    let cal = pipeline::calibration_for(&r, &raw, &pipeline::rig_offsets(&r, &raw).unwrap()).unwrap();
+    // The pipeline's own window (50 000 samples) is longer than the record: one window.
+    let s = show(&raw, &cal, &r, rec.speed_rpm, SpeedSource::Record, &ShowConfig { window_s: None, ..ShowConfig::default() }).unwrap();
+    assert_eq!(s.coefficients.windows.len(), 1);
+    assert!(s.trends.is_empty());
+    assert!(s.notes.iter().any(|n| n.contains("trends need at least 3")), "{:?}", s.notes);
+    // The short film is the rig's own film here, so the prediction still matches.
+    assert!(worst_nrmse(&s) < 0.02, "NRMSE {}", worst_nrmse(&s));
+}
