@@ -11,6 +11,8 @@ mod records;
 mod campaign;
 mod figures;
 mod report;
+#[allow(dead_code)] // wired to `oilfilm diagnose` by the lead
+mod diagnose_report;
 
 use std::path::PathBuf;
 

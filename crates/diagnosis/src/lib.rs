@@ -22,4 +22,5 @@ pub mod verdict;
 
 pub use catalog::Cause;
 pub use error::DiagnosisError;
+pub use show::{show, Show, ShowConfig};
 pub use verdict::{diagnose, Diagnosis, DiagnosisOptions};
