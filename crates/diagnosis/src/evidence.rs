@@ -207,6 +207,8 @@ pub struct Prepared {
     /// nonlinear in it: they are formed at full rate and passed through the conditioning's
     /// low-pass like the force they are compared with ([`Prepared::filtered_picks`]).
     pub full_motion: [Vec<f64>; 4],
+    /// What the preparation noticed (refused windows, range violations).
+    pub notes: Vec<String>,
 }
 
 /// Settings of a diagnosis.
@@ -273,14 +275,21 @@ pub fn prepare(
             options.min_seconds
         ))));
     }
-    let accepted = identification.accepted().count();
-    if accepted == 0 {
+    if lines_hz.len() < 2 {
+        return Ok(Err(Insufficient(format!(
+            "too poorly excited: the exciter forces hold {} line(s) ({:?} Hz); at one frequency x, y, x', y' all lie in span{{cos, sin}} (rank 2 of 4) and stiffness, damping and any added mass alias: excite two frequencies or a band (multisine)",
+            lines_hz.len(),
+            lines_hz
+        ))));
+    }
+    let mut notes = Vec::new();
+    if identification.accepted().count() == 0 {
         let why = identification
             .refusal
             .clone()
             .or_else(|| identification.windows.iter().find_map(|w| w.estimate.result.as_ref().err().map(|r| r.to_string())))
             .unwrap_or_else(|| "no window could be identified".into());
-        return Ok(Err(Insufficient(format!("too poorly excited or refused: the linear model itself cannot be identified ({why})"))));
+        notes.push(format!("the windowed identification refused every window ({why}); the diagnosis fits the whole record"));
     }
     let decimation = ((raw.sample_rate_hz / (DECIMATED_RATE_OVER_CUTOFF * conditioning.lowpass_cutoff_hz)).floor() as usize).max(1);
     let picks: Vec<usize> = (valid.start + EDGE_MARGIN..valid.end - EDGE_MARGIN).step_by(decimation).collect();
@@ -310,6 +319,7 @@ pub fn prepare(
         mean_temperature_c,
         static_force_n: conditioned.static_force_n,
         full_motion: [conditioned.x_m.clone(), conditioned.y_m.clone(), conditioned.vx_m_s.clone(), conditioned.vy_m_s.clone()],
+        notes,
     };
     let mut fx = prepared.series.fx_n.clone();
     let mut fy = prepared.series.fy_n.clone();
@@ -323,7 +333,10 @@ pub fn prepare(
     // models; it is not a fitted parameter of any of them).
     let design = prepared.kc_design(&prepared.series, 0);
     let target = prepared.target(&prepared.series, 0.0);
-    let fit = crate::least_squares::solve(&design, &target, &vec![true; design.nrows()], "baseline K-C (whole record)")?;
+    let fit = match crate::least_squares::solve(&design, &target, &vec![true; design.nrows()], "baseline K-C (whole record)") {
+        Ok(f) => f,
+        Err(e) => return Ok(Err(Insufficient(format!("too poorly excited: the linear model itself cannot be fitted ({e})")))),
+    };
     prepared.tilt_weight_n_m = 0.5 * (fit.theta[0].abs() + fit.theta[5].abs());
     Ok(Ok(prepared))
 }

@@ -127,6 +127,9 @@ pub struct LineStructure {
     /// film force at the same lines.
     pub relative_amplitude: f64,
     pub lines: usize,
+    /// Displacement power at the lines over the power between them: the motion's own
+    /// signal-to-noise ratio (below ~10 the line fit itself is biased by the noise).
+    pub motion_snr: f64,
 }
 
 /// Phasor of `v` at `f` (sampled at `t`): `(2/n) sum v e^{-i w t}` as (re, im).
@@ -233,12 +236,14 @@ pub fn line_structure(motion: [&[f64]; 4], force: [&[f64]; 2], t: &[f64], lines_
     if !(res_off > 0.0 && force_on > 0.0) {
         return None;
     }
+    let motion_power = |ph: &[[(f64, f64); 6]]| ph.iter().map(|p| p[0].0.powi(2) + p[0].1.powi(2) + p[1].0.powi(2) + p[1].1.powi(2)).sum::<f64>() / ph.len() as f64;
+    let motion_snr = motion_power(&on) / motion_power(&offp).max(f64::MIN_POSITIVE);
     let ratio = res_on / res_off;
     // Each line's residual power (both axes) ~ floor * chi2(4) / 4 under an adequate model.
     let dof = 4.0 * lines.len() as f64;
     let p_value = chi2_sf(ratio * dof, dof);
     let relative_amplitude = ((res_on - res_off).max(0.0) / force_on).sqrt();
-    Some(LineStructure { ratio, p_value, relative_amplitude, lines: lines.len() })
+    Some(LineStructure { ratio, p_value, relative_amplitude, lines: lines.len(), motion_snr })
 }
 
 #[cfg(test)]

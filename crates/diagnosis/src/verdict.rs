@@ -35,6 +35,10 @@ use crate::evidence::{self, Insufficient, PrepareOptions, Prepared};
 use crate::statistics::{self, LineStructure};
 use crate::DiagnosisError;
 
+/// Displacement power ratio (lines over the floor between them) below which a record is too
+/// noisy to judge (20 dB).
+pub const MIN_MOTION_SNR: f64 = 100.0;
+
 /// Thresholds of a diagnosis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DiagnosisOptions {
@@ -230,11 +234,18 @@ pub fn diagnose(
     let rows = p.rows();
     let sst = 2.0 * n as f64 * p.force_rms_n * p.force_rms_n;
     let nrmse = |block_sse: &[f64]| (block_sse.iter().sum::<f64>() / sst).sqrt();
+    let baseline_structure = structure_of(&p);
+    if let Some(s) = baseline_structure.filter(|s| s.motion_snr < MIN_MOTION_SNR) {
+        return Ok(Diagnosis::insufficient(format!(
+            "too noisy: the motion at the excitation lines stands only {:.1} dB above the noise between them (at least {:.0} dB needed to judge any model); excite harder or record longer",
+            10.0 * s.motion_snr.log10(),
+            10.0 * MIN_MOTION_SNR.log10()
+        )));
+    }
     let baseline = judge(&p, &|train| Baseline::fit(&p, train))?;
     let nrmse0 = nrmse(&baseline.block_sse);
     let sse0 = baseline.full.residual.norm_squared();
-    let baseline_structure = structure_of(&p);
-    let mut notes = Vec::new();
+    let mut notes = p.notes.clone();
     if speed_source == SpeedSource::RigFile {
         notes.push("the record states no speed: the rig file's was assumed (1X runout is looked for at that speed)".into());
     }
