@@ -11,7 +11,7 @@ mod records;
 mod campaign;
 mod figures;
 mod report;
-#[allow(dead_code)] // wired to `oilfilm diagnose` by the lead
+mod diagnose;
 mod diagnose_report;
 
 use std::path::PathBuf;
@@ -75,6 +75,10 @@ enum Command {
     Simulate(records::SimulateArgs),
     /// Identify the coefficients of an ASCII record, window by window.
     Identify(records::IdentifyArgs),
+    /// What the simulation gets wrong about a record (ASCII or bag): the cause named from a
+    /// catalog and judged on held-out data, the extended model's parameters and its gain,
+    /// with a report (figures + report.md). `--json` prints the stable contract.
+    Diagnose(diagnose::DiagnoseArgs),
     /// Benchmarks that print a table (film coefficient set, rig simulation speed).
     Bench(bench::BenchArgs),
     /// Zhou et al. (2004)'s two studies on the simulated rig: coefficients against the load
@@ -162,6 +166,7 @@ fn main() -> Result<()> {
         Command::Coefficients(args) => run_coefficients(&args),
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Campaign(args) => campaign::run(&args.source.load()?, &args.out, args.quick, args.json),
     }

@@ -69,7 +69,7 @@ impl Default for DiagnosisOptions {
             min_fold_fraction: 0.7,
             structure_p: 1e-6,
             min_structure: 0.01,
-            explained_fraction: 0.5,
+            explained_fraction: 0.3,
             max_noise_nrmse: 0.7,
         }
     }

@@ -1,0 +1,186 @@
+//! `oilfilm diagnose INPUT --rig RIG`: what the simulation gets wrong about a record (issue 6).
+//! Reads an ASCII record or a bag directory's DAQ frames, runs the diagnosis library (the
+//! catalog judged on held-out blocks) and the show (model against measurement), prints the
+//! verdict or the JSON contract, and writes the figures and `report.md`.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use oilfilm_diagnosis::{diagnose, show, Diagnosis, DiagnosisOptions, ShowConfig};
+use oilfilm_identification::ascii;
+use oilfilm_identification::conditioning::{RawRecord, RawUnits};
+use oilfilm_identification::pipeline::{self, SpeedSource};
+use oilfilm_identification::simulate;
+use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::daq::ChannelId;
+
+use crate::RigSource;
+
+#[derive(Debug, clap::Args)]
+pub struct DiagnoseArgs {
+    /// An ASCII record (README format) or a rosbag2 bag directory holding DAQ frames.
+    input: PathBuf,
+    #[command(flatten)]
+    source: RigSource,
+    /// Shaft speed, rpm, if the record does not state it.
+    #[arg(long)]
+    speed_rpm: Option<f64>,
+    /// Directory for report.md and the SVG figures (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "out/diagnose")]
+    out: PathBuf,
+    /// Print the diagnosis as one JSON object (the contract in the README) instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Skip the show (simulation against measurement) and the report: verdict only.
+    #[arg(long)]
+    no_report: bool,
+}
+
+/// A record ready for the libraries: raw columns, the rig's calibration on its schedule,
+/// its speed and where that came from.
+struct Loaded {
+    raw: RawRecord,
+    calibration: oilfilm_physics::daq::Calibration,
+    speed_rpm: f64,
+    speed_source: SpeedSource,
+}
+
+fn load_ascii(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
+    let name = args.input.display().to_string();
+    let text = std::fs::read_to_string(&args.input).with_context(|| format!("cannot read {name}"))?;
+    let record = ascii::read(&text, &name)?;
+    let raw = simulate::raw_from_ascii(&record)?;
+    let offsets: Vec<f64> = (0..record.header.channels.len())
+        .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
+        .collect::<Result<_>>()?;
+    let calibration = pipeline::calibration_for(rig, &raw, &offsets).with_context(|| format!("{name}: the rig's calibration on the record's schedule"))?;
+    let (speed_rpm, speed_source) = match (args.speed_rpm, record.header.speed_rpm) {
+        (Some(v), _) => (v, SpeedSource::User),
+        (None, Some(v)) => (v, SpeedSource::Record),
+        (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
+    };
+    Ok(Loaded { raw, calibration, speed_rpm, speed_source })
+}
+
+/// The bag's DAQ frames, in order, as one raw record; they must be consecutive (a gap is an
+/// error naming the frame) and share one channel layout.
+fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
+    let name = args.input.display().to_string();
+    let bag = oilfilm_bag::Bag::open(&args.input)?;
+    let (mut frames, mut speeds) = (Vec::new(), Vec::new());
+    for m in bag.messages()? {
+        match m.decode_ours()? {
+            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
+            oilfilm_bag::OilfilmMessage::RigStatus(s) => speeds.push(s.speed_rad_s * 30.0 / std::f64::consts::PI),
+            _ => {}
+        }
+    }
+    let Some(first) = frames.first() else {
+        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to diagnose", oilfilm_nodes::topics::DAQ_FRAMES.name);
+    };
+    let channels: Vec<ChannelId> = first
+        .channel_names
+        .iter()
+        .map(|c| ChannelId::parse(c).with_context(|| format!("{name}: frame 0 channel `{c}`")))
+        .collect::<Result<_>>()?;
+    let width = channels.len();
+    let mut columns = vec![Vec::new(); width];
+    let mut next_scan = first.first_scan;
+    for (i, f) in frames.iter().enumerate() {
+        if f.channel_names != first.channel_names || f.units != first.units || f.sample_rate_hz != first.sample_rate_hz {
+            bail!("{name}: DAQ frame {i} (sequence {}) changes the channel layout, units or rate of frame 0", f.sequence);
+        }
+        if f.first_scan != next_scan {
+            bail!("{name}: DAQ frame {i} (sequence {}) starts at scan {}, expected {next_scan}: the record has a gap", f.sequence, f.first_scan);
+        }
+        if f.values.len() != f.scan_count as usize * width {
+            bail!("{name}: DAQ frame {i} (sequence {}) holds {} values for {} scans of {width} channels", f.sequence, f.values.len(), f.scan_count);
+        }
+        for scan in f.values.chunks(width) {
+            for (c, v) in columns.iter_mut().zip(scan) {
+                c.push(*v);
+            }
+        }
+        next_scan += u64::from(f.scan_count);
+    }
+    let raw = RawRecord {
+        sample_rate_hz: first.sample_rate_hz,
+        start_time_s: first.first_scan as f64 / first.sample_rate_hz,
+        channels,
+        units: if first.units == oilfilm_msgs::DaqFrame::UNITS_VOLTS { RawUnits::Volts } else { RawUnits::Si },
+        columns,
+    };
+    let calibration = pipeline::calibration_for(rig, &raw, &first.channel_offsets_s).with_context(|| format!("{name}: the rig's calibration on the frames' schedule"))?;
+    let (speed_rpm, speed_source) = match (args.speed_rpm, speeds.first()) {
+        (Some(v), _) => (v, SpeedSource::User),
+        (None, Some(&v)) if v > 0.0 => (v, SpeedSource::Record),
+        _ => (rig.operating.speed_rpm, SpeedSource::RigFile),
+    };
+    Ok(Loaded { raw, calibration, speed_rpm, speed_source })
+}
+
+pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    let rig = args.source.load()?;
+    if !rig.effects.is_none() {
+        eprintln!("note: the rig file injects effects; they belong to simulations, the diagnosis reads only the rig's nominal description");
+    }
+    let mut nominal = rig.clone();
+    nominal.effects = Default::default();
+    let name = args.input.display().to_string();
+    let loaded = if args.input.is_dir() { load_bag(args, &nominal)? } else { load_ascii(args, &nominal)? };
+    let d = diagnose(&loaded.raw, &loaded.calibration, &nominal, loaded.speed_rpm, loaded.speed_source, &DiagnosisOptions::default())
+        .with_context(|| format!("diagnosing {name}"))?;
+    let value = serde_json::to_value(&d)?;
+    let mut written = Vec::new();
+    if !args.no_report {
+        let config = ShowConfig { window_s: Some(1.0), ..ShowConfig::default() };
+        match show(&loaded.raw, &loaded.calibration, &nominal, loaded.speed_rpm, loaded.speed_source, &config) {
+            Ok(s) => written = crate::diagnose_report::write_report(&args.out, &name, &s, Some(&value))?,
+            Err(e) => eprintln!("note: no report: the simulation against the measurement failed: {e}"),
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        print_diagnosis(&name, &d);
+        if let Some(report) = written.iter().find(|p| p.extension().is_some_and(|e| e == "md")) {
+            println!("report: {} ({} files in {})", report.display(), written.len(), args.out.display());
+        }
+    }
+    Ok(())
+}
+
+fn print_diagnosis(name: &str, d: &Diagnosis) {
+    println!("record: {name}");
+    println!("frame: {}", d.frame);
+    println!("cause: {}", d.cause);
+    println!("why: {}", d.reason);
+    if let (Some(b), Some(e), Some(g)) = (d.baseline_heldout_nrmse, d.extended_heldout_nrmse, d.gain) {
+        println!("held-out NRMSE: linear K-C {b:.4}, extended {e:.4} (gain {:.1} %)", 100.0 * g);
+    }
+    for (k, v) in &d.parameters {
+        let se = d.standard_errors.get(k).map_or(String::new(), |s| format!(" (SE {s:.3e})"));
+        println!("  {k} = {v}{se}");
+    }
+    if !d.candidates.is_empty() {
+        println!("{:<24} {:>9} {:>9} {:>10} {:>9} {:>6}  note", "candidate", "score", "NRMSE", "p", "dBIC", "earns");
+        for c in &d.candidates {
+            println!(
+                "{:<24} {:>8.2}% {:>9.4} {:>10.2e} {:>9.1} {:>6}  {}",
+                c.name.name(),
+                100.0 * c.score.unwrap_or(f64::NAN),
+                c.heldout_nrmse.unwrap_or(f64::NAN),
+                c.p_value.unwrap_or(f64::NAN),
+                c.delta_bic.unwrap_or(f64::NAN),
+                if c.earns { "yes" } else { "no" },
+                c.note.clone().unwrap_or_default()
+            );
+        }
+    }
+    for a in &d.aliases {
+        println!("alias {} / {}: {} — {}", a.pair[0], a.pair[1], if a.separable { "separated" } else { "NOT separable here" }, a.evidence);
+    }
+    for n in &d.notes {
+        println!("note: {n}");
+    }
+}
