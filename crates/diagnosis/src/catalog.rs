@@ -440,15 +440,15 @@ impl ThermalDrift {
             v
         });
         let mut slope = [vec![0.0; n], vec![0.0; n]];
-        for axis in 0..2 {
+        for (axis, slope_axis) in slope.iter_mut().enumerate() {
             for (j, col) in src.iter().enumerate() {
                 let k = 4 * axis + j;
                 let sk = self.sensitivity[k];
                 let scaled: Vec<f64> = col.iter().zip(&self.delta_t_c).map(|(v, dt)| v * (1.0 + beta * sk * dt)).collect();
                 set_axis_column(p, &mut design, k, axis, &scaled);
                 if let Some(th) = theta {
-                    for (i, (v, dt)) in col.iter().zip(&self.delta_t_c).enumerate() {
-                        slope[axis][i] += th[k] * sk * dt * v;
+                    for ((acc, v), dt) in slope_axis.iter_mut().zip(col).zip(&self.delta_t_c) {
+                        *acc += th[k] * sk * dt * v;
                     }
                 }
             }
@@ -722,9 +722,9 @@ impl Candidate for ProbeSaturation {
         }
         let offset = sum / count as f64;
         let mut raw = p.raw.clone();
-        for i in 0..col.len() {
-            if self.clipped[i] {
-                raw.columns[k][i] = partner[i] + offset;
+        for ((v, &clipped), &q) in raw.columns[k].iter_mut().zip(&self.clipped).zip(&partner) {
+            if clipped {
+                *v = q + offset;
             }
         }
         let s = p.recondition(&raw)?;

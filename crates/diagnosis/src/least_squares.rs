@@ -50,7 +50,8 @@ pub fn solve(design: &DMatrix<f64>, target: &DVector<f64>, use_row: &[bool], wha
     let diag: Vec<f64> = (0..cols).map(|j| r[(j, j)].abs()).collect();
     let dmax = diag.iter().copied().fold(0.0, f64::max);
     let dmin = diag.iter().copied().fold(f64::INFINITY, f64::min);
-    if !(dmin > RANK_TOLERANCE * dmax) {
+    // Written so a NaN diagonal is refused too.
+    if dmin.partial_cmp(&(RANK_TOLERANCE * dmax)) != Some(std::cmp::Ordering::Greater) {
         return Err(DiagnosisError::bad_input(
             what,
             format!("the design is rank-deficient (R diagonal {dmin:.3e} against {dmax:.3e}): the record cannot tell its parameters apart"),

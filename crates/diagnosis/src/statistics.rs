@@ -99,7 +99,7 @@ pub fn chi2_sf(x: f64, dof: f64) -> f64 {
 /// Likelihood-ratio test of a model with `extra` more parameters than the baseline, on `rows`
 /// Gaussian rows: `n ln(SSE0 / SSE1) ~ chi2(extra)` under the baseline. Returns the p-value.
 pub fn likelihood_ratio_p(sse_baseline: f64, sse_model: f64, rows: usize, extra: usize) -> f64 {
-    if extra == 0 || !(sse_model > 0.0) {
+    if extra == 0 || sse_model.is_nan() || sse_model <= 0.0 {
         return 1.0;
     }
     let stat = rows as f64 * (sse_baseline / sse_model).ln();
@@ -219,9 +219,9 @@ pub fn line_structure(motion: [&[f64]; 4], force: [&[f64]; 2], t: &[f64], lines_
             ph.iter()
                 .map(|p| {
                     let (mut re, mut im) = p[4 + axis];
-                    for j in 0..4 {
-                        re -= fit.theta[j] * p[j].0;
-                        im -= fit.theta[j] * p[j].1;
+                    for (th, m) in fit.theta.iter().zip(&p[..4]) {
+                        re -= th * m.0;
+                        im -= th * m.1;
                     }
                     re * re + im * im
                 })
