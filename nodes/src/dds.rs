@@ -215,7 +215,7 @@ impl RosNode {
         let writer = publisher
             .create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
             .map_err(|e| mw(format!("raw publisher {full}"), e))?;
-        Ok(RawPublisher { writer, topic: full.to_string() })
+        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0 })
     }
 
     /// Matched subscriptions on a topic (fully qualified name), as DDS discovery sees them.
@@ -362,9 +362,23 @@ impl Receive<RawCdr> for RawSubscription {
 pub struct RawPublisher {
     writer: dds_no_key::DataWriter<RawCdr, RawAdapter>,
     topic: String,
+    matched: i32,
 }
 
 impl RawPublisher {
+    /// Readers this writer is matched with now. A reader DDS discovery has seen is not
+    /// matched at once, and what is written before it is lost to a volatile reader: the
+    /// player waits for this, not for discovery.
+    pub fn matched(&mut self) -> usize {
+        use ros2_client::dds::rustdds::{DataWriterStatus, StatusEvented};
+        while let Some(status) = self.writer.try_recv_status() {
+            if let DataWriterStatus::PublicationMatched { current, .. } = status {
+                self.matched = current.count();
+            }
+        }
+        self.matched.max(0) as usize
+    }
+
     /// Waits (at most `max`) until every matched reliable reader acknowledged what was
     /// written; false on timeout.
     pub fn wait_for_acknowledgments(&self, max: std::time::Duration) -> Result<bool, NodeError> {

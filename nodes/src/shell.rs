@@ -247,7 +247,10 @@ pub fn run_recorder(args: &NodeArgs, p: &RecorderParams, map: &serde_json::Map<S
     let mut ros = RosNode::new(args, map, read_only("recorder", map.clone()))?;
     let mut inputs: Vec<Box<dyn Receive<RawCdr>>> = Vec::new();
     for t in core.topics().to_vec() {
-        inputs.push(Box::new(ros.raw_subscription(&t.name, &t.type_name, crate::dds::qos_from(t.qos))?));
+        // The publisher's reliability and durability (so they match), but a deep history:
+        // a burst (a fast replay) must wait in the reader rather than push older samples out.
+        let qos = ros2_client::QosProfile { history: ros2_client::qos::History::KeepLast { depth: 10_000 }, ..crate::dds::qos_from(t.qos) };
+        inputs.push(Box::new(ros.raw_subscription(&t.name, &t.type_name, qos)?));
     }
     let stop = shutdown_flag()?;
     tracing::info!("recording {} topic(s) to {}", core.topics().len(), dir.display());
@@ -285,6 +288,9 @@ pub fn run_recorder(args: &NodeArgs, p: &RecorderParams, map: &serde_json::Map<S
     Ok(dir)
 }
 
+/// How long a reliable reader may take to send its first acknowledgment (see `run_player`).
+const FIRST_ACK: Duration = Duration::from_millis(500);
+
 /// The `player` node: `oilfilm-player --ros-args -p bag:=DIR ...`.
 pub fn player_main() -> Result<(), NodeError> {
     let (args, p, map) = setup::<PlayerParams>("player")?;
@@ -307,7 +313,11 @@ pub fn run_player(args: &NodeArgs, p: &PlayerParams, map: &serde_json::Map<Strin
     let mut writers = Vec::new();
     for t in core.topics() {
         let default = oilfilm_bag::QosProfile::keep_last(10, true, false);
-        let qos = crate::dds::qos_from_bag(t.qos.as_ref().unwrap_or(&default), fast);
+        let mut qos = crate::dds::qos_from_bag(t.qos.as_ref().unwrap_or(&default), fast);
+        if fast {
+            // A batch must fit the writer's history, or unacknowledged samples are replaced.
+            qos.history = ros2_client::qos::History::KeepAll;
+        }
         writers.push(ros.raw_publisher(&t.name, &t.type_name, qos)?);
     }
     let clock_qos = crate::dds::qos_from(topics::TopicQos { reliable: true, depth: 1, transient_local: false });
@@ -315,14 +325,16 @@ pub fn run_player(args: &NodeArgs, p: &PlayerParams, map: &serde_json::Map<Strin
     let stop = shutdown_flag()?;
     // Like the DAQ: what is published before a reader is discovered is lost to it.
     let deadline = Instant::now() + Duration::from_secs_f64(p.wait_s);
-    for t in core.topics() {
-        while ros.subscription_count_named(&t.name) == 0 && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+    for (t, w) in core.topics().iter().zip(writers.iter_mut()) {
+        while w.matched() == 0 && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(20));
         }
-        if ros.subscription_count_named(&t.name) == 0 {
+        if w.matched() == 0 {
             tracing::warn!("no subscriber on {} after {} s: playing anyway", t.name, p.wait_s);
         }
     }
+    // The readers learn of the writers about when the writers learn of them: a moment more.
+    std::thread::sleep(Duration::from_millis(200));
     tracing::info!("playing {} message(s) on {} topic(s) from {}", core.items().len(), core.topics().len(), p.bag);
     let origin = Instant::now();
     let wall = || Stamp(i64::try_from(origin.elapsed().as_nanos()).unwrap_or(i64::MAX));
@@ -336,6 +348,12 @@ pub fn run_player(args: &NodeArgs, p: &PlayerParams, map: &serde_json::Map<Strin
             }
             if fast && !step.publish.is_empty() {
                 drop(ports);
+                if step.publish.start == 0 {
+                    // rustdds counts a reliable reader in its acknowledgment wait only once
+                    // that reader has sent its first ACKNACK (answering a heartbeat): until
+                    // then the wait returns at once. Give the first batch time for it.
+                    std::thread::sleep(FIRST_ACK);
+                }
                 for w in &writers {
                     // Reliable readers acknowledge before the next batch: nothing is dropped.
                     while !w.wait_for_acknowledgments(Duration::from_secs(1))? && !stop.load(Ordering::SeqCst) {}
@@ -351,8 +369,12 @@ pub fn run_player(args: &NodeArgs, p: &PlayerParams, map: &serde_json::Map<Strin
     })();
     tracing::info!("played {} message(s), {} full pass(es)", core.position(), core.passes() + u64::from(core.position() == core.items().len()));
     // Give reliable readers the last messages before the writers go.
+    // (The same rustdds caveat: a short run may end before the first ACKNACK.)
+    std::thread::sleep(FIRST_ACK);
     for w in &writers {
-        let _ = w.wait_for_acknowledgments(Duration::from_secs(2));
+        if !w.wait_for_acknowledgments(Duration::from_secs(5)).unwrap_or(false) {
+            tracing::warn!("a reader did not acknowledge the last messages within 5 s");
+        }
     }
     drop(writers);
     drop(clock.take());
