@@ -47,6 +47,7 @@ interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopb
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support from PyPI, in .venv-bag)"
 interop "rosbags and mcap-ros2-support decode our bags (also a killed one after our recovery); our reader reads rosbags' bags" bash tests/interop/run-bag-readers.sh
+interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
 
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
