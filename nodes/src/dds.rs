@@ -187,6 +187,13 @@ impl RosNode {
         Ok(DdsPublisher { publisher: p, topic: leak_name(full) })
     }
 
+    /// A typed subscription on a topic given by full name, type and QoS (`/clock`).
+    pub fn subscription_named<M: DeserializeOwned + 'static>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsSubscription<M>, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let s = self.node.create_subscription::<M>(&t, Some(qos)).map_err(|e| mw(format!("subscription {full}"), e))?;
+        Ok(DdsSubscription { subscription: s, topic: leak_name(full) })
+    }
+
     /// A subscription that hands over each sample's serialised CDR as it arrived (the
     /// recorder's input): nothing is decoded, so any type is recorded byte for byte.
     /// ros2-client has no such subscription, so this is a rustdds reader on the node's

@@ -1,6 +1,10 @@
 //! The `recorder` node's core: messages of our topics, as the serialised CDR they arrived
 //! in, written to a rosbag2 MCAP bag through [`oilfilm_bag::BagWriter`].
 //!
+//! * The bytes are the sample's serialized payload as it arrived: nothing is decoded or
+//!   re-encoded. (DDS pads a payload sent in one DATA submessage to a multiple of 4 bytes, so
+//!   a message ending off that boundary arrives with up to 3 zero bytes more; CDR readers
+//!   ignore them, and rosbag2's bags hold them too.)
 //! * Log time = the receive time on the recorder's clock (passed in: the system clock of
 //!   the rig's machine in the node). A message's own `header.stamp` (the DAQ clock) stays in
 //!   its bytes, untouched.
