@@ -121,7 +121,7 @@ fn play(bag: &Path, params: &[&str], clock: &mut dyn Receive<Clock>) -> (Vec<i64
 /// end) arrives with up to 3 more bytes; CDR readers ignore them, and rosbag2 records them
 /// too.
 fn as_received(got: &[u8], sent: &[u8]) -> bool {
-    got == sent || (got.len() > sent.len() && got.len() - sent.len() <= 3 && (got.len() - 4) % 4 == 0 && got.starts_with(sent) && got[sent.len()..].iter().all(|&b| b == 0))
+    got == sent || (got.len() > sent.len() && got.len() - sent.len() <= 3 && (got.len() - 4).is_multiple_of(4) && got.starts_with(sent) && got[sent.len()..].iter().all(|&b| b == 0))
 }
 
 fn check_recorded(dir: &Path, sent: &[(String, Vec<u8>)]) -> Vec<u64> {
