@@ -8,6 +8,7 @@ mod bench;
 mod bench_nodes;
 mod bench_pipeline;
 mod records;
+mod record;
 mod campaign;
 mod figures;
 mod report;
@@ -66,6 +67,10 @@ enum Command {
     /// Start a launch file's nodes (ROS 2 launch YAML), supervise them, print the estimates
     /// as they arrive, and stop them all after --seconds or on Ctrl-C.
     Launch(launch::LaunchArgs),
+    /// Record our topics from DDS to a rosbag2 MCAP bag until Ctrl-C (the recorder node's code).
+    Record(record::RecordArgs),
+    /// Publish a bag's topics on DDS at real time, a rate or as fast as possible, with /clock.
+    Play(record::PlayArgs),
     /// rosbag2 bag tools.
     #[command(subcommand)]
     Bag(BagCommand),
@@ -162,6 +167,8 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Rig(args) => run_rig(&args),
         Command::Launch(args) => launch::run(&args),
+        Command::Record(args) => record::run_record(&args),
+        Command::Play(args) => record::run_play(&args),
         Command::Bag(BagCommand::Recover { dir }) => bag_recover(&dir),
         Command::Coefficients(args) => run_coefficients(&args),
         Command::Simulate(args) => records::run_simulate(&args),

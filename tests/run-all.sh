@@ -45,8 +45,10 @@ interop "oilfilm_msgs builds with rosidl; rclpy serialises every message as the 
 interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopback)" bash tests/interop/run-rclpy-roundtrip.sh
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
+interop "oilfilm play seen from rclpy: /clock is rosgraph_msgs/Clock on the bag's log time and a use_sim_time node follows it; every message arrives with its recorded stamp" bash tests/interop/run-rclpy-player.sh target/debug
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support from PyPI, in .venv-bag)"
 interop "rosbags and mcap-ros2-support decode our bags (also a killed one after our recovery); our reader reads rosbags' bags" bash tests/interop/run-bag-readers.sh
+interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
 
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"

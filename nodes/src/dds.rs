@@ -19,7 +19,7 @@ use serde_json::{Map, Value};
 
 use crate::error::NodeError;
 use crate::params::NodeArgs;
-use crate::ports::{Publish, Receive};
+use crate::ports::{Publish, RawCdr, Receive};
 use crate::topics::Topic;
 
 fn mw(what: impl Into<String>, e: impl std::fmt::Display) -> NodeError {
@@ -40,11 +40,35 @@ pub fn domain_id() -> Result<u16, NodeError> {
 
 /// A topic's QoS in ros2-client's terms.
 pub fn qos_of(topic: &Topic) -> QosProfile {
-    let q = topic.qos;
+    qos_from(topic.qos)
+}
+
+/// Our QoS table's entry in ros2-client's terms.
+pub fn qos_from(q: crate::topics::TopicQos) -> QosProfile {
     QosProfile {
         reliability: if q.reliable { Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) } } else { Reliability::BestEffort },
         durability: if q.transient_local { Durability::TransientLocal } else { Durability::Volatile },
         history: History::KeepLast { depth: q.depth.max(1) as usize },
+        ..QosProfile::publisher_default()
+    }
+}
+
+/// A QoS profile recorded in a bag (the publisher's offer) in ros2-client's terms.
+/// `reliable` forces reliable delivery (the player's fast mode, which must not drop).
+pub fn qos_from_bag(q: &oilfilm_bag::QosProfile, reliable: bool) -> QosProfile {
+    use oilfilm_bag::metadata::{Durability as D, History as H, Reliability as R};
+    let reliability = if reliable || !matches!(q.reliability, R::BestEffort) {
+        Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) }
+    } else {
+        Reliability::BestEffort
+    };
+    QosProfile {
+        reliability,
+        durability: if matches!(q.durability, D::TransientLocal) { Durability::TransientLocal } else { Durability::Volatile },
+        history: match q.history {
+            H::KeepAll => History::KeepAll,
+            _ => History::KeepLast { depth: q.depth.max(1) as usize },
+        },
         ..QosProfile::publisher_default()
     }
 }
@@ -86,6 +110,7 @@ pub type Validator = Box<dyn Fn(&Map<String, Value>) -> Result<(), String> + Sen
 
 /// One ROS 2 node on DDS.
 pub struct RosNode {
+    context: Context,
     node: Node,
     namespace: String,
     params: Arc<Mutex<Map<String, Value>>>,
@@ -121,7 +146,7 @@ impl RosNode {
             Ok(())
         }));
         let node_name = NodeName::new(&args.namespace, &args.name).map_err(|e| mw("node name", format!("{e:?}")))?;
-        let mut node = context.new_node(node_name, options).map_err(|e| mw("node", e))?;
+        let mut node = context.clone().new_node(node_name, options).map_err(|e| mw("node", e))?;
         let spinner = node.spinner().map_err(|e| mw("spinner", e))?;
         let handle = std::thread::Builder::new()
             .name("ros2-spinner".into())
@@ -131,15 +156,78 @@ impl RosNode {
                 }
             })
             .map_err(|e| NodeError::Io { what: "spinner thread".into(), source: e })?;
-        Ok(Self { node, namespace: args.namespace.clone(), params: shared, changed, spinner: Some(handle) })
+        Ok(Self { context, node, namespace: args.namespace.clone(), params: shared, changed, spinner: Some(handle) })
+    }
+
+    /// The namespace the node's topics live under.
+    pub fn namespace(&self) -> &str {
+        &self.namespace
     }
 
     fn topic(&mut self, topic: &Topic) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
         let full = crate::topics::qualified(&self.namespace, topic);
-        let (ns, base) = full.rsplit_once('/').unwrap_or(("/", full.as_str()));
+        self.topic_named(&full, topic.type_name, &qos_of(topic))
+    }
+
+    /// A topic by its fully qualified name (`/oilfilm/daq/frames`, `/clock`) and
+    /// `pkg/msg/Type`.
+    fn topic_named(&mut self, full: &str, type_name: &str, qos: &QosProfile) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
+        let (ns, base) = full.rsplit_once('/').unwrap_or(("/", full));
         let name = Name::new(if ns.is_empty() { "/" } else { ns }, base).map_err(|e| mw(format!("topic name {full}"), format!("{e:?}")))?;
-        let (pkg, ty) = topic.type_name.split_once("/msg/").unwrap_or(("oilfilm_msgs", topic.type_name));
-        self.node.create_topic(&name, MessageTypeName::new(pkg, ty), &qos_of(topic)).map_err(|e| mw(format!("topic {full}"), e))
+        let (pkg, ty) = type_name
+            .split_once("/msg/")
+            .ok_or_else(|| mw(format!("topic {full}"), format!("type `{type_name}` is not pkg/msg/Type")))?;
+        self.node.create_topic(&name, MessageTypeName::new(pkg, ty), qos).map_err(|e| mw(format!("topic {full}"), e))
+    }
+
+    /// A typed publisher on a topic given by full name, type and QoS (`/clock`).
+    pub fn publisher_named<M: Serialize>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsPublisher<M>, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let p = self.node.create_publisher::<M>(&t, Some(qos)).map_err(|e| mw(format!("publisher {full}"), e))?;
+        Ok(DdsPublisher { publisher: p, topic: leak_name(full) })
+    }
+
+    /// A typed subscription on a topic given by full name, type and QoS (`/clock`).
+    pub fn subscription_named<M: DeserializeOwned + 'static>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsSubscription<M>, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let s = self.node.create_subscription::<M>(&t, Some(qos)).map_err(|e| mw(format!("subscription {full}"), e))?;
+        Ok(DdsSubscription { subscription: s, topic: leak_name(full) })
+    }
+
+    /// A subscription that hands over each sample's serialised CDR as it arrived (the
+    /// recorder's input): nothing is decoded, so any type is recorded byte for byte.
+    /// ros2-client has no such subscription, so this is a rustdds reader on the node's
+    /// participant with an adapter that keeps the bytes.
+    pub fn raw_subscription(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<RawSubscription, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let subscriber = self
+            .context
+            .domain_participant()
+            .create_subscriber(&ros2_client::dds::rustdds::QosPolicies::builder().build())
+            .map_err(|e| mw(format!("subscriber {full}"), e))?;
+        let reader = subscriber
+            .create_simple_datareader_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
+            .map_err(|e| mw(format!("raw subscription {full}"), e))?;
+        Ok(RawSubscription { reader, topic: full.to_string() })
+    }
+
+    /// A writer that sends serialised CDR as it is given (the player's output).
+    pub fn raw_publisher(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<RawPublisher, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let publisher = self
+            .context
+            .domain_participant()
+            .create_publisher(&ros2_client::dds::rustdds::QosPolicies::builder().build())
+            .map_err(|e| mw(format!("publisher {full}"), e))?;
+        let writer = publisher
+            .create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
+            .map_err(|e| mw(format!("raw publisher {full}"), e))?;
+        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0 })
+    }
+
+    /// Matched subscriptions on a topic (fully qualified name), as DDS discovery sees them.
+    pub fn subscription_count_named(&self, full: &str) -> usize {
+        self.node.subscription_count(full)
     }
 
     pub fn publisher<M: Serialize>(&mut self, topic: &Topic) -> Result<DdsPublisher<M>, NodeError> {
@@ -181,8 +269,9 @@ impl RosNode {
     /// participant, so the node's own entities are removed from a live participant; then
     /// waits for the spinner, whose end lets the participant say goodbye to DDS.
     pub fn shutdown(self) {
-        let RosNode { node, spinner, .. } = self;
+        let RosNode { node, spinner, context, .. } = self;
         drop(node);
+        drop(context);
         if let Some(h) = spinner {
             let _ = h.join();
         }
@@ -192,6 +281,132 @@ impl RosNode {
 pub struct DdsPublisher<M: Serialize> {
     publisher: ros2_client::Publisher<M>,
     topic: &'static str,
+}
+
+/// The few topic names given at run time (`/clock`) live as long as the process.
+fn leak_name(full: &str) -> &'static str {
+    Box::leak(full.to_string().into_boxed_str())
+}
+
+/// Keeps a sample's bytes: the adapter of [`RosNode::raw_subscription`] and
+/// [`RosNode::raw_publisher`]. Only little-endian plain CDR (what ROS 2 writers send and
+/// bags hold) is accepted; the encapsulation header is put back in front of the data.
+pub struct RawAdapter;
+
+/// Why raw bytes could not be taken or sent.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct RawError(String);
+
+use ros2_client::dds::rustdds::{bytes::Bytes, no_key as dds_no_key, RepresentationIdentifier};
+
+impl dds_no_key::DeserializerAdapter<RawCdr> for RawAdapter {
+    type Error = RawError;
+    type Decoded = RawCdr;
+    fn supported_encodings() -> &'static [RepresentationIdentifier] {
+        &[RepresentationIdentifier::CDR_LE]
+    }
+    fn transform_decoded(decoded: RawCdr) -> RawCdr {
+        decoded
+    }
+}
+
+#[derive(Clone)]
+pub struct RawDecoder;
+
+impl<'de> dds_no_key::Decode<'de, RawCdr> for RawDecoder {
+    type Error = RawError;
+    fn decode_bytes(self, input: &'de [u8], encoding: RepresentationIdentifier) -> Result<RawCdr, RawError> {
+        if encoding != RepresentationIdentifier::CDR_LE {
+            return Err(RawError(format!("representation {encoding:?} is not little-endian CDR")));
+        }
+        let mut v = Vec::with_capacity(input.len() + 4);
+        v.extend_from_slice(&oilfilm_msgs::cdr::ENCAPSULATION_CDR_LE);
+        v.extend_from_slice(input);
+        Ok(RawCdr(v))
+    }
+}
+
+impl dds_no_key::DefaultDecoder<RawCdr> for RawAdapter {
+    type Decoder = RawDecoder;
+    const DECODER: RawDecoder = RawDecoder;
+}
+
+impl dds_no_key::SerializerAdapter<RawCdr> for RawAdapter {
+    type Error = RawError;
+    fn output_encoding() -> RepresentationIdentifier {
+        RepresentationIdentifier::CDR_LE
+    }
+    fn to_bytes(value: &RawCdr) -> Result<Bytes, RawError> {
+        match value.0.split_first_chunk::<4>() {
+            Some((header, body)) if header[..2] == oilfilm_msgs::cdr::ENCAPSULATION_CDR_LE[..2] => Ok(Bytes::copy_from_slice(body)),
+            _ => Err(RawError(format!(
+                "a message of {} bytes does not start with the little-endian CDR header 00 01 00 00",
+                value.0.len()
+            ))),
+        }
+    }
+}
+
+pub struct RawSubscription {
+    reader: dds_no_key::SimpleDataReader<RawCdr, RawAdapter>,
+    topic: String,
+}
+
+impl Receive<RawCdr> for RawSubscription {
+    fn receive(&mut self) -> Result<Option<RawCdr>, NodeError> {
+        self.reader.drain_read_notifications();
+        match self.reader.try_take_one() {
+            Ok(m) => Ok(m.map(|m| m.into_value())),
+            Err(e) => {
+                tracing::warn!(topic = %self.topic, "sample not taken: {e}");
+                Ok(None)
+            }
+        }
+    }
+}
+
+pub struct RawPublisher {
+    writer: dds_no_key::DataWriter<RawCdr, RawAdapter>,
+    topic: String,
+    matched: i32,
+}
+
+impl RawPublisher {
+    /// Readers this writer is matched with now. A reader DDS discovery has seen is not
+    /// matched at once, and what is written before it is lost to a volatile reader: the
+    /// player waits for this, not for discovery.
+    pub fn matched(&mut self) -> usize {
+        use ros2_client::dds::rustdds::{DataWriterStatus, StatusEvented};
+        while let Some(status) = self.writer.try_recv_status() {
+            if let DataWriterStatus::PublicationMatched { current, .. } = status {
+                self.matched = current.count();
+            }
+        }
+        self.matched.max(0) as usize
+    }
+
+    /// Waits (at most `max`) until every matched reliable reader acknowledged what was
+    /// written; false on timeout.
+    pub fn wait_for_acknowledgments(&self, max: std::time::Duration) -> Result<bool, NodeError> {
+        self.writer
+            .wait_for_acknowledgments(max)
+            .map_err(|e| mw(format!("acknowledgments on {}", self.topic), format!("{e:?}")))
+    }
+}
+
+impl Publish<RawCdr> for &mut RawPublisher {
+    fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
+        (**self).publish(message)
+    }
+}
+
+impl Publish<RawCdr> for RawPublisher {
+    fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
+        self.writer
+            .write(message, Some(ros2_client::dds::rustdds::Timestamp::now()))
+            .map_err(|e| mw(format!("publish on {}", self.topic), format!("{e:?}")))
+    }
 }
 
 impl<M: Serialize> Publish<M> for DdsPublisher<M> {

@@ -28,6 +28,9 @@ pub enum NodeError {
     Identification(#[from] oilfilm_identification::IdentificationError),
     #[error(transparent)]
     Physics(#[from] oilfilm_physics::PhysicsError),
+    /// Writing or reading a bag failed (the error names the file).
+    #[error(transparent)]
+    Bag(#[from] oilfilm_bag::BagError),
     #[error("{what}: {source}")]
     Io { what: String, source: std::io::Error },
 }

@@ -251,16 +251,22 @@ mod tests {
                     "exciter" => crate::params::load::<crate::exciter::ExciterParams>(&args).map(|_| ()),
                     "daq" => crate::params::load::<crate::daq::DaqParams>(&args).and_then(|(p, _)| p.validate()),
                     "conditioner" => crate::params::load::<crate::conditioner::ConditionerParams>(&args).map(|_| ()),
+                    "recorder" => crate::params::load::<crate::recorder::RecorderParams>(&args).and_then(|(p, _)| p.writer_options().map(|_| ())),
+                    "player" => crate::params::load::<crate::player::PlayerParams>(&args).and_then(|(p, _)| p.options().map(|_| ())),
                     _ => crate::params::load::<crate::estimator::EstimatorParams>(&args).map(|_| ()),
                 };
                 r.unwrap_or_else(|e| panic!("{} / {}: {e}", path.display(), n.name));
             }
         }
-        assert!(seen >= 3, "sim_rig, replay and live_rig");
+        assert!(seen >= 4, "sim_rig, replay, live_rig and record_sim_rig");
         let replay = dir.join("replay.launch.yaml");
         let nodes = read_with(&replay, &[("file".into(), "/tmp/x.txt".into())]).unwrap();
         assert!(nodes.iter().any(|n| n.args.iter().any(|a| a == "file:=/tmp/x.txt")), "{nodes:?}");
         assert!(read_with(&replay, &[("fil".into(), "x".into())]).unwrap_err().to_string().contains("no launch argument `fil`"));
+        let record = read_with(&dir.join("record_sim_rig.launch.yaml"), &[("bag".into(), "/tmp/b1".into())]).unwrap();
+        assert_eq!(record[0].name, "recorder");
+        assert!(record[0].args.iter().any(|a| a == "output:=/tmp/b1"), "{:?}", record[0].args);
+        assert_eq!(record.len(), 5);
     }
 
     #[test]

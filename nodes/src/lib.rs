@@ -1,5 +1,5 @@
 //! The oilfilm ROS 2 nodes: `exciter`, `daq`, `conditioner` and `estimator`, thin shells over
-//! the physics and identification crates.
+//! the physics and identification crates, and the bag `recorder` and `player`.
 //!
 //! Each node is a core (plain Rust, no ROS, no I/O, no clock: time is passed in) and a
 //! `poll` ([`poll`]) that moves messages between the core and its ports ([`ports`]). The
@@ -18,6 +18,8 @@ pub mod exciter;
 pub mod harness;
 pub mod launch;
 pub mod params;
+pub mod player;
+pub mod recorder;
 pub mod dds;
 pub mod shell;
 pub mod poll;

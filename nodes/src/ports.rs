@@ -7,6 +7,12 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use crate::error::NodeError;
 
+/// A message as serialised CDR bytes, the 4-byte encapsulation header (`00 01 00 00`)
+/// included: what a rosbag2 bag stores. The recorder takes these and the player sends them,
+/// so a message crosses a record and a replay byte for byte, whatever its type.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawCdr(pub Vec<u8>);
+
 /// Where a node sends messages of one topic.
 pub trait Publish<M> {
     fn publish(&mut self, message: M) -> Result<(), NodeError>;

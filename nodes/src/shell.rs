@@ -20,7 +20,9 @@ use crate::estimator::{EstimatorCore, EstimatorParams};
 use crate::exciter::{ExciterCore, ExciterParams};
 use crate::params::{self, NodeArgs};
 use crate::poll::{self, ConditionerPorts, DaqPorts, EstimatorPorts, ExciterPorts, Pace, SimDaqState};
-use crate::ports::Publish;
+use crate::player::{self, PlayerCore, PlayerParams, Rate};
+use crate::ports::{Publish, RawCdr, Receive};
+use crate::recorder::{self, RecorderCore, RecorderParams};
 use crate::replay::{Produced, ReplayCore};
 use crate::stamp::Stamp;
 use crate::topics;
@@ -226,6 +228,158 @@ pub fn estimator_main() -> Result<(), NodeError> {
     drop((conditioned, status, estimates));
     ros.shutdown();
     Ok(())
+}
+
+/// The `recorder` node: `oilfilm-recorder --ros-args -p output:=DIR ...`.
+pub fn recorder_main() -> Result<(), NodeError> {
+    let (args, p, map) = setup::<RecorderParams>("recorder")?;
+    run_recorder(&args, &p, &map).map(|_| ())
+}
+
+/// Records `p.topics` under `args.namespace` to a bag until SIGINT/SIGTERM, then closes it
+/// (metadata.yaml written). The node and `oilfilm record` both run this. Returns the bag.
+pub fn run_recorder(args: &NodeArgs, p: &RecorderParams, map: &serde_json::Map<String, serde_json::Value>) -> Result<std::path::PathBuf, NodeError> {
+    let options = p.writer_options()?;
+    let topics = recorder::select_topics(&args.namespace, &p.topics)?;
+    let dir = p.output_dir(Stamp::now());
+    let writer = oilfilm_bag::BagWriter::create(&dir, options)?;
+    let mut core = RecorderCore::new(writer, topics)?;
+    let mut ros = RosNode::new(args, map, read_only("recorder", map.clone()))?;
+    let mut inputs: Vec<Box<dyn Receive<RawCdr>>> = Vec::new();
+    for t in core.topics().to_vec() {
+        // The publisher's reliability and durability (so they match), but a deep history:
+        // a burst (a fast replay) must wait in the reader rather than push older samples out.
+        let qos = ros2_client::QosProfile { history: ros2_client::qos::History::KeepLast { depth: 10_000 }, ..crate::dds::qos_from(t.qos) };
+        inputs.push(Box::new(ros.raw_subscription(&t.name, &t.type_name, qos)?));
+    }
+    let stop = shutdown_flag()?;
+    tracing::info!("recording {} topic(s) to {}", core.topics().len(), dir.display());
+    let started = Instant::now();
+    let period = Duration::from_secs_f64(p.status_period_s.max(0.0));
+    let (mut last_status, mut last_bytes) = (Instant::now(), 0_u64);
+    let clock = Stamp::now;
+    let result = (|| -> Result<(), NodeError> {
+        while !stop.load(Ordering::SeqCst) {
+            let taken = recorder::poll(&mut core, &mut inputs, &clock)?;
+            if !period.is_zero() && last_status.elapsed() >= period {
+                let dt = last_status.elapsed().as_secs_f64();
+                let rate = (core.stats().bytes - last_bytes) as f64 * 1e-6 / dt;
+                eprintln!("{}", recorder::status_line(core.stats(), core.topics(), started.elapsed().as_secs_f64(), rate));
+                (last_status, last_bytes) = (Instant::now(), core.stats().bytes);
+            }
+            if taken == 0 {
+                std::thread::sleep(IDLE);
+            }
+        }
+        // What arrived before the signal is kept.
+        recorder::poll(&mut core, &mut inputs, &clock)?;
+        Ok(())
+    })();
+    drop(inputs);
+    let stats = core.stats().clone();
+    let topics = core.topics().to_vec();
+    // Close the bag even when recording failed, so what was written stays readable.
+    let closed = core.close();
+    ros.shutdown();
+    result?;
+    let dir = closed?;
+    eprintln!("{}", recorder::status_line(&stats, &topics, started.elapsed().as_secs_f64(), 0.0));
+    tracing::info!("closed {} ({} messages)", dir.display(), stats.messages);
+    Ok(dir)
+}
+
+/// How long a reliable reader may take to send its first acknowledgment (see `run_player`).
+const FIRST_ACK: Duration = Duration::from_millis(500);
+
+/// The `player` node: `oilfilm-player --ros-args -p bag:=DIR ...`.
+pub fn player_main() -> Result<(), NodeError> {
+    let (args, p, map) = setup::<PlayerParams>("player")?;
+    run_player(&args, &p, &map)
+}
+
+/// Plays a bag on DDS (see [`crate::player`]); the node and `oilfilm play` both run this.
+/// Returns at the end of the bag (never with `loop`) or on SIGINT/SIGTERM.
+pub fn run_player(args: &NodeArgs, p: &PlayerParams, map: &serde_json::Map<String, serde_json::Value>) -> Result<(), NodeError> {
+    let options = p.options()?;
+    let bag = oilfilm_bag::Bag::open(&p.bag)?;
+    let info = bag.info().clone();
+    let qos_of = |name: &str| {
+        info.topics_with_message_count.iter().find(|t| t.topic_metadata.name == name).and_then(|t| t.topic_metadata.offered_qos_profiles.first().copied())
+    };
+    let (topics, items) = player::play_list(bag.messages()?, &p.topics, &qos_of)?;
+    let fast = matches!(options.rate, Rate::Fast);
+    let mut core = PlayerCore::new(topics, items, options)?;
+    let mut ros = RosNode::new(args, map, read_only("player", map.clone()))?;
+    let mut writers = Vec::new();
+    for t in core.topics() {
+        let default = oilfilm_bag::QosProfile::keep_last(10, true, false);
+        let mut qos = crate::dds::qos_from_bag(t.qos.as_ref().unwrap_or(&default), fast);
+        if fast {
+            // A batch must fit the writer's history, or unacknowledged samples are replaced.
+            qos.history = ros2_client::qos::History::KeepAll;
+        }
+        writers.push(ros.raw_publisher(&t.name, &t.type_name, qos)?);
+    }
+    let clock_qos = crate::dds::qos_from(topics::TopicQos { reliable: true, depth: 1, transient_local: false });
+    let mut clock = if p.clock { Some(ros.publisher_named::<oilfilm_msgs::Clock>("/clock", "rosgraph_msgs/msg/Clock", clock_qos)?) } else { None };
+    let stop = shutdown_flag()?;
+    // Like the DAQ: what is published before a reader is discovered is lost to it.
+    let deadline = Instant::now() + Duration::from_secs_f64(p.wait_s);
+    for (t, w) in core.topics().iter().zip(writers.iter_mut()) {
+        while w.matched() == 0 && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if w.matched() == 0 {
+            tracing::warn!("no subscriber on {} after {} s: playing anyway", t.name, p.wait_s);
+        }
+    }
+    // The readers learn of the writers about when the writers learn of them: a moment more.
+    std::thread::sleep(Duration::from_millis(200));
+    tracing::info!("playing {} message(s) on {} topic(s) from {}", core.items().len(), core.topics().len(), p.bag);
+    let origin = Instant::now();
+    let wall = || Stamp(i64::try_from(origin.elapsed().as_nanos()).unwrap_or(i64::MAX));
+    let result = (|| -> Result<(), NodeError> {
+        let mut ports: Vec<Box<dyn Publish<RawCdr> + '_>> = writers.iter_mut().map(|w| Box::new(w) as Box<dyn Publish<RawCdr> + '_>).collect();
+        while !stop.load(Ordering::SeqCst) {
+            let step = core.step(wall());
+            player::publish_step(&core, &step, &mut ports, clock.as_mut().map(|c| c as &mut dyn Publish<oilfilm_msgs::Clock>))?;
+            if step.finished {
+                break;
+            }
+            if fast && !step.publish.is_empty() {
+                drop(ports);
+                if step.publish.start == 0 {
+                    // rustdds counts a reliable reader in its acknowledgment wait only once
+                    // that reader has sent its first ACKNACK (answering a heartbeat): until
+                    // then the wait returns at once. Give the first batch time for it.
+                    std::thread::sleep(FIRST_ACK);
+                }
+                for w in &writers {
+                    // Reliable readers acknowledge before the next batch: nothing is dropped.
+                    while !w.wait_for_acknowledgments(Duration::from_secs(1))? && !stop.load(Ordering::SeqCst) {}
+                }
+                ports = writers.iter_mut().map(|w| Box::new(w) as Box<dyn Publish<RawCdr> + '_>).collect();
+            }
+            let left = Duration::from_nanos(u64::try_from(step.next_wall.0 - wall().0).unwrap_or(0));
+            if !left.is_zero() {
+                std::thread::sleep(left.min(Duration::from_millis(20)));
+            }
+        }
+        Ok(())
+    })();
+    tracing::info!("played {} message(s), {} full pass(es)", core.position(), core.passes() + u64::from(core.position() == core.items().len()));
+    // Give reliable readers the last messages before the writers go.
+    // (The same rustdds caveat: a short run may end before the first ACKNACK.)
+    std::thread::sleep(FIRST_ACK);
+    for w in &writers {
+        if !w.wait_for_acknowledgments(Duration::from_secs(5)).unwrap_or(false) {
+            tracing::warn!("a reader did not acknowledge the last messages within 5 s");
+        }
+    }
+    drop(writers);
+    drop(clock.take());
+    ros.shutdown();
+    result
 }
 
 // ---------------------------------------------------------------------------------------------

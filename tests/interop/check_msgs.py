@@ -12,7 +12,7 @@ deserialize_message gives the same values back, and writes
 same value through serde. Values are finite (JSON has no NaN).
 
 It also copies the dependency definitions the bag schemas need (std_msgs/Header,
-builtin_interfaces/Time) from the installed share directories into crates/msgs/upstream/.
+builtin_interfaces/Time, and rosgraph_msgs/Clock for the player) from the installed share directories into crates/msgs/upstream/.
 
 Note: Fast-CDR does not zero alignment padding, so padding bytes in cdr_hex may be any
 value; the Rust test compares every other byte.
@@ -33,6 +33,7 @@ from ament_index_python.packages import get_package_share_directory
 
 from builtin_interfaces.msg import Time
 from std_msgs.msg import Header
+from rosgraph_msgs.msg import Clock
 from oilfilm_msgs.msg import (
     CoefficientEstimate,
     ConditionedFrame,
@@ -248,12 +249,21 @@ def status_cases():
     return [("exciting", m), ("fault_negative_stamp", f)]
 
 
+def clock_cases():
+    """/clock as our player publishes it: a bag's log time."""
+    c = Clock()
+    c.clock = Time(sec=1_700_000_000, nanosec=123_456_789)
+    z = Clock()
+    return [("bag_log_time", c), ("zero", z)]
+
+
 TYPES = [
     ("ExciterCommand", ExciterCommand, exciter_cases),
     ("DaqFrame", DaqFrame, daq_cases),
     ("ConditionedFrame", ConditionedFrame, conditioned_cases),
     ("CoefficientEstimate", CoefficientEstimate, estimate_cases),
     ("RigStatus", RigStatus, status_cases),
+    ("rosgraph_msgs/msg/Clock", Clock, clock_cases),
 ]
 
 
@@ -264,7 +274,10 @@ def main():
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     failures = 0
-    for name, cls, make in TYPES:
+    for full, cls, make in TYPES:
+        if "/" not in full:
+            full = f"oilfilm_msgs/msg/{full}"
+        name = full.rsplit("/", 1)[1]
         cases = []
         for case, msg in make():
             data = serialize_message(msg)
@@ -277,7 +290,7 @@ def main():
                 failures += 1
             cases.append({"name": case, "value": to_plain(msg), "cdr_hex": data.hex()})
             print(f"{name}/{case}: {len(data)} bytes")
-        doc = {"type": f"oilfilm_msgs/msg/{name}", "cases": cases}
+        doc = {"type": full, "cases": cases}
         path = os.path.join(args.out, f"{name}.json")
         if args.check:
             with open(path) as f:
@@ -295,7 +308,7 @@ def main():
                 f.write("\n")
     if not args.check:
         deps = os.path.join(ROOT, "crates", "msgs", "upstream")
-        for pkg, typ in [("std_msgs", "Header"), ("builtin_interfaces", "Time")]:
+        for pkg, typ in [("std_msgs", "Header"), ("builtin_interfaces", "Time"), ("rosgraph_msgs", "Clock")]:
             src = os.path.join(get_package_share_directory(pkg), "msg", f"{typ}.msg")
             dst = os.path.join(deps, pkg, "msg", f"{typ}.msg")
             os.makedirs(os.path.dirname(dst), exist_ok=True)

@@ -135,6 +135,16 @@ ros_message! {
     constants {}
 }
 
+ros_message! {
+    /// `rosgraph_msgs/msg/Clock`: the time of a simulated (or replayed) clock, published on
+    /// `/clock` for nodes with `use_sim_time`. Our player publishes a bag's log time here.
+    pub struct Clock = "rosgraph_msgs/msg/Clock",
+        definition = include_str!("../upstream/rosgraph_msgs/msg/Clock.msg"); {
+        pub clock: Time,
+    }
+    constants {}
+}
+
 /// The frame id our nodes put in `header.frame_id`: the rig's bearing frame (x horizontal,
 /// y up, origin at the bearing centre).
 pub const BEARING_FRAME_ID: &str = "oilfilm_bearing";
@@ -297,6 +307,7 @@ pub fn definition(package: &str, type_name: &str) -> Option<&'static str> {
     Some(match (package, type_name) {
         ("builtin_interfaces", "Time") => Time::DEFINITION,
         ("std_msgs", "Header") => Header::DEFINITION,
+        ("rosgraph_msgs", "Clock") => Clock::DEFINITION,
         ("oilfilm_msgs", "ExciterCommand") => ExciterCommand::DEFINITION,
         ("oilfilm_msgs", "DaqFrame") => DaqFrame::DEFINITION,
         ("oilfilm_msgs", "ConditionedFrame") => ConditionedFrame::DEFINITION,

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use oilfilm_msgs::cdr::RosMessage;
 use oilfilm_msgs::spec::{parse_msg, SchemaNaming};
 use oilfilm_msgs::{
-    schema_text, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header,
+    schema_text, Clock, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header,
     RigStatus, Time, MESSAGE_TYPES,
 };
 
@@ -69,6 +69,7 @@ fn rust_types_agree_with_the_msg_files() {
     check::<RigStatus>();
     check::<Header>();
     check::<Time>();
+    check::<Clock>();
 }
 
 #[test]

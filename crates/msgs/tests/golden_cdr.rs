@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use oilfilm_msgs::cdr::{decode, decode_exact, encode, encode_with_padding, RosMessage};
 use oilfilm_msgs::{
-    CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header, RigStatus, Time,
+    Clock, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header, RigStatus, Time,
 };
 use serde::de::DeserializeOwned;
 
@@ -109,6 +109,14 @@ fn coefficient_estimate_matches_rclpy() {
 #[test]
 fn rig_status_matches_rclpy() {
     assert!(check::<RigStatus>("RigStatus.json") >= 2);
+}
+
+/// The player's /clock message: rclpy's bytes for a bag log time and for zero.
+#[test]
+fn clock_matches_rclpy() {
+    assert!(check::<Clock>("Clock.json") >= 2);
+    let c = Clock { clock: Time { sec: 1_700_000_000, nanosec: 123_456_789 } };
+    assert_eq!(encode(&c), unhex("0001000000f1536515cd5b07"));
 }
 
 /// rclpy: Header(stamp=Time(sec=1, nanosec=2), frame_id="ab") serialises to this.

@@ -1,0 +1,334 @@
+//! The `recorder` node's core: messages of our topics, as the serialised CDR they arrived
+//! in, written to a rosbag2 MCAP bag through [`oilfilm_bag::BagWriter`].
+//!
+//! * The bytes are the sample's serialized payload as it arrived: nothing is decoded or
+//!   re-encoded. (DDS pads a payload sent in one DATA submessage to a multiple of 4 bytes, so
+//!   a message ending off that boundary arrives with up to 3 zero bytes more; CDR readers
+//!   ignore them, and rosbag2's bags hold them too.)
+//! * Log time = the receive time on the recorder's clock (passed in: the system clock of
+//!   the rig's machine in the node). A message's own `header.stamp` (the DAQ clock) stays in
+//!   its bytes, untouched.
+//! * Each topic is subscribed with the QoS its publisher offers ([`crate::topics`]), and that
+//!   QoS is what the bag records as `offered_qos_profiles`, so `ros2 bag play` (and ours)
+//!   republish with it.
+//! * A crash loses at most the chunk being filled: the writer closes a chunk every
+//!   `chunk_size` bytes or 1 s of log time and hands it to the OS then.
+//!
+//! The core owns no port and no clock: [`poll`] takes what waits on the inputs and stamps
+//! it with the clock it is given.
+
+use std::path::PathBuf;
+
+use oilfilm_bag::{BagWriter, Compression, QosProfile, TopicId, TopicSpec, WriterOptions};
+use serde::{Deserialize, Serialize};
+
+use crate::error::NodeError;
+use crate::ports::{RawCdr, Receive};
+use crate::stamp::Stamp;
+use crate::topics::{self, TopicQos};
+
+/// The recorder's parameters (ROS parameters of the node; `oilfilm record` options).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RecorderParams {
+    /// The bag directory (must not exist, or be empty). Empty: `rosbag2_YYYY_MM_DD-HH_MM_SS`
+    /// (UTC) in the working directory, as `ros2 bag record` names it.
+    pub output: String,
+    /// Topics to record, relative to the namespace (`daq/frames`) or absolute
+    /// (`/oilfilm/daq/frames`). Empty: all six of ours.
+    pub topics: Vec<String>,
+    /// Chunk compression: `zstd`, `lz4` or `none`.
+    pub compression: String,
+    /// Start a new file of the bag after this many MB (10^6 bytes); 0: never.
+    pub split_size_mb: f64,
+    /// Start a new file of the bag after this many seconds of log time; 0: never.
+    pub split_duration_s: f64,
+    /// Seconds between status lines on stderr; 0: none.
+    pub status_period_s: f64,
+}
+
+impl Default for RecorderParams {
+    fn default() -> Self {
+        Self {
+            output: String::new(),
+            topics: Vec::new(),
+            compression: "zstd".into(),
+            split_size_mb: 0.0,
+            split_duration_s: 0.0,
+            status_period_s: 1.0,
+        }
+    }
+}
+
+impl RecorderParams {
+    /// The bag writer's options (default chunking: 1 MiB or 1 s of log time).
+    pub fn writer_options(&self) -> Result<WriterOptions, NodeError> {
+        let compression = match self.compression.to_ascii_lowercase().as_str() {
+            "zstd" => Compression::Zstd,
+            "lz4" => Compression::Lz4,
+            "none" | "" => Compression::None,
+            other => return Err(NodeError::parameter("compression", format!("`{other}` is not zstd, lz4 or none"))),
+        };
+        let positive = |name: &str, v: f64| -> Result<Option<f64>, NodeError> {
+            if !v.is_finite() || v < 0.0 {
+                return Err(NodeError::parameter(name, format!("{v} is not a number >= 0 (0: off)")));
+            }
+            Ok((v > 0.0).then_some(v))
+        };
+        let split_size_bytes = positive("split_size_mb", self.split_size_mb)?.map(|mb| (mb * 1e6).round() as u64);
+        let split_duration_ns = positive("split_duration_s", self.split_duration_s)?.map(|s| (s * 1e9).round() as u64);
+        positive("status_period_s", self.status_period_s)?;
+        Ok(WriterOptions { compression, split_size_bytes, split_duration_ns, ..WriterOptions::default() })
+    }
+
+    /// The bag directory: `output`, or the rosbag2-style name for `now`.
+    pub fn output_dir(&self, now: Stamp) -> PathBuf {
+        if self.output.is_empty() {
+            PathBuf::from(default_bag_name(now))
+        } else {
+            PathBuf::from(&self.output)
+        }
+    }
+}
+
+/// `rosbag2_YYYY_MM_DD-HH_MM_SS` of `now` (UTC), the name `ros2 bag record` gives a bag.
+pub fn default_bag_name(now: Stamp) -> String {
+    let secs = now.0.div_euclid(1_000_000_000);
+    let (days, day_s) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    // Civil date of a day count since 1970-01-01 (proleptic Gregorian).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("rosbag2_{year:04}_{month:02}_{day:02}-{:02}_{:02}_{:02}", day_s / 3600, day_s % 3600 / 60, day_s % 60)
+}
+
+/// One topic the recorder subscribes to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordTopic {
+    /// Fully qualified name (`/oilfilm/daq/frames`).
+    pub name: String,
+    /// `pkg/msg/Type`.
+    pub type_name: String,
+    /// The QoS its publisher offers (and the recorder requests).
+    pub qos: TopicQos,
+}
+
+/// The topics `wanted` names (all six of ours when empty) under `namespace`; an unknown
+/// name is an error listing the known ones.
+pub fn select_topics(namespace: &str, wanted: &[String]) -> Result<Vec<RecordTopic>, NodeError> {
+    let of = |t: &topics::Topic| RecordTopic { name: topics::qualified(namespace, t), type_name: t.type_name.into(), qos: t.qos };
+    if wanted.is_empty() {
+        return Ok(topics::ALL.iter().map(of).collect());
+    }
+    let mut out: Vec<RecordTopic> = Vec::new();
+    for w in wanted {
+        let found = topics::ALL
+            .iter()
+            .find(|t| if w.starts_with('/') { topics::qualified(namespace, t) == *w } else { t.name == w.as_str() })
+            .map(of);
+        match found {
+            Some(t) if !out.contains(&t) => out.push(t),
+            Some(_) => {}
+            None => {
+                let known: Vec<String> = topics::ALL.iter().map(|t| topics::qualified(namespace, t)).collect();
+                return Err(NodeError::parameter("topics", format!("`{w}` is not one of our topics ({})", known.join(", "))));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// A topic's QoS as rosbag2 records it.
+pub fn bag_qos(q: &TopicQos) -> QosProfile {
+    QosProfile::keep_last(q.depth.max(1) as u32, q.reliable, q.transient_local)
+}
+
+/// Counts of what was recorded.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RecorderStats {
+    pub messages: u64,
+    /// CDR bytes recorded (before compression).
+    pub bytes: u64,
+    /// Messages per topic, in the topics' order.
+    pub per_topic: Vec<u64>,
+}
+
+pub struct RecorderCore {
+    writer: BagWriter,
+    topics: Vec<RecordTopic>,
+    ids: Vec<TopicId>,
+    stats: RecorderStats,
+}
+
+impl RecorderCore {
+    /// Adds each topic (its schema from our .msg files, its offered QoS) to `writer`.
+    pub fn new(mut writer: BagWriter, topics: Vec<RecordTopic>) -> Result<Self, NodeError> {
+        let mut ids = Vec::with_capacity(topics.len());
+        for t in &topics {
+            let spec = TopicSpec::ours(&t.name, &t.type_name, vec![bag_qos(&t.qos)])
+                .map_err(|reason| NodeError::parameter("topics", format!("{}: {reason}", t.name)))?;
+            ids.push(writer.add_topic(spec)?);
+        }
+        let stats = RecorderStats { per_topic: vec![0; topics.len()], ..Default::default() };
+        Ok(Self { writer, topics, ids, stats })
+    }
+
+    pub fn topics(&self) -> &[RecordTopic] {
+        &self.topics
+    }
+
+    pub fn stats(&self) -> &RecorderStats {
+        &self.stats
+    }
+
+    /// Writes one message of topic `index` received at `receive_time`.
+    pub fn record(&mut self, index: usize, receive_time: Stamp, message: &RawCdr) -> Result<(), NodeError> {
+        let id = *self.ids.get(index).ok_or_else(|| NodeError::parameter("topics", format!("no topic {index}")))?;
+        let log_time = u64::try_from(receive_time.0).map_err(|_| NodeError::BadMessage {
+            topic: self.topics[index].name.clone(),
+            sequence: self.stats.per_topic[index],
+            reason: format!("receive time {} ns is before 1970", receive_time.0),
+        })?;
+        self.writer.write(id, log_time, &message.0)?;
+        self.stats.messages += 1;
+        self.stats.bytes += message.0.len() as u64;
+        self.stats.per_topic[index] += 1;
+        Ok(())
+    }
+
+    /// Closes the bag: its last file finished, metadata.yaml written. Returns its directory.
+    pub fn close(self) -> Result<PathBuf, NodeError> {
+        Ok(self.writer.close()?)
+    }
+}
+
+/// One turn: takes everything waiting on `inputs` (one per topic, in the core's topic
+/// order), each message stamped with `clock()` as it is taken. Returns the number taken.
+pub fn poll(core: &mut RecorderCore, inputs: &mut [Box<dyn Receive<RawCdr> + '_>], clock: &dyn Fn() -> Stamp) -> Result<usize, NodeError> {
+    let mut taken = 0;
+    for (index, input) in inputs.iter_mut().enumerate() {
+        while let Some(m) = input.receive()? {
+            core.record(index, clock(), &m)?;
+            taken += 1;
+        }
+    }
+    Ok(taken)
+}
+
+/// The status line: totals, throughput since the last line, and per-topic counts.
+/// `mb_per_s`: MB (10^6 bytes) of CDR per second over the last period.
+pub fn status_line(stats: &RecorderStats, topics: &[RecordTopic], elapsed_s: f64, mb_per_s: f64) -> String {
+    let per_topic: Vec<String> = topics
+        .iter()
+        .zip(&stats.per_topic)
+        .map(|(t, n)| format!("{} {n}", t.name.rsplit_once("/oilfilm/").map_or(t.name.as_str(), |(_, r)| r)))
+        .collect();
+    format!(
+        "recording {:.0} s: {} msgs, {:.2} MB, {:.2} MB/s | {}",
+        elapsed_s,
+        stats.messages,
+        stats.bytes as f64 * 1e-6,
+        mb_per_s,
+        per_topic.join(", ")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ports::{memory::Bus, Publish};
+    use oilfilm_bag::Bag;
+    use oilfilm_msgs::{encode, DaqFrame, Header, RigStatus, Time};
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("oilfilm-recorder-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn records_what_was_published_byte_for_byte_at_the_receive_time() {
+        let dir = temp_dir("bytes");
+        let topics = select_topics("/oilfilm", &["daq/frames".into(), "/oilfilm/rig/status".into()]).unwrap();
+        assert_eq!(topics.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["/oilfilm/daq/frames", "/oilfilm/rig/status"]);
+        let mut core = RecorderCore::new(BagWriter::create(&dir, WriterOptions::default()).unwrap(), topics).unwrap();
+        let (frames, status) = (Bus::<RawCdr>::new(), Bus::<RawCdr>::new());
+        let mut inputs: Vec<Box<dyn Receive<RawCdr>>> = vec![Box::new(frames.subscriber()), Box::new(status.subscriber())];
+        let (mut pf, mut ps) = (frames.publisher(), status.publisher());
+        let mut published = Vec::new();
+        for k in 0..5u32 {
+            let f = DaqFrame {
+                header: Header { stamp: Time { sec: 100, nanosec: k * 1000 }, frame_id: "oilfilm_bearing".into() },
+                sequence: u64::from(k),
+                values: (0..10).map(|i| f64::from(i * k)).collect(),
+                ..Default::default()
+            };
+            let s = RigStatus { speed_rad_s: f64::from(k), message: format!("s{k}"), ..Default::default() };
+            // Bytes another writer might send: not what our encoder would produce (a
+            // non-zero padding byte) must still be kept as they came.
+            let mut fb = encode(&f);
+            fb.push(0xAB);
+            pf.publish(RawCdr(fb.clone())).unwrap();
+            ps.publish(RawCdr(encode(&s))).unwrap();
+            published.push(("/oilfilm/daq/frames", fb));
+            published.push(("/oilfilm/rig/status", encode(&s)));
+        }
+        let t = std::cell::Cell::new(1_700_000_000_000_000_000_i64);
+        let clock = || {
+            t.set(t.get() + 1_000);
+            Stamp(t.get())
+        };
+        assert_eq!(poll(&mut core, &mut inputs, &clock).unwrap(), 10);
+        assert_eq!(poll(&mut core, &mut inputs, &clock).unwrap(), 0);
+        assert_eq!(core.stats().per_topic, [5, 5]);
+        let line = status_line(core.stats(), core.topics(), 2.0, 0.5);
+        assert!(line.contains("10 msgs") && line.contains("daq/frames 5") && line.contains("rig/status 5"), "{line}");
+        let dir = core.close().unwrap();
+        let bag = Bag::open(&dir).unwrap();
+        let msgs = bag.messages().unwrap();
+        assert_eq!(msgs.len(), 10);
+        // Poll takes all of a topic's waiting messages before the next topic's.
+        let want: Vec<_> = published.iter().filter(|(t, _)| t.contains("daq")).chain(published.iter().filter(|(t, _)| t.contains("rig"))).collect();
+        for (i, (m, (topic, bytes))) in msgs.iter().zip(want).enumerate() {
+            assert_eq!(&*m.topic, *topic, "message {i}");
+            assert_eq!(&m.data, bytes, "message {i}: bytes differ");
+            assert_eq!(m.log_time, 1_700_000_000_000_000_000 + 1_000 * (i as u64 + 1), "message {i}: log time is the receive time");
+        }
+        let info = bag.info();
+        let daq = &info.topics_with_message_count[0].topic_metadata;
+        assert_eq!(daq.offered_qos_profiles, vec![bag_qos(&topics::DAQ_FRAMES.qos)]);
+        assert_eq!(info.topics_with_message_count[1].topic_metadata.offered_qos_profiles[0].durability, oilfilm_bag::metadata::Durability::TransientLocal);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn parameters_are_checked_and_topics_named() {
+        let p = RecorderParams { compression: "lz4".into(), split_size_mb: 2.5, split_duration_s: 10.0, ..Default::default() };
+        let o = p.writer_options().unwrap();
+        assert_eq!((o.compression, o.split_size_bytes, o.split_duration_ns), (Compression::Lz4, Some(2_500_000), Some(10_000_000_000)));
+        assert_eq!(RecorderParams::default().writer_options().unwrap().compression, Compression::Zstd);
+        let e = RecorderParams { compression: "gzip".into(), ..Default::default() }.writer_options().unwrap_err().to_string();
+        assert!(e.contains("compression") && e.contains("gzip"), "{e}");
+        let e = RecorderParams { split_size_mb: -1.0, ..Default::default() }.writer_options().unwrap_err().to_string();
+        assert!(e.contains("split_size_mb"), "{e}");
+        assert_eq!(select_topics("/oilfilm", &[]).unwrap().len(), 6);
+        let e = select_topics("/oilfilm", &["daq/frame".into()]).unwrap_err().to_string();
+        assert!(e.contains("daq/frame") && e.contains("/oilfilm/daq/frames"), "{e}");
+        assert_eq!(select_topics("/rig2", &["estimates".into()]).unwrap()[0].name, "/rig2/estimates");
+    }
+
+    #[test]
+    fn default_bag_name_is_the_utc_date() {
+        // 2026-11-21 19:52:13 UTC
+        assert_eq!(default_bag_name(Stamp(1_795_290_733_000_000_000)), "rosbag2_2026_11_21-19_52_13");
+        assert_eq!(default_bag_name(Stamp(0)), "rosbag2_1970_01_01-00_00_00");
+        // 2024-02-29 23:59:59 UTC (a leap day)
+        assert_eq!(default_bag_name(Stamp(1_709_251_199_000_000_000)), "rosbag2_2024_02_29-23_59_59");
+    }
+}
