@@ -44,6 +44,16 @@ enum BenchWhat {
         #[arg(long, default_value_t = 20.0)]
         seconds: f64,
     },
+    /// The diagnosis catalog on a 10 s, 5 kHz record (target: under 5 s on one core), and
+    /// the show (model against measurement) beside it.
+    Diagnose {
+        /// Repeats per record (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// Seconds of record.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+    },
     /// Film coefficient set at the Zhou point and rig simulation speed.
     Physics {
         /// Repeats of the coefficient set (the median is reported).
@@ -60,6 +70,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
         BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
         BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
+        BenchWhat::Diagnose { repeats, seconds } => crate::bench_diagnose::run(repeats, seconds),
     }
 }
 

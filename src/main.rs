@@ -12,6 +12,7 @@ mod record;
 mod campaign;
 mod figures;
 mod report;
+mod bench_diagnose;
 mod diagnose;
 mod diagnose_report;
 

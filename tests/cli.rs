@@ -158,3 +158,36 @@ fn identify_a_bag_gives_the_live_estimates() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("not-a-bag"), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+#[test]
+fn diagnose_names_a_hidden_runout_prints_the_contract_and_writes_a_report() {
+    let record = scratch("runout.txt");
+    let out = oilfilm(&[
+        "simulate", "--seconds", "8", "--excitation", "multisine", "--amplitude-n", "60", "--inject", "synchronous_runout=2e-7", "-o",
+        record.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "simulate failed: {}", String::from_utf8_lossy(&out.stderr));
+    let report_dir = scratch("diagnose-report");
+    let out = oilfilm(&["diagnose", record.to_str().unwrap(), "--json", "--out", report_dir.to_str().unwrap()]);
+    assert!(out.status.success(), "diagnose failed: {}", String::from_utf8_lossy(&out.stderr));
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("diagnose --json prints one JSON object");
+    assert_eq!(d["cause"], "synchronous_runout", "{}", d["reason"]);
+    let a = d["parameters"]["runout_amplitude_m"].as_f64().expect("runout_amplitude_m");
+    assert!((a / 2e-7 - 1.0).abs() < 0.2, "runout {a} m, hidden 2e-7 m");
+    assert!(d["gain"].as_f64().expect("gain") > 0.0);
+    assert_eq!(d["candidates"][0]["name"], "synchronous_runout", "best first");
+    let report = std::fs::read_to_string(report_dir.join("report.md")).expect("report.md written");
+    assert!(report.contains("synchronous_runout"), "the report carries the diagnosis");
+    assert!(std::fs::read_dir(&report_dir).expect("dir").filter_map(Result::ok).any(|e| e.path().extension().is_some_and(|x| x == "svg")), "figures written");
+
+    // The text form, and bad input naming the file.
+    let out = oilfilm(&["diagnose", record.to_str().unwrap(), "--no-report"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("cause: synchronous_runout") && text.contains("held-out NRMSE"), "{text}");
+    let missing = scratch("no-such-record.txt");
+    let out = oilfilm(&["diagnose", missing.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-record.txt"), "the error names the file");
+    let _ = std::fs::remove_file(&record);
+    let _ = std::fs::remove_dir_all(&report_dir);
+}
