@@ -254,7 +254,7 @@ pub fn prepare(
     let mechanics = pipeline::mechanics_of(rig);
     let mut conditioning = config.conditioning.clone();
     conditioning.lowpass_cutoff_hz = identification.lowpass_cutoff_hz;
-    let lines_hz = excitation_lines(raw)?;
+    let lines_hz = pipeline::excitation_lines(raw)?;
     if let Some(&top) = lines_hz.last() {
         // Band-limit to the excitation (ADR 0005), from the measured exciter forces, closer
         // than the pipeline does: differentiated probe noise grows with the cube of the band
@@ -339,66 +339,6 @@ pub fn prepare(
     };
     prepared.tilt_weight_n_m = 0.5 * (fit.theta[0].abs() + fit.theta[5].abs());
     Ok(Ok(prepared))
-}
-
-/// A line of an exciter force counts when its power is within this factor of the strongest
-/// line's and this factor above the median bin.
-const LINE_FRACTION_OF_STRONGEST: f64 = 0.05;
-const LINE_OVER_MEDIAN: f64 = 100.0;
-/// Exciter-force samples kept for the line search (every k-th scan).
-const LINE_SEARCH_RATE_HZ: f64 = 500.0;
-
-/// The excitation lines of a record, Hz, from its measured exciter forces `f1`, `f2`: DFT
-/// bins (resolution 1 / record length) up to 0.8 of the search rate's Nyquist frequency that
-/// stand out of both the median bin and the strongest line's neighbourhood.
-pub fn excitation_lines(raw: &RawRecord) -> Result<Vec<f64>, DiagnosisError> {
-    use oilfilm_physics::daq::ChannelId;
-    let stride = ((raw.sample_rate_hz / LINE_SEARCH_RATE_HZ).floor() as usize).max(1);
-    let rate = raw.sample_rate_hz / stride as f64;
-    let mut power: Vec<f64> = Vec::new();
-    for ch in [ChannelId::F1, ChannelId::F2] {
-        let Some(col) = raw.column(ch) else { continue };
-        let v: Vec<f64> = col.iter().step_by(stride).copied().collect();
-        let m = v.len();
-        if m < 16 {
-            return Ok(Vec::new());
-        }
-        let mean = v.iter().sum::<f64>() / m as f64;
-        let bins = ((0.4 * m as f64).floor() as usize).max(1);
-        power.resize(bins, 0.0);
-        for (k, p) in power.iter_mut().enumerate().skip(1) {
-            let w = 2.0 * std::f64::consts::PI * k as f64 / m as f64;
-            // Goertzel: one recurrence per bin.
-            let coeff = 2.0 * w.cos();
-            let (mut s1, mut s2) = (0.0, 0.0);
-            for &x in &v {
-                let s0 = (x - mean) + coeff * s1 - s2;
-                s2 = s1;
-                s1 = s0;
-            }
-            *p += s1 * s1 + s2 * s2 - coeff * s1 * s2;
-        }
-    }
-    if power.len() < 3 {
-        return Ok(Vec::new());
-    }
-    let mut sorted = power[1..].to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    let strongest = sorted[sorted.len() - 1];
-    let m = power.len() as f64 / 0.4;
-    let duration = m / rate;
-    let lines: Vec<f64> = (1..power.len())
-        .filter(|&k| {
-            let p = power[k];
-            p >= LINE_FRACTION_OF_STRONGEST * strongest
-                && p >= LINE_OVER_MEDIAN * median
-                && p >= power[k - 1]
-                && power.get(k + 1).is_none_or(|&q| p >= q)
-        })
-        .map(|k| k as f64 / duration)
-        .collect();
-    Ok(lines)
 }
 
 impl Prepared {

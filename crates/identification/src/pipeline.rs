@@ -186,7 +186,19 @@ pub fn identify(
     if !config.adaptive_lowpass {
         return Ok(first);
     }
-    let Some(cutoff) = adapted_cutoff(&first, config.conditioning.lowpass_cutoff_hz) else {
+    // The lines the estimator found in the motion; failing those (a multisine spreads its
+    // power over many lines, none of which stands out of differentiated broadband noise at
+    // the configured band), the lines of the measured exciter forces.
+    let by_forces = || -> Result<Option<f64>, IdentificationError> {
+        let lines = excitation_lines(raw)?;
+        Ok(lines.last().map(|&top| (ADAPTIVE_CUTOFF_FACTOR * top).max(MIN_ADAPTIVE_CUTOFF_HZ)).filter(|&c| c < 0.9 * config.conditioning.lowpass_cutoff_hz))
+    };
+    let cutoff = match adapted_cutoff(&first, config.conditioning.lowpass_cutoff_hz) {
+        Some(c) => Some(c),
+        None if first.frequency_domain.is_none() => by_forces()?,
+        None => None,
+    };
+    let Some(cutoff) = cutoff else {
         return Ok(first);
     };
     let mut adapted = config.clone();
@@ -208,6 +220,65 @@ fn adapted_cutoff(first: &Identification, configured_hz: f64) -> Option<f64> {
     let top = lines.iter().filter(|l| amplitude(l) >= STRONG_LINE_FRACTION * strongest).map(|l| l.frequency_hz).fold(0.0, f64::max);
     let cutoff = (ADAPTIVE_CUTOFF_FACTOR * top).max(MIN_ADAPTIVE_CUTOFF_HZ);
     (cutoff < 0.9 * configured_hz).then_some(cutoff)
+}
+
+/// A line of an exciter force counts when its power is within this factor of the strongest
+/// line's and this factor above the median bin.
+const LINE_FRACTION_OF_STRONGEST: f64 = 0.05;
+const LINE_OVER_MEDIAN: f64 = 100.0;
+/// Exciter-force samples kept for the line search (every k-th scan).
+const LINE_SEARCH_RATE_HZ: f64 = 500.0;
+
+/// The excitation lines of a record, Hz, from its measured exciter forces `f1`, `f2`: DFT
+/// bins (resolution 1 / record length) up to 0.8 of the search rate's Nyquist frequency that
+/// stand out of both the median bin and the strongest line's neighbourhood.
+pub fn excitation_lines(raw: &RawRecord) -> Result<Vec<f64>, IdentificationError> {
+    let stride = ((raw.sample_rate_hz / LINE_SEARCH_RATE_HZ).floor() as usize).max(1);
+    let rate = raw.sample_rate_hz / stride as f64;
+    let mut power: Vec<f64> = Vec::new();
+    for ch in [ChannelId::F1, ChannelId::F2] {
+        let Some(col) = raw.column(ch) else { continue };
+        let v: Vec<f64> = col.iter().step_by(stride).copied().collect();
+        let m = v.len();
+        if m < 16 {
+            return Ok(Vec::new());
+        }
+        let mean = v.iter().sum::<f64>() / m as f64;
+        let bins = ((0.4 * m as f64).floor() as usize).max(1);
+        power.resize(bins, 0.0);
+        for (k, p) in power.iter_mut().enumerate().skip(1) {
+            let w = 2.0 * std::f64::consts::PI * k as f64 / m as f64;
+            // Goertzel: one recurrence per bin.
+            let coeff = 2.0 * w.cos();
+            let (mut s1, mut s2) = (0.0, 0.0);
+            for &x in &v {
+                let s0 = (x - mean) + coeff * s1 - s2;
+                s2 = s1;
+                s1 = s0;
+            }
+            *p += s1 * s1 + s2 * s2 - coeff * s1 * s2;
+        }
+    }
+    if power.len() < 3 {
+        return Ok(Vec::new());
+    }
+    let mut sorted = power[1..].to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let strongest = sorted[sorted.len() - 1];
+    let m = power.len() as f64 / 0.4;
+    let duration = m / rate;
+    let lines: Vec<f64> = (1..power.len())
+        .filter(|&k| {
+            let p = power[k];
+            p >= LINE_FRACTION_OF_STRONGEST * strongest
+                && p >= LINE_OVER_MEDIAN * median
+                && p >= power[k - 1]
+                && power.get(k + 1).is_none_or(|&q| p >= q)
+        })
+        .map(|k| k as f64 / duration)
+        .collect();
+    Ok(lines)
 }
 
 /// Identifies an already conditioned record.
