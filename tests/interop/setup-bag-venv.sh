@@ -15,7 +15,7 @@ log() { echo "setup-bag-venv: $*" >&2; }
 
 # Pinned so the facts in issue 5 (metadata.yaml version <= 9 for rosbags 0.11, ...) keep holding.
 packages=(
-  'rosbags==0.11.9' 'mcap==1.6.0' 'mcap-ros2-support==0.6.0' 'zstandard' 'lz4' 'pytest'
+  'rosbags==0.11.9' 'mcap==1.6.0' 'mcap-ros2-support==0.6.0' 'pymcap-cli==0.34.0' 'zstandard' 'lz4' 'pytest'
 )
 
 python_ok() {
