@@ -45,8 +45,8 @@ interop "oilfilm_msgs builds with rosidl; rclpy serialises every message as the 
 interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopback)" bash tests/interop/run-rclpy-roundtrip.sh
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
-echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support from PyPI, in .venv-bag)"
-interop "rosbags and mcap-ros2-support decode our bags (also a killed one after our recovery); our reader reads rosbags' bags" bash tests/interop/run-bag-readers.sh
+echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
+interop "rosbags (type hashes checked) and mcap-ros2-support decode our bags (also a killed one after our recovery); pymcap-cli doctor finds no error; rosbags-convert round-trips via sqlite3; our reader and oilfilm identify read rosbags' bags" bash tests/interop/run-bag-readers.sh
 
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Creates the Python environment of the bag interop tests from PyPI: the readers and writer
-# our rosbag2 MCAP bags must work with (rosbags, mcap, mcap-ros2-support) and pytest.
+# our rosbag2 MCAP bags must work with (rosbags with rosbags-convert, mcap, mcap-ros2-support,
+# pymcap-cli for `pymcap-cli doctor`) and pytest.
 # Separate from .venv-ros because these are pure-Python wheels that need no ROS build.
 # Idempotent and cached: a second run only checks the stamp of the package list.
 #
