@@ -4,8 +4,9 @@ Run by run-bag-readers.sh beside test_bag_readers.py (same environment variables
 OILFILM_BAGS: extra bags of ours (lz4, uncompressed, split) separated by ':', and
 OILFILM_BIN: the `oilfilm` binary).
 
-* the RIHS01 type hashes we write equal rosbags' own computation from msgs/*.msg, rosbags'
-  AnyReader checks them (and refuses a wrong one, so the check is real);
+* the RIHS01 type hashes we write equal rosbags' own computation from msgs/*.msg and (when
+  setup-ros-venv.sh has built msgs/) rosidl's generator's, and rosbags' AnyReader checks
+  them (and refuses a wrong one, so the check is real);
 * `pymcap-cli doctor` (PyPI `pymcap-cli`) reports no error and no warning on every file of
   our bags (zstd, lz4, none, split, recovered, the committed reference bag), and does report
   a corrupted chunk;
@@ -116,6 +117,22 @@ def test_type_hashes_are_rosbags_own_and_anyreader_checks_them(tmp_path):
     with pytest.raises(AnyReaderError, match="DaqFrame.*hash mismatch"):
         with AnyReader([bad], default_typestore=get_typestore(Stores.EMPTY)):
             pass
+
+
+def test_type_hashes_equal_rosidls_when_its_build_is_there():
+    """rosidl's own generator wrote the hashes into the interface package that
+    setup-ros-venv.sh builds (run-all.sh builds it before this test): ours must equal them."""
+    share = ROOT / "target" / "ros" / "oilfilm_msgs" / "share" / "oilfilm_msgs" / "msg"
+    if not share.is_dir():
+        pytest.skip(f"{share}: no rosidl build (bash tests/interop/setup-ros-venv.sh makes one)")
+    rosidl = {}
+    for f in share.glob("*.json"):
+        for h in json.loads(f.read_text())["type_hashes"]:
+            rosidl[h["type_name"]] = h["hash_string"]
+    ours = {t["topic_metadata"]["type"]: t["topic_metadata"]["type_description_hash"] for t in metadata(BAG)["topics_with_message_count"]}
+    assert len(ours) == 5
+    for ty, h in ours.items():
+        assert rosidl.get(ty) == h, f"{ty}: ours {h}, rosidl {rosidl.get(ty)}"
 
 
 # --- pymcap-cli doctor --------------------------------------------------------------
