@@ -54,6 +54,13 @@ enum BenchWhat {
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
     },
+    /// rosbag2 bags: record throughput (MB/s, msgs/s; zstd, lz4, none) of the simulated rig's
+    /// DAQ frames and whole graph, and `oilfilm identify BAG` speed as a multiple of real time.
+    Bag {
+        /// Seconds of simulated rig (5 kHz x 10 channels).
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+    },
     /// Film coefficient set at the Zhou point and rig simulation speed.
     Physics {
         /// Repeats of the coefficient set (the median is reported).
@@ -71,6 +78,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
         BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
         BenchWhat::Diagnose { repeats, seconds } => crate::bench_diagnose::run(repeats, seconds),
+        BenchWhat::Bag { seconds } => crate::bench_bag::run(seconds),
     }
 }
 

@@ -5,6 +5,7 @@
 
 mod launch;
 mod bench;
+mod bench_bag;
 mod bench_nodes;
 mod bench_pipeline;
 mod records;

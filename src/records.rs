@@ -334,6 +334,29 @@ fn print_identification(name: &str, id: &Identification) {
     }
 }
 
+/// The DAQ frames and rig status of a bag, in log-time order: what `oilfilm identify BAG`
+/// feeds the conditioner and estimator (`oilfilm bench bag` times the same path).
+pub fn read_bag_inputs(dir: &std::path::Path) -> Result<(Vec<oilfilm_msgs::DaqFrame>, Vec<oilfilm_msgs::RigStatus>)> {
+    let bag = oilfilm_bag::Bag::open(dir)?;
+    let (mut frames, mut status) = (Vec::new(), Vec::new());
+    for m in bag.messages()? {
+        // Only the conditioner's and estimator's inputs are decoded (what else the bag holds,
+        // e.g. the conditioned frames, would cost as much again to decode for nothing).
+        if !matches!(&*m.type_name, <oilfilm_msgs::DaqFrame as oilfilm_msgs::RosMessage>::TYPE_NAME | <oilfilm_msgs::RigStatus as oilfilm_msgs::RosMessage>::TYPE_NAME) {
+            continue;
+        }
+        match m.decode_ours()? {
+            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
+            oilfilm_bag::OilfilmMessage::RigStatus(s) => status.push(s),
+            _ => {}
+        }
+    }
+    if frames.is_empty() {
+        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
+    }
+    Ok((frames, status))
+}
+
 /// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
 /// and estimator (the node cores, `oilfilm_nodes::harness::reanalyse`).
 fn identify_bag(args: &IdentifyArgs) -> Result<()> {
@@ -378,18 +401,7 @@ fn identify_bag(args: &IdentifyArgs) -> Result<()> {
     if args.no_deskew {
         bail!("{name}: --no-deskew is for ASCII records; for a bag set `deskew: false` in the conditioner's params");
     }
-    let bag = oilfilm_bag::Bag::open(&args.file)?;
-    let (mut frames, mut status) = (Vec::new(), Vec::new());
-    for m in bag.messages()? {
-        match m.decode_ours()? {
-            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
-            oilfilm_bag::OilfilmMessage::RigStatus(s) => status.push(s),
-            _ => {}
-        }
-    }
-    if frames.is_empty() {
-        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to identify", oilfilm_nodes::topics::DAQ_FRAMES.name);
-    }
+    let (frames, status) = read_bag_inputs(&args.file)?;
     let out = oilfilm_nodes::harness::reanalyse(&rig, &conditioner, &estimator, &frames, &status)?;
     if args.json {
         let doc = serde_json::json!({

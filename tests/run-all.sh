@@ -46,8 +46,8 @@ interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopb
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 interop "oilfilm play seen from rclpy: /clock is rosgraph_msgs/Clock on the bag's log time and a use_sim_time node follows it; every message arrives with its recorded stamp" bash tests/interop/run-rclpy-player.sh target/debug
-echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support from PyPI, in .venv-bag)"
-interop "rosbags and mcap-ros2-support decode our bags (also a killed one after our recovery); our reader reads rosbags' bags" bash tests/interop/run-bag-readers.sh
+echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
+interop "rosbags (type hashes checked) and mcap-ros2-support decode our bags (also a killed one after our recovery); pymcap-cli doctor finds no error; rosbags-convert round-trips via sqlite3; our reader and oilfilm identify read rosbags' bags" bash tests/interop/run-bag-readers.sh
 interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
 
 echo

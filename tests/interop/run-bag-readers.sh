@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Our rosbag2 MCAP bags against the readers users have (rosbags, mcap + mcap-ros2-support,
-# from PyPI in .venv-bag), and a bag written by rosbags read by ours.
+# Our rosbag2 MCAP bags against the readers and tools users have (rosbags with its
+# AnyReader type-hash check and rosbags-convert, mcap + mcap-ros2-support, pymcap-cli doctor,
+# from PyPI in .venv-bag), and bags written by rosbags read by ours and by `oilfilm identify`.
 #
 #   bash tests/interop/run-bag-readers.sh
 set -euo pipefail
@@ -9,7 +10,13 @@ py=$(bash tests/interop/setup-bag-venv.sh)
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-bag-interop.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 cargo build --quiet --profile test -p oilfilm-bag --examples
+cargo build --quiet --profile test -p oilfilm --bin oilfilm
 bin=target/debug/examples
 "$bin/write_sim_rig" "$work/sim_rig" 2
+# The other chunk compressions and a bag split into several files, for pymcap-cli doctor.
+"$bin/write_sim_rig" "$work/sim_rig_lz4" 2 lz4
+"$bin/write_sim_rig" "$work/sim_rig_none" 2 none
+"$bin/write_sim_rig" "$work/sim_rig_split" 2 zstd 0.7
 OILFILM_BAG=$work/sim_rig OILFILM_EXPECTED=$work/sim_rig.expected.yaml OILFILM_READ_BAG=$(pwd)/$bin/read_bag \
-  "$py" -m pytest -q -p no:cacheprovider --basetemp "$work/pytest" tests/interop/test_bag_readers.py
+OILFILM_BAGS=$work/sim_rig_lz4:$work/sim_rig_none:$work/sim_rig_split OILFILM_BIN=$(pwd)/target/debug/oilfilm \
+  "$py" -m pytest -q -p no:cacheprovider --durations=5 --basetemp "$work/pytest" tests/interop/test_bag_readers.py tests/interop/test_bag_tools.py

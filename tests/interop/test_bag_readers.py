@@ -11,6 +11,7 @@ points OILFILM_READ_BAG at our reader (the read_bag example).
   with equal values.
 """
 
+import functools
 import math
 import os
 import subprocess
@@ -27,11 +28,17 @@ EXPECTED = Path(os.environ["OILFILM_EXPECTED"])
 READ_BAG = os.environ["OILFILM_READ_BAG"]
 
 
-@pytest.fixture(scope="module")
-def expected():
+@functools.cache
+def load_expected():
+    """What every message held (parsed once per session: the YAML takes seconds)."""
     msgs = YAML(typ="safe").load(EXPECTED.read_text())
     assert len(msgs) > 20
     return msgs
+
+
+@pytest.fixture(scope="module")
+def expected():
+    return load_expected()
 
 
 def by_topic(entries):

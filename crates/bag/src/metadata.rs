@@ -68,8 +68,9 @@ pub struct TopicMetadata {
     pub serialization_format: String,
     #[serde(default, deserialize_with = "de_qos_list")]
     pub offered_qos_profiles: Vec<QosProfile>,
-    /// RIHS01 hash of the type description. We leave it empty: rosbags checks it when
-    /// present, and an empty one is "not known".
+    /// RIHS01 hash of the type description (`RIHS01_` + 64 hex digits), as rosidl computes
+    /// it; empty is "not known". rosbags' AnyReader checks a present one against the
+    /// schema, so the writer fills it only when it can compute it.
     #[serde(default)]
     pub type_description_hash: String,
 }

@@ -168,7 +168,7 @@ fn add_topics(path: &Path, s: &ScannedFile, topics: &mut Vec<(TopicMetadata, u64
                     type_name,
                     serialization_format: c.message_encoding.clone(),
                     offered_qos_profiles: qos,
-                    type_description_hash: String::new(),
+                    type_description_hash: c.metadata.get(crate::writer::TYPE_HASH_KEY).cloned().unwrap_or_default(),
                 },
                 n,
             )),

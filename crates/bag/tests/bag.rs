@@ -55,6 +55,16 @@ fn every_topic_round_trips_byte_for_byte_and_decodes() {
         let n = want.iter().filter(|m| m.topic == t.topic_metadata.name).count() as u64;
         assert_eq!(t.message_count, n, "{}", t.topic_metadata.name);
         assert_eq!(t.topic_metadata.offered_qos_profiles.len(), 1);
+        // The RIHS01 hash of each type (pinned against rosidl in oilfilm-msgs' tests), in
+        // metadata.yaml and in the channel metadata where rosbag2's MCAP plugin keeps it.
+        let hash = oilfilm_msgs::type_description_hash(&t.topic_metadata.type_name).unwrap();
+        assert_eq!(t.topic_metadata.type_description_hash, hash, "{}", t.topic_metadata.name);
+    }
+    let scanned = oilfilm_bag::scan::scan(&std::fs::read(dir.join("roundtrip_0.mcap")).unwrap());
+    assert_eq!(scanned.channels.len(), info.topics_with_message_count.len());
+    for c in scanned.channels.values() {
+        let ty = &scanned.schemas[&c.schema_id].name;
+        assert_eq!(c.metadata.get("topic_type_hash"), Some(&oilfilm_msgs::type_description_hash(ty).unwrap()), "{}", c.topic);
     }
     let got = bag.messages().unwrap();
     assert_same_messages(&got, want);
@@ -188,11 +198,12 @@ fn recovery_of_a_file_cut_mid_chunk_keeps_every_complete_chunk() {
     let bytes = std::fs::read(&file).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
     assert_eq!(summary.stats.unwrap().message_count, kept.len() as u64);
-    // Its metadata.yaml counts what is there, per topic, with the channels' QoS.
+    // Its metadata.yaml counts what is there, per topic, with the channels' QoS and hashes.
     let info = bag.info();
     assert_eq!(info.message_count, kept.len() as u64);
     for t in &info.topics_with_message_count {
         assert_eq!(t.topic_metadata.offered_qos_profiles.len(), 1, "{}", t.topic_metadata.name);
+        assert_eq!(t.topic_metadata.type_description_hash, oilfilm_msgs::type_description_hash(&t.topic_metadata.type_name).unwrap());
         assert_eq!(t.message_count, got.iter().filter(|m| *m.topic == t.topic_metadata.name).count() as u64);
     }
     // Recovering a sound bag again changes nothing.

@@ -15,6 +15,7 @@
 
 pub mod cdr;
 pub mod spec;
+pub mod type_hash;
 
 pub use cdr::{
     decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage,
@@ -321,6 +322,12 @@ pub fn definition(package: &str, type_name: &str) -> Option<&'static str> {
 /// writes it into a bag (see [`spec::schema_text`]).
 pub fn schema_text(type_name: &str, naming: spec::SchemaNaming) -> Result<String, String> {
     spec::schema_text(type_name, naming, &definition)
+}
+
+/// The RIHS01 type description hash of one of our types (`oilfilm_msgs/msg/DaqFrame`), as
+/// rosidl computes it and rosbag2 stores it (see [`type_hash`](mod@type_hash)).
+pub fn type_description_hash(type_name: &str) -> Result<String, String> {
+    type_hash::type_hash(type_name, &definition)
 }
 
 /// Which of our topics' types a name is, for tools (`pkg/msg/Type`).

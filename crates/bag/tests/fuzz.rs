@@ -1,0 +1,399 @@
+//! A bounded, seeded fuzz loop over mutated bags: the reader ([`Bag::open`],
+//! [`Bag::messages`], [`oilfilm_bag::BagMessage::decode_ours`]) and [`recover`] never panic,
+//! and every error names the file (or directory) it is about and says what is wrong.
+//!
+//! Mutations of a sound bag (zstd, lz4 or uncompressed chunks, one file or split): bytes
+//! flipped, the file truncated anywhere, top-level records duplicated, dropped or swapped,
+//! metadata.yaml missing, cut, flipped or edited (version, storage, file list), the header's
+//! profile rewritten, a type no reader here knows, message payloads that are not valid CDR.
+//!
+//! Bounded: `CASES` cases (about a second optimised); each case's seed is
+//! `SEED + case`, printed on failure, so `OILFILM_FUZZ_SEED=<seed> OILFILM_FUZZ_CASES=1`
+//! reproduces it. `OILFILM_FUZZ_CASES=100000` fuzzes longer.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+
+use oilfilm_bag::{recover, Bag, BagWriter, Compression, QosProfile, TopicSpec, WriterOptions};
+use oilfilm_msgs::{DaqFrame, Header, RigStatus, Time};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const SEED: u64 = 0x0171_f11e_ba65;
+const CASES: u64 = 400;
+
+fn tmp_root(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("oilfilm-bag-fuzz-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn header(t_ns: u64) -> Header {
+    Header { stamp: Time { sec: (t_ns / 1_000_000_000) as i32, nanosec: (t_ns % 1_000_000_000) as u32 }, frame_id: "oilfilm_bearing".into() }
+}
+
+fn frame(i: u64, t_ns: u64) -> DaqFrame {
+    let scans = 50u32;
+    DaqFrame {
+        header: header(t_ns),
+        sequence: i,
+        first_scan: i * scans as u64,
+        sample_rate_hz: 5000.0,
+        units: DaqFrame::UNITS_SI,
+        channel_names: ["probe_a_x", "probe_a_y", "probe_b_x", "probe_b_y", "frame_x", "frame_y", "f1", "f2", "f3", "temperature"].map(String::from).to_vec(),
+        channel_units: ["m", "m", "m", "m", "m", "m", "N", "N", "N", "degC"].map(String::from).to_vec(),
+        channel_offsets_s: (0..10).map(|p| p as f64 * 1e-5).collect(),
+        scan_count: scans,
+        values: (0..scans as u64 * 10).map(|k| ((i * 1000 + k) as f64 * 0.37).sin()).collect(),
+        rig: "zhou2004".into(),
+    }
+}
+
+/// A sound bag of DAQ frames and rig status in small chunks (so there are many), written
+/// with `compression`, split every `split_ns` of log time if given.
+fn sound_bag(dir: &Path, compression: Compression, split_ns: Option<u64>) {
+    let options = WriterOptions { compression, chunk_size: 6 << 10, split_duration_ns: split_ns, ..WriterOptions::default() };
+    let mut w = BagWriter::create(dir, options).unwrap();
+    let qos = vec![QosProfile::keep_last(200, true, false)];
+    let frames = w.add_topic(TopicSpec::ours("/oilfilm/daq/frames", "oilfilm_msgs/msg/DaqFrame", qos.clone()).unwrap()).unwrap();
+    let status = w.add_topic(TopicSpec::ours("/oilfilm/rig/status", "oilfilm_msgs/msg/RigStatus", qos).unwrap()).unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    for i in 0..24u64 {
+        let t = t0 + i * 10_000_000;
+        w.write_message(frames, t, &frame(i, t)).unwrap();
+        let s = RigStatus { header: header(t), speed_rad_s: 157.08, static_load_n: 5000.0, bearing_temperature_degc: 29.0, state: RigStatus::STATE_EXCITING, message: String::new() };
+        w.write_message(status, t, &s).unwrap();
+    }
+    w.close().unwrap();
+}
+
+/// A bag holding a type that is not ours, and one whose payloads are not valid CDR of their
+/// (our) type.
+fn odd_bag(dir: &Path, rng: &mut ChaCha8Rng) -> &'static str {
+    let mut w = BagWriter::create(dir, WriterOptions::default()).unwrap();
+    let qos = vec![QosProfile::keep_last(10, true, false)];
+    if rng.random_bool(0.5) {
+        let spec = TopicSpec { name: "/point".into(), type_name: "geometry_msgs/msg/Point".into(), schema_text: "float64 x\nfloat64 y\nfloat64 z\n".into(), qos };
+        let id = w.add_topic(spec).unwrap();
+        let mut cdr = vec![0, 1, 0, 0];
+        cdr.extend_from_slice(&[0u8; 24]);
+        w.write(id, 1, &cdr).unwrap();
+        w.close().unwrap();
+        "a type that is not ours"
+    } else {
+        let id = w.add_topic(TopicSpec::ours("/oilfilm/daq/frames", "oilfilm_msgs/msg/DaqFrame", qos).unwrap()).unwrap();
+        let mut cdr = oilfilm_msgs::encode(&frame(0, 1));
+        match rng.random_range(0..3) {
+            0 => cdr.truncate(rng.random_range(0..cdr.len())),
+            1 => {
+                for _ in 0..rng.random_range(1..8) {
+                    let i = rng.random_range(0..cdr.len());
+                    cdr[i] = rng.random();
+                }
+            }
+            _ => cdr = (0..rng.random_range(0..64)).map(|_| rng.random()).collect(),
+        }
+        w.write(id, 1, &cdr).unwrap();
+        w.close().unwrap();
+        "payloads that are not valid CDR"
+    }
+}
+
+/// Top-level records of an MCAP file: (start, end) byte ranges after the 8-byte magic, up
+/// to the end magic (or as far as the lengths make sense).
+fn records(bytes: &[u8]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut at = 8;
+    while at + 9 <= bytes.len().saturating_sub(8) {
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&bytes[at + 1..at + 9]);
+        let Some(end) = usize::try_from(u64::from_le_bytes(len)).ok().and_then(|l| l.checked_add(at + 9)).filter(|&e| e <= bytes.len()) else { break };
+        out.push((at, end));
+        at = end;
+    }
+    out
+}
+
+/// The header record rewritten with another profile.
+fn with_profile(bytes: &[u8], profile: &str) -> Vec<u8> {
+    let recs = records(bytes);
+    let (start, end) = recs[0];
+    assert_eq!(bytes[start], 0x01, "the first record is the header");
+    let body = &bytes[start + 9..end];
+    let plen = u32::from_le_bytes(body[..4].try_into().unwrap()) as usize;
+    let library = &body[4 + plen..];
+    let mut new_body = (profile.len() as u32).to_le_bytes().to_vec();
+    new_body.extend_from_slice(profile.as_bytes());
+    new_body.extend_from_slice(library);
+    let mut out = bytes[..start].to_vec();
+    out.push(0x01);
+    out.extend_from_slice(&(new_body.len() as u64).to_le_bytes());
+    out.extend_from_slice(&new_body);
+    out.extend_from_slice(&bytes[end..]);
+    out
+}
+
+/// Mutates the bag in `dir` (one change chosen by `rng`); returns what it did.
+fn mutate(dir: &Path, rng: &mut ChaCha8Rng) -> String {
+    let meta = dir.join("metadata.yaml");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == "mcap")).collect();
+    files.sort();
+    let file = files[rng.random_range(0..files.len())].clone();
+    let mut bytes = std::fs::read(&file).unwrap();
+    let name = file.file_name().unwrap().to_string_lossy().into_owned();
+    let what = match rng.random_range(0..12) {
+        0 | 1 => {
+            let n = rng.random_range(1..9);
+            for _ in 0..n {
+                let i = rng.random_range(0..bytes.len());
+                bytes[i] ^= rng.random_range(1..=255u8);
+            }
+            format!("{n} bytes of {name} flipped")
+        }
+        2 | 3 => {
+            let at = rng.random_range(0..bytes.len());
+            bytes.truncate(at);
+            format!("{name} cut at byte {at}")
+        }
+        4 => {
+            let recs = records(&bytes);
+            let (s, e) = recs[rng.random_range(0..recs.len())];
+            let to = recs[rng.random_range(0..recs.len())].0;
+            let copy = bytes[s..e].to_vec();
+            bytes.splice(to..to, copy);
+            format!("{name}: record at {s} duplicated at {to}")
+        }
+        5 => {
+            let recs = records(&bytes);
+            let (s, e) = recs[rng.random_range(0..recs.len())];
+            bytes.drain(s..e);
+            format!("{name}: record at {s} dropped")
+        }
+        6 => {
+            let recs = records(&bytes);
+            let a = rng.random_range(0..recs.len());
+            let b = rng.random_range(0..recs.len());
+            let (a, b) = (recs[a.min(b)], recs[a.max(b)]);
+            if a != b {
+                let mut out = bytes[..a.0].to_vec();
+                out.extend_from_slice(&bytes[b.0..b.1]);
+                out.extend_from_slice(&bytes[a.1..b.0]);
+                out.extend_from_slice(&bytes[a.0..a.1]);
+                out.extend_from_slice(&bytes[b.1..]);
+                bytes = out;
+            }
+            format!("{name}: records at {} and {} swapped", a.0, b.0)
+        }
+        7 => {
+            let p = ["ros1", "", "ros2 ", "x"][rng.random_range(0..4)];
+            bytes = with_profile(&bytes, p);
+            format!("{name}: profile `{p}`")
+        }
+        8 => {
+            std::fs::remove_file(&meta).unwrap();
+            "metadata.yaml missing".to_string()
+        }
+        9 => {
+            let mut m = std::fs::read(&meta).unwrap();
+            let at = rng.random_range(0..m.len());
+            if rng.random_bool(0.5) {
+                m.truncate(at);
+            } else {
+                m[at] ^= rng.random_range(1..=255u8);
+            }
+            std::fs::write(&meta, m).unwrap();
+            format!("metadata.yaml cut or flipped at byte {at}")
+        }
+        10 => {
+            let m = std::fs::read_to_string(&meta).unwrap();
+            let edits: [(&str, &str); 6] = [
+                ("version: 9", "version: 12"),
+                ("storage_identifier: mcap", "storage_identifier: sqlite3"),
+                (&name, "missing_9.mcap"),
+                (&name, "../../etc/passwd"),
+                ("compression_mode: ''", "compression_mode: FILE"),
+                ("rosbag2_bagfile_information", "bagfile"),
+            ];
+            let (from, to) = edits[rng.random_range(0..edits.len())];
+            std::fs::write(&meta, m.replacen(from, to, 1)).unwrap();
+            format!("metadata.yaml: `{from}` -> `{to}`")
+        }
+        _ => {
+            // Several mutations at once.
+            let a = mutate_bytes_only(&mut bytes, rng);
+            let b = mutate_bytes_only(&mut bytes, rng);
+            format!("{name}: {a}, then {b}")
+        }
+    };
+    std::fs::write(&file, bytes).unwrap();
+    what
+}
+
+fn mutate_bytes_only(bytes: &mut Vec<u8>, rng: &mut ChaCha8Rng) -> String {
+    if bytes.is_empty() {
+        return "nothing (empty)".into();
+    }
+    if rng.random_bool(0.5) {
+        let i = rng.random_range(0..bytes.len());
+        bytes[i] ^= rng.random_range(1..=255u8);
+        format!("byte {i} flipped")
+    } else {
+        let at = rng.random_range(0..bytes.len());
+        bytes.truncate(at);
+        format!("cut at {at}")
+    }
+}
+
+/// The error names a path inside (or equal to) the bag directory and says more than that.
+fn check_error(e: &oilfilm_bag::BagError, dir: &Path, case: &str) {
+    let text = e.to_string();
+    let dir_text = dir.display().to_string();
+    let Some(at) = text.find(&dir_text) else {
+        panic!("{case}: the error does not name the bag or its file: {text}");
+    };
+    let rest = &text[at + dir_text.len()..];
+    let reason = rest.split_once(": ").map(|(_, r)| r).unwrap_or("");
+    assert!(reason.trim().len() >= 8, "{case}: the error does not say what is wrong: {text}");
+}
+
+/// Reads the bag as `oilfilm identify` does: open, every message, decode each.
+fn read_all(dir: &Path) -> oilfilm_bag::Result<usize> {
+    let bag = Bag::open(dir)?;
+    let msgs = bag.messages()?;
+    for m in &msgs {
+        m.decode_ours()?;
+    }
+    Ok(msgs.len())
+}
+
+/// Runs one case; returns whether reading the mutated bag failed (with a good error).
+fn run_case(root: &Path, seed: u64) -> bool {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let dir = root.join(format!("case_{seed}"));
+    let what = if rng.random_range(0..8) == 0 {
+        odd_bag(&dir, &mut rng).to_string()
+    } else {
+        let compression = [Compression::Zstd, Compression::Lz4, Compression::None][rng.random_range(0..3)];
+        let split = rng.random_bool(0.3).then_some(80_000_000);
+        sound_bag(&dir, compression, split);
+        format!("{compression:?}{}: {}", if split.is_some() { " split" } else { "" }, mutate(&dir, &mut rng))
+    };
+    let case = format!("seed {seed} ({what})");
+    let refused = match catch_unwind(AssertUnwindSafe(|| read_all(&dir))) {
+        Err(_) => panic!("{case}: reading panicked"),
+        Ok(Err(e)) => {
+            check_error(&e, &dir, &case);
+            true
+        }
+        Ok(Ok(_)) => false,
+    };
+    match catch_unwind(AssertUnwindSafe(|| recover(&dir))) {
+        Err(_) => panic!("{case}: recover panicked"),
+        Ok(Err(e)) => check_error(&e, &dir, &case),
+        Ok(Ok(_)) => match catch_unwind(AssertUnwindSafe(|| read_all(&dir))) {
+            Err(_) => panic!("{case}: reading the recovered bag panicked"),
+            Ok(Err(e)) => check_error(&e, &dir, &format!("{case}, recovered")),
+            Ok(Ok(_)) => {}
+        },
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    refused
+}
+
+#[test]
+fn mutated_bags_never_panic_and_errors_name_the_file() {
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<u64>().ok());
+    let first = env("OILFILM_FUZZ_SEED").unwrap_or(SEED);
+    let cases = env("OILFILM_FUZZ_CASES").unwrap_or(CASES);
+    let root = tmp_root("loop");
+    // Quiet the default hook while panics are caught; the case is named in the failure.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let result = catch_unwind(AssertUnwindSafe(|| (first..first + cases).filter(|&seed| run_case(&root, seed)).count() as u64));
+    std::panic::set_hook(hook);
+    let _ = std::fs::remove_dir_all(&root);
+    match result {
+        Err(p) => {
+            let msg = p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default();
+            panic!("{msg}");
+        }
+        Ok(refused) => {
+            eprintln!("fuzz: {cases} cases from seed {first}: {refused} refused with a named error, {} read", cases - refused);
+            // Most mutations must bite (a flip in an index or padding may not).
+            assert!(cases < 20 || refused * 2 > cases, "only {refused} of {cases} mutated bags were refused");
+        }
+    }
+}
+
+#[test]
+fn the_fuzzer_reaches_every_kind_of_error() {
+    // Not a fuzz case: the named mutations each give the error they should, so the loop
+    // above is exercising the paths it claims to.
+    let root = tmp_root("kinds");
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+    let fresh = |name: &str| {
+        let d = root.join(name);
+        sound_bag(&d, Compression::Zstd, None);
+        let f = d.join(format!("{name}_0.mcap"));
+        (d, f)
+    };
+    let (d, f) = fresh("profile");
+    std::fs::write(&f, with_profile(&std::fs::read(&f).unwrap(), "ros1")).unwrap();
+    let e = read_all(&d).unwrap_err().to_string();
+    assert!(e.contains("profile_0.mcap") && e.contains("`ros1`, not `ros2`"), "{e}");
+
+    let (d, _) = fresh("nometa");
+    std::fs::remove_file(d.join("metadata.yaml")).unwrap();
+    let e = read_all(&d).unwrap_err().to_string();
+    assert!(e.contains("nometa/metadata.yaml") && e.contains("recover"), "{e}");
+
+    // Cut inside a chunk, and a byte flipped inside a chunk's compressed data.
+    let (d, f) = fresh("cut");
+    let bytes = std::fs::read(&f).unwrap();
+    let recs = records(&bytes);
+    let chunks: Vec<_> = recs.iter().filter(|(s, _)| bytes[*s] == 0x06).collect();
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    let (s, e) = *chunks[1];
+    std::fs::write(&f, &bytes[..(s + e) / 2]).unwrap();
+    let e1 = read_all(&d).unwrap_err().to_string();
+    assert!(e1.contains("cut_0.mcap") && e1.contains("ends early") && e1.contains("after 1 complete chunks"), "{e1}");
+    let (d, f) = fresh("flip");
+    let mut bad = bytes.clone();
+    bad[e - 20] ^= 0xff;
+    std::fs::write(&f, &bad).unwrap();
+    let e2 = read_all(&d).unwrap_err().to_string();
+    assert!(e2.contains("flip_0.mcap") && (e2.contains("CRC") || e2.contains("zstd")), "{e2}");
+    // Reordered: the second chunk before the first is read (MCAP allows any chunk order)
+    // and gives the same messages, sorted by log time.
+    let (d, f) = fresh("swap");
+    let (a, b) = (*chunks[0], *chunks[1]);
+    let mut out = bytes[..a.0].to_vec();
+    out.extend_from_slice(&bytes[b.0..b.1]);
+    out.extend_from_slice(&bytes[a.0..a.1]);
+    out.extend_from_slice(&bytes[b.1..]);
+    std::fs::write(&f, &out).unwrap();
+    let n = read_all(&d);
+    assert!(matches!(n, Ok(48)) || n.as_ref().is_err_and(|e| e.to_string().contains("swap_0.mcap")), "{n:?}");
+
+    let d = root.join("foreign");
+    while odd_bag(&d, &mut rng) != "a type that is not ours" {
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+    let e = read_all(&d).unwrap_err().to_string();
+    assert!(e.contains("foreign_0.mcap") && e.contains("geometry_msgs/msg/Point is not an oilfilm_msgs type"), "{e}");
+
+    let d = root.join("badcdr");
+    while odd_bag(&d, &mut rng) != "payloads that are not valid CDR" {
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+    match read_all(&d) {
+        Err(e) => {
+            let e = e.to_string();
+            assert!(e.contains("badcdr_0.mcap") && e.contains("/oilfilm/daq/frames"), "{e}");
+        }
+        // A few flipped bytes inside a float are still a valid frame.
+        Ok(n) => assert_eq!(n, 1),
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
