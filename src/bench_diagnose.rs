@@ -22,7 +22,7 @@ pub fn run(repeats: usize, seconds: f64) -> Result<()> {
         ("channel_delay f1 300 us", Effects { channel_delay: Some(ChannelDelay { channel: "f1".into(), delay_s: 300e-6 }), ..Effects::default() }),
     ];
     println!("oilfilm bench diagnose: {seconds} s records at {} Hz, 60 N rms multisine 5-80 Hz; median of {repeats} runs; one thread", base.daq.sample_rate_hz);
-    println!("{:<26} {:>12} {:>12} {:>12} {:>10}  {}", "record", "diagnose s", "show s", "simulate s", "target", "named");
+    println!("{:<26} {:>12} {:>12} {:>12} {:>10}  named", "record", "diagnose s", "show s", "simulate s", "target");
     for (label, effects) in cases {
         let mut rig = base.clone();
         rig.effects = effects;

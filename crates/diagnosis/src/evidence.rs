@@ -45,6 +45,9 @@ pub struct Series {
     pub vy_m_s: Vec<f64>,
     pub ax_m_s2: Vec<f64>,
     pub ay_m_s2: Vec<f64>,
+    /// Housing absolute displacement (frame probes).
+    pub housing_x_m: Vec<f64>,
+    pub housing_y_m: Vec<f64>,
     /// Housing absolute velocity (central difference of the frame-probe displacement).
     pub housing_vx_m_s: Vec<f64>,
     pub housing_vy_m_s: Vec<f64>,
@@ -80,6 +83,8 @@ impl Series {
             vy_m_s: take(&c.vy_m_s),
             ax_m_s2: take(&c.ax_m_s2),
             ay_m_s2: take(&c.ay_m_s2),
+            housing_x_m: take(&c.housing_x_m),
+            housing_y_m: take(&c.housing_y_m),
             housing_vx_m_s: diff(&c.housing_x_m),
             housing_vy_m_s: diff(&c.housing_y_m),
             housing_ax_m_s2: take(&c.housing_ax_m_s2),
@@ -102,7 +107,7 @@ impl Series {
 
     /// The fields that move with the record's channels, as mutable slices in a fixed order
     /// (time and temperature excluded).
-    fn fields_mut(&mut self) -> [&mut Vec<f64>; 14] {
+    fn fields_mut(&mut self) -> [&mut Vec<f64>; 16] {
         [
             &mut self.x_m,
             &mut self.y_m,
@@ -110,6 +115,8 @@ impl Series {
             &mut self.vy_m_s,
             &mut self.ax_m_s2,
             &mut self.ay_m_s2,
+            &mut self.housing_x_m,
+            &mut self.housing_y_m,
             &mut self.housing_vx_m_s,
             &mut self.housing_vy_m_s,
             &mut self.housing_ax_m_s2,
@@ -121,7 +128,7 @@ impl Series {
         ]
     }
 
-    fn fields(&self) -> [&Vec<f64>; 14] {
+    fn fields(&self) -> [&Vec<f64>; 16] {
         [
             &self.x_m,
             &self.y_m,
@@ -129,6 +136,8 @@ impl Series {
             &self.vy_m_s,
             &self.ax_m_s2,
             &self.ay_m_s2,
+            &self.housing_x_m,
+            &self.housing_y_m,
             &self.housing_vx_m_s,
             &self.housing_vy_m_s,
             &self.housing_ax_m_s2,

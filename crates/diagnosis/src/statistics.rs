@@ -145,6 +145,14 @@ fn phasor(v: &[f64], t: &[f64], f: f64) -> (f64, f64) {
     (re * k, im * k)
 }
 
+/// Summed power of `v` at the frequencies `lines_hz` (phasor magnitudes squared).
+pub fn line_power(v: &[f64], t: &[f64], lines_hz: &[f64]) -> f64 {
+    lines_hz.iter().map(|&f| {
+        let (re, im) = phasor(v, t, f);
+        re * re + im * im
+    }).sum()
+}
+
 /// The off-line probe frequencies: half a line spacing either side of every line (0.5 Hz
 /// for a single line), or `None` when the record is too short to resolve them.
 fn off_lines(lines: &[f64], duration_s: f64, nyquist_hz: f64) -> Option<Vec<f64>> {

@@ -446,18 +446,9 @@ pub fn diagnose(
     Ok(out)
 }
 
-/// Correlation of two stacked signals.
-fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-    }
-    sab / (saa * sbb).sqrt()
-}
+/// The journal counts as fixed when its motion at the excitation lines is below this fraction
+/// of the journal-bearing motion there.
+pub const JOURNAL_FIXED_RATIO: f64 = 0.05;
 
 /// The aliasing pairs relevant to the winner, with what this record says about each.
 fn aliases(
@@ -471,19 +462,35 @@ fn aliases(
     let mut out = Vec::new();
     let s = &p.series;
     if winner.name == Cause::FluidInertia {
-        let rel: Vec<f64> = s.ax_m_s2.iter().chain(&s.ay_m_s2).copied().collect();
-        let housing: Vec<f64> = s.housing_ax_m_s2.iter().chain(&s.housing_ay_m_s2).map(|v| -v).collect();
-        let rho = correlation(&rel, &housing);
+        // Does the journal move? Its position J = r + X (bearing probes plus frame probes),
+        // compared with the relative motion r at the excitation lines, where the probes' noise
+        // is one DFT bin against a whole line (accelerations would compare noise).
+        let journal = |r: &[f64], h: &[f64]| {
+            let mut v: Vec<f64> = r.iter().zip(h).map(|(a, b)| a + b).collect();
+            p.detrend(&mut v);
+            v
+        };
+        let detrended = |r: &[f64]| {
+            let mut v = r.to_vec();
+            p.detrend(&mut v);
+            v
+        };
+        let (jx, jy) = (journal(&s.x_m, &s.housing_x_m), journal(&s.y_m, &s.housing_y_m));
+        let (rx, ry) = (detrended(&s.x_m), detrended(&s.y_m));
+        let lp = |v: &[f64]| statistics::line_power(v, &s.t_s, &p.lines_hz);
+        let ratio = ((lp(&jx) + lp(&jy)) / (lp(&rx) + lp(&ry)).max(f64::MIN_POSITIVE)).sqrt();
+        let fixed = ratio < JOURNAL_FIXED_RATIO;
         out.push(Alias {
             pair: ["fluid_inertia".into(), "housing_mass_error".into()],
-            separable: rho.abs() < 0.99,
-            evidence: if rho.abs() < 0.99 {
-                format!("the journal moves: housing and journal-bearing accelerations differ (correlation {rho:.4}), so an added mass in the film and an error in the configured housing mass act on different signals")
-            } else {
+            separable: !fixed,
+            evidence: if fixed {
                 format!(
-                    "the journal is fixed: the housing's acceleration is minus the journal-bearing acceleration (correlation {rho:.5}), so an error of the configured housing mass in eq. 2 is indistinguishable from this added mass ({:.2} kg); weigh the housing or run with the film unloaded to separate them",
+                    "the journal is fixed (its motion at the excitation lines is {:.2} % of the journal-bearing motion): the housing's acceleration is minus the journal-bearing acceleration, so an error of the configured housing mass in eq. 2 is indistinguishable from this added mass ({:.2} kg); weigh the housing or run with the film unloaded to separate them",
+                    100.0 * ratio,
                     winner.parameters.get("added_mass_kg").and_then(Value::as_f64).unwrap_or(f64::NAN)
                 )
+            } else {
+                format!("the journal moves ({:.1} % of the journal-bearing motion at the lines): housing and journal-bearing accelerations differ, so an added mass in the film and an error in the configured housing mass act on different signals", 100.0 * ratio)
             },
         });
     }

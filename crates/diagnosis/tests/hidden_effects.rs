@@ -271,3 +271,26 @@ fn the_papers_finding_reproduced_as_a_diagnosis_the_same_point_is_linear_at_low_
     assert!(e < 0.95 * b, "the extended model must predict the held-out force clearly better: {e} vs {b}");
     assert!(high.parameters.get("cubic_stiffness_n_per_m3").and_then(|v| v.as_f64()).is_some_and(f64::is_finite));
 }
+
+#[test]
+fn aliases_are_reported_an_added_mass_and_a_wrong_housing_mass_cannot_be_told_apart_with_the_journal_fixed() {
+    // The journal is fixed in the Zhou rig: the housing's acceleration is minus the
+    // journal-bearing acceleration, so an error in the configured housing mass (eq. 2) acts
+    // exactly like an added mass. The diagnosis must say so rather than pretend.
+    let mut r = rng(404);
+    let (mut rig, speed_rpm, load_n) = base_case(&mut r, 404);
+    rig.effects.housing_mass_mismatch = Some(HousingMassMismatch { mass_error_kg: 90.0 });
+    let d = run(&Case { rig, truth: Truth { effect: "fluid_inertia", parameter: None, channel: None, speed_rpm, load_n }, seconds: SECONDS, plan: multisine(RMS_N) });
+    println!("housing 90 kg heavier than configured: {} | {}", d.cause, d.reason);
+    for a in &d.aliases {
+        println!("  alias {:?} separable {}: {}", a.pair, a.separable, a.evidence);
+    }
+    assert_eq!(d.cause, Cause::FluidInertia, "{}", d.reason);
+    let m = d.parameters["added_mass_kg"].as_f64().expect("added mass");
+    assert!((m / 90.0 - 1.0).abs() < 0.2, "the mass error shows as {m} kg of added mass");
+    let alias = d.aliases.iter().find(|a| a.pair.contains(&"housing_mass_error".to_string())).expect("the housing-mass alias is reported");
+    assert!(!alias.separable && alias.evidence.contains("journal is fixed"), "{alias:?}");
+    // Channel skew against added mass is decided on the record, block by block.
+    let skew = d.aliases.iter().find(|a| a.pair.contains(&"channel_delay".to_string())).expect("the skew alias is reported");
+    assert!(skew.separable, "{skew:?}");
+}
