@@ -140,6 +140,33 @@ fn about_block_mean(p: &Prepared, v: &[f64]) -> Vec<f64> {
     out
 }
 
+/// The K-C model plus one regressor shared by both force axes (`columns[0]` on the `f_x`
+/// rows, `columns[1]` on the `f_y` rows), whose coefficient is the parameter `key`; it must
+/// come out positive, else `negative(value)` says why it is unphysical.
+fn fit_shared_column(
+    p: &Prepared,
+    train: &[bool],
+    what: &str,
+    columns: [&[f64]; 2],
+    key: &str,
+    negative: impl Fn(f64) -> String,
+) -> Result<Fitted, DiagnosisError> {
+    let s = &p.series;
+    let mut design = p.kc_design(s, 1);
+    p.set_column(&mut design, 8, columns[0], columns[1]);
+    let target = p.target(s, 0.0);
+    let fit = least_squares::solve(&design, &target, train, what)?;
+    let value = fit.theta[8];
+    Ok(Fitted {
+        residual: residual_of(&design, &target, &fit.theta),
+        kc: kc_of(&fit.theta),
+        parameters: BTreeMap::from([(key.to_string(), json!(value))]),
+        standard_errors: BTreeMap::from([(key.to_string(), fit.standard_errors[8])]),
+        extra_parameters: 1,
+        physical: if value > 0.0 { Ok(()) } else { Err(negative(value)) },
+    })
+}
+
 /// The baseline: the linear K-C model of Zhou et al. (2004), eq. 3.
 pub struct Baseline;
 
@@ -175,20 +202,10 @@ impl Candidate for FluidInertia {
 
     fn fit(&self, p: &Prepared, train: &[bool]) -> Result<Fitted, DiagnosisError> {
         let s = &p.series;
-        let mut design = p.kc_design(s, 1);
         let nx: Vec<f64> = s.ax_m_s2.iter().map(|a| -a).collect();
         let ny: Vec<f64> = s.ay_m_s2.iter().map(|a| -a).collect();
-        p.set_column(&mut design, 8, &nx, &ny);
-        let target = p.target(s, 0.0);
-        let fit = least_squares::solve(&design, &target, train, "fluid_inertia (K-C + isotropic added mass)")?;
-        let m = fit.theta[8];
-        Ok(Fitted {
-            residual: residual_of(&design, &target, &fit.theta),
-            kc: kc_of(&fit.theta),
-            parameters: BTreeMap::from([("added_mass_kg".to_string(), json!(m))]),
-            standard_errors: BTreeMap::from([("added_mass_kg".to_string(), fit.standard_errors[8])]),
-            extra_parameters: 1,
-            physical: if m > 0.0 { Ok(()) } else { Err(format!("negative added mass ({m:.3} kg): fluid inertia only adds mass")) },
+        fit_shared_column(p, train, "fluid_inertia (K-C + isotropic added mass)", [&nx, &ny], "added_mass_kg", |m| {
+            format!("negative added mass ({m:.3} kg): fluid inertia only adds mass")
         })
     }
 }
@@ -235,18 +252,8 @@ impl Candidate for SupportFriction {
         }
         // Through the conditioning's low-pass, like the eq. 2 force the friction hides in.
         let (ux, uy) = (p.filtered_picks(&ux)?, p.filtered_picks(&uy)?);
-        let mut design = p.kc_design(s, 1);
-        p.set_column(&mut design, 8, &ux, &uy);
-        let target = p.target(s, 0.0);
-        let fit = least_squares::solve(&design, &target, train, "support_friction (K-C + Coulomb friction)")?;
-        let f = fit.theta[8];
-        Ok(Fitted {
-            residual: residual_of(&design, &target, &fit.theta),
-            kc: kc_of(&fit.theta),
-            parameters: BTreeMap::from([("friction_force_n".to_string(), json!(f))]),
-            standard_errors: BTreeMap::from([("friction_force_n".to_string(), fit.standard_errors[8])]),
-            extra_parameters: 1,
-            physical: if f > 0.0 { Ok(()) } else { Err(format!("negative friction force ({f:.3} N): friction opposes motion")) },
+        fit_shared_column(p, train, "support_friction (K-C + Coulomb friction)", [&ux, &uy], "friction_force_n", |f| {
+            format!("negative friction force ({f:.3} N): friction opposes motion")
         })
     }
 }
