@@ -242,8 +242,10 @@ fn trends(show: &Show, record: &str, var: TrendVariable, path: &Path) -> Result<
 fn residual_spectrum(show: &Show, record: &str, path: &Path) -> Result<()> {
     let root = SVGBackend::new(path, (1300, 800)).into_drawing_area();
     let r = &show.residual;
-    let what = if r.baseline.is_some() { "F - (K r + C r'), baseline K-C fit over the record" } else { "dynamic film force (no baseline fit)" };
-    let body = header(&root, &format!("Residual spectra: {what}; circles: named lines (black excitation, red harmonics and intermodulation, green shaft 1X)"), &subtitle(show, record))?;
+    let what = if r.baseline.is_some() { "F - (K r + C r'), K-C fit over the record" } else { "dynamic film force (no baseline fit)" };
+    // The legend of the circles goes in the subtitle: the title must fit the width.
+    let legend = format!("{}; circles: black excitation, red harmonics/intermodulation, green shaft 1X", subtitle(show, record));
+    let body = header(&root, &format!("Residual spectra: {what}"), &legend)?;
     let panels = body.split_evenly((2, 1));
     for (k, panel) in panels.iter().enumerate() {
         let amp = if k == 0 { &r.amplitude_x_n } else { &r.amplitude_y_n };
