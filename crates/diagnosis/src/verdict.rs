@@ -177,6 +177,18 @@ impl Diagnosis {
     }
 }
 
+/// A candidate ready to fit, or why it is not tried on this record.
+type Ready = Result<Box<dyn Candidate>, String>;
+
+/// A candidate's set-up: ready, not applicable to this record (why), or failed (why).
+fn set_up<C: Candidate + 'static>(r: Result<Result<C, String>, DiagnosisError>) -> Ready {
+    match r {
+        Ok(Ok(c)) => Ok(Box::new(c)),
+        Ok(Err(why)) => Err(why),
+        Err(e) => Err(format!("could not be set up: {e}")),
+    }
+}
+
 /// Held-out residual sums of squares per block and the whole-record fit of one model.
 struct Judged {
     block_sse: Vec<f64>,
@@ -259,18 +271,17 @@ pub fn diagnose(
     // The catalog, each entry tried if it applies to this record.
     let mut reports = Vec::new();
     let mut fitted: BTreeMap<Cause, Judged> = BTreeMap::new();
-    let channel_delay = catalog::ChannelDelay::new(&p)?;
-    let thermal = catalog::ThermalDrift::new(&p, rig)?;
-    let saturation = catalog::ProbeSaturation::new(&p)?;
-    let mut entries: Vec<(Cause, Result<&dyn Candidate, String>)> = vec![
-        (Cause::AmplitudeNonlinearity, Ok(&catalog::AmplitudeNonlinearity)),
-        (Cause::FluidInertia, Ok(&catalog::FluidInertia)),
-        (Cause::ChannelDelay, Ok(&channel_delay)),
-        (Cause::SynchronousRunout, Ok(&catalog::SynchronousRunout)),
-        (Cause::SupportFriction, Ok(&catalog::SupportFriction)),
+    // A candidate that cannot be set up on this record (a re-conditioning or a film solve that
+    // fails, nothing to look at) is listed with why, and the others are still judged.
+    let entries: Vec<(Cause, Ready)> = vec![
+        (Cause::AmplitudeNonlinearity, Ok(Box::new(catalog::AmplitudeNonlinearity))),
+        (Cause::FluidInertia, Ok(Box::new(catalog::FluidInertia))),
+        (Cause::ChannelDelay, set_up(catalog::ChannelDelay::new(&p).map(Ok))),
+        (Cause::SynchronousRunout, Ok(Box::new(catalog::SynchronousRunout))),
+        (Cause::SupportFriction, Ok(Box::new(catalog::SupportFriction))),
+        (Cause::ThermalDrift, set_up(catalog::ThermalDrift::new(&p, rig))),
+        (Cause::ProbeSaturation, set_up(catalog::ProbeSaturation::new(&p))),
     ];
-    entries.push((Cause::ThermalDrift, thermal.as_ref().map(|t| t as &dyn Candidate).map_err(Clone::clone)));
-    entries.push((Cause::ProbeSaturation, saturation.as_ref().map(|s| s as &dyn Candidate).map_err(Clone::clone)));
     for (cause, entry) in entries {
         let mut report = CandidateReport {
             name: cause,
@@ -287,8 +298,8 @@ pub fn diagnose(
             explained_fraction: None,
             note: None,
         };
-        let candidate = match entry {
-            Ok(c) => c,
+        let candidate = match &entry {
+            Ok(c) => c.as_ref(),
             Err(why) => {
                 report.note = Some(format!("not tried: {why}"));
                 reports.push(report);
