@@ -291,25 +291,34 @@ pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64]
         }
     }
 
-    // Residuals of every right-hand side (the RMS over every sample, the series decimated).
-    let mut resid: Vec<Vec<f64>> = Vec::with_capacity(m);
-    for k in 0..m {
-        let f = &cols[p + k][..n];
-        let fm = mean[p + k];
-        let mut sse = 0.0;
-        let mut e_kept = Vec::with_capacity(nd);
-        for t in 0..n {
-            let mut e = f[t] - fm;
+    // Residuals of every right-hand side (the RMS over every sample, the series decimated),
+    // all right-hand sides in one pass over the regressors (each sum still in sample order).
+    let mut resid: Vec<Vec<f64>> = (0..m).map(|_| Vec::with_capacity(nd)).collect();
+    let mut sse = vec![0.0; m];
+    let mut centred = vec![0.0; p];
+    // Samples until the next kept one (a countdown: no division per sample).
+    let mut skip = 0;
+    for t in 0..n {
+        for j in 0..p {
+            centred[j] = cols[j][t] - mean[j];
+        }
+        for k in 0..m {
+            let mut e = cols[p + k][t] - mean[p + k];
             for j in 0..p {
-                e -= (cols[j][t] - mean[j]) * coef[j * m + k];
+                e -= centred[j] * coef[j * m + k];
             }
-            sse += e * e;
-            if t % q == 0 {
-                e_kept.push(e);
+            sse[k] += e * e;
+            if skip == 0 {
+                resid[k].push(e);
             }
         }
-        out.residual_rms[k] = (sse / n as f64).sqrt();
-        resid.push(e_kept);
+        if skip == 0 {
+            skip = q;
+        }
+        skip -= 1;
+    }
+    for k in 0..m {
+        out.residual_rms[k] = (sse[k] / n as f64).sqrt();
     }
 
     // Residual spectral densities per right-hand side, bins 0..=N/2.
