@@ -148,8 +148,9 @@ pub struct Hac {
     pub se: Vec<f64>,
     /// Root-mean-square residual per right-hand side.
     pub residual_rms: Vec<f64>,
-    /// Truncation lag per right-hand side: of the Parzen lag window ([`spectral`]) or of the
-    /// Bartlett kernel on the prewhitened scores ([`newey_west`]).
+    /// Truncation lag per right-hand side, in samples of the full window: of the Parzen lag
+    /// window ([`spectral`], [`spectral_decimated`]) or of the Bartlett kernel on the
+    /// prewhitened scores ([`newey_west`]).
     pub lag: Vec<usize>,
     /// True if a lag was clipped to `n/4`.
     pub lag_capped: bool,
