@@ -40,6 +40,11 @@ pub struct EstimatorParams {
     pub max_relative_se: f64,
     /// Shaft speed, rpm; 0: from rig/status (else the rig file's).
     pub speed_rpm: f64,
+    /// Band of the conditioned signals, Hz: set it to the conditioner's `lowpass_cutoff_hz`
+    /// and the standard errors are computed from a decimated copy of each window (cheaper
+    /// at high rates; the coefficients are unchanged). 0: every sample (the default). A
+    /// conditioned frame declaring a higher cutoff (its `lowpass_hz=` flag) wins.
+    pub signal_band_hz: f64,
 }
 
 impl Default for EstimatorParams {
@@ -54,6 +59,7 @@ impl Default for EstimatorParams {
             max_condition: c.max_condition,
             max_relative_se: c.max_relative_se,
             speed_rpm: 0.0,
+            signal_band_hz: 0.0,
         }
     }
 }
@@ -81,6 +87,7 @@ impl EstimatorParams {
             max_condition: self.max_condition,
             sample_rate_hz,
             max_relative_se: self.max_relative_se,
+            signal_band_hz: if self.signal_band_hz == 0.0 { None } else { Some(self.signal_band_hz) },
         };
         c.validate().map_err(|e| match e {
             oilfilm_identification::IdentificationError::InvalidParameter { field, reason } => NodeError::parameter(field, reason),
@@ -140,6 +147,9 @@ pub struct EstimatorCore {
     /// The line search of the window at `next_start` (its first sample, and the search), fed
     /// as conditioned frames arrive so that little of it is left when the window completes.
     search: Option<(u64, LineSearch)>,
+    /// Highest low-pass cutoff the conditioned frames declared (`lowpass_hz=` flag) since the
+    /// windows last restarted.
+    frame_cutoff_hz: Option<f64>,
 }
 
 impl EstimatorCore {
@@ -156,6 +166,7 @@ impl EstimatorCore {
             sequence: 0,
             restart_note: None,
             search: None,
+            frame_cutoff_hz: None,
         })
     }
 
@@ -203,7 +214,7 @@ impl EstimatorCore {
         if !(has_acc || frame.x_ddot_m_s2.is_empty() && frame.y_ddot_m_s2.is_empty()) {
             return Err(bad(format!("x_ddot_m_s2 / y_ddot_m_s2 have {} / {} samples: either none or {n}", frame.x_ddot_m_s2.len(), frame.y_ddot_m_s2.len())));
         }
-        let config = self.params.config(frame.sample_rate_hz)?;
+        let mut config = self.params.config(frame.sample_rate_hz)?;
         if self.rate_hz != frame.sample_rate_hz || self.buffer.end() != frame.first_sample || self.origin.is_none() {
             if self.origin.is_some() {
                 self.restart_note = Some(format!(
@@ -214,6 +225,7 @@ impl EstimatorCore {
             }
             self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
             self.search = None;
+            self.frame_cutoff_hz = None;
             self.rate_hz = frame.sample_rate_hz;
             self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
             let hop = config.hop as u64;
@@ -236,6 +248,15 @@ impl EstimatorCore {
         b.temperature.extend(std::iter::repeat_n(frame.bearing_temperature_degc, n));
         b.valid.extend(&frame.valid);
 
+        // The standard errors may be decimated only to the band the conditioner really passed.
+        if let Some(c) = declared_cutoff_hz(&frame.flags) {
+            self.frame_cutoff_hz = Some(self.frame_cutoff_hz.map_or(c, |f| f.max(c)));
+        }
+        if let (Some(band), Some(declared)) = (config.signal_band_hz, self.frame_cutoff_hz) {
+            if declared > band {
+                config.signal_band_hz = Some(declared).filter(|&d| d < frame.sample_rate_hz / 2.0);
+            }
+        }
         let mut out = Vec::new();
         let (window, hop) = (config.window as u64, config.hop as u64);
         while self.buffer.end() >= self.next_start + window {
@@ -323,6 +344,11 @@ impl EstimatorCore {
     }
 }
 
+/// The low-pass cutoff a conditioned frame declares in its `lowpass_hz=` flag.
+fn declared_cutoff_hz(flags: &[String]) -> Option<f64> {
+    flags.iter().find_map(|f| f.strip_prefix("lowpass_hz=")?.trim().parse::<f64>().ok()).filter(|c| c.is_finite() && *c > 0.0)
+}
+
 /// An estimate with every number NaN and nothing solved.
 fn nan_estimate() -> CoefficientEstimate {
     let n4 = [f64::NAN; 4];
@@ -407,12 +433,35 @@ mod tests {
     /// Conditioned frames of `size` samples (the last may be shorter) of a two-tone record
     /// with a linear film and deterministic pseudo-noise.
     fn frames(total: usize, size: usize, fs: f64) -> Vec<ConditionedFrame> {
+        noisy_frames(total, size, fs, None)
+    }
+
+    /// [`frames`] with the noise white, or band-limited by four one-pole low-passes at
+    /// `band_hz` (each noise stream its own filter state; the white input scaled by
+    /// `2 / sqrt(alpha)` so the filtered noise stays of the order of the white).
+    fn noisy_frames(total: usize, size: usize, fs: f64, band_hz: Option<f64>) -> Vec<ConditionedFrame> {
         let mut state: u64 = 0x2545_F491_4F6C_DD1D;
-        let mut noise = move || {
+        let mut white = move || {
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let alpha = band_hz.map(|b| 1.0 - (-2.0 * std::f64::consts::PI * b / fs).exp());
+        // One filter state per call site, in call order within a sample (4 streams).
+        let mut stages = [[0.0f64; 4]; 4];
+        let mut call = 0usize;
+        let mut noise = move || {
+            let w = white();
+            let Some(a) = alpha else { return w };
+            let st = &mut stages[call % 4];
+            call += 1;
+            let mut v = w * (1.0 / a).sqrt() * 2.0;
+            for s in st.iter_mut() {
+                *s += a * (v - *s);
+                v = *s;
+            }
+            v
         };
         let (w1, w2) = (2.0 * std::f64::consts::PI * 23.0, 2.0 * std::f64::consts::PI * 37.0);
         let mut out = Vec::new();
@@ -441,6 +490,57 @@ mod tests {
     fn run(frames: &[ConditionedFrame], params: &EstimatorParams) -> Vec<String> {
         let mut core = EstimatorCore::new(RigConfig::zhou2004().expect("built-in rig"), params.clone()).expect("valid parameters");
         frames.iter().flat_map(|f| core.push(f).expect("good frame")).map(|e| format!("{e:?}")).collect()
+    }
+
+    fn estimates(frames: &[ConditionedFrame], params: &EstimatorParams) -> Vec<CoefficientEstimate> {
+        let mut core = EstimatorCore::new(RigConfig::zhou2004().expect("built-in rig"), params.clone()).expect("valid parameters");
+        frames.iter().flat_map(|f| core.push(f).expect("good frame")).collect()
+    }
+
+    /// With `signal_band_hz` the standard errors come from a decimated window (here 5-fold:
+    /// 100 000 samples at 50 kHz) and agree with the full ones; the coefficients do not move.
+    /// Frames declaring a wider low-pass than the parameter say the band is theirs.
+    #[test]
+    fn signal_band_decimates_only_the_standard_errors_and_frames_can_widen_it() {
+        let fs = 50_000.0;
+        let window = 100_000;
+        let mut fr = noisy_frames(2 * window as usize, 10_000, fs, Some(40.0));
+        for f in &mut fr {
+            f.flags.push("lowpass_hz=55.5".into());
+        }
+        let full = EstimatorParams { window, hop: window, speed_rpm: 1500.0, ..EstimatorParams::default() };
+        let banded = EstimatorParams { signal_band_hz: 55.5, ..full.clone() };
+        let (a, b) = (estimates(&fr, &full), estimates(&fr, &banded));
+        assert_eq!(a.len(), 2);
+        assert_eq!(a.len(), b.len());
+        for (a, b) in a.iter().zip(&b) {
+            assert!(a.solved && b.solved);
+            assert_eq!((a.stiffness_n_m, a.damping_n_s_m), (b.stiffness_n_m, b.damping_n_s_m));
+            assert_ne!(a.stiffness_se_n_m, b.stiffness_se_n_m, "the standard errors were not decimated");
+            for (x, y) in a.stiffness_se_n_m.iter().chain(&a.damping_se_n_s_m).zip(b.stiffness_se_n_m.iter().chain(&b.damping_se_n_s_m)) {
+                assert!((y / x - 1.0).abs() < 0.02, "decimated SE {y} against {x}");
+            }
+        }
+        // White noise breaks the band assumption: decimation folds it onto the lines, so the
+        // decimated errors come out larger (about sqrt(5) here), never smaller.
+        let mut white = frames(2 * window as usize, 10_000, fs);
+        for f in &mut white {
+            f.flags.push("lowpass_hz=55.5".into());
+        }
+        for (a, b) in estimates(&white, &full).iter().zip(&estimates(&white, &banded)) {
+            for (x, y) in a.stiffness_se_n_m.iter().chain(&a.damping_se_n_s_m).zip(b.stiffness_se_n_m.iter().chain(&b.damping_se_n_s_m)) {
+                assert!(y / x > 1.5, "white noise: decimated SE {y} against {x}");
+            }
+        }
+        // A conditioner at 8 kHz leaves nothing to decimate at 50 kHz: the full errors.
+        for f in &mut fr {
+            f.flags = vec!["lowpass_hz=8000".into()];
+        }
+        let wide = estimates(&fr, &banded);
+        assert_eq!(format!("{wide:?}"), format!("{:?}", estimates(&fr, &full)));
+        // A band the record cannot have is refused by name.
+        let bad = EstimatorParams { signal_band_hz: -3.0, ..full };
+        assert!(EstimatorCore::new(RigConfig::zhou2004().expect("built-in rig"), bad).err().is_some_and(|e| e.to_string().contains("signal_band_hz")));
     }
 
     /// Windows completed by many small frames (line search fed while they arrive) and by one

@@ -50,6 +50,7 @@ impl GraphParams {
         p.conditioner.block_scans = 1000;
         p.estimator.window = window;
         p.estimator.hop = hop;
+        p.estimator.signal_band_hz = p.conditioner.lowpass_cutoff_hz;
         p
     }
 }

@@ -168,7 +168,7 @@ fn main() {
         fx_n: &d.cols[4],
         fy_n: &d.cols[5],
     };
-    let cfg = EstimatorConfig { window: WINDOW, hop: HOP, model: ModelOrder::Kc, solver: Solver::Qr, max_relative_se: 0.25, max_condition: 1e6, sample_rate_hz: FS };
+    let cfg = EstimatorConfig { window: WINDOW, hop: HOP, model: ModelOrder::Kc, solver: Solver::Qr, max_relative_se: 0.25, max_condition: 1e6, sample_rate_hz: FS, signal_band_hz: None };
     let t_full = median_time(7, || {
         black_box(estimate_window(&s, 0..WINDOW, &cfg).ok());
     });

@@ -313,6 +313,11 @@ pub fn identify_conditioned(
     }
     let mut est = config.estimator.clone();
     est.sample_rate_hz = 1.0 / median_step(&conditioned.t_s).unwrap_or(1.0 / est.sample_rate_hz);
+    // Decimated standard errors (asked for by giving a band): the signals carry power up to
+    // the low-pass cutoff used here, so the band is never taken below it.
+    if let Some(band) = est.signal_band_hz {
+        est.signal_band_hz = Some(band.max(config.conditioning.lowpass_cutoff_hz)).filter(|&b| b < est.sample_rate_hz / 2.0);
+    }
     let n_valid = valid.len();
     if n_valid < est.model.min_samples() {
         out.refusal = Some(format!(

@@ -156,7 +156,7 @@ fn rel_err(est: &Matrix2<f64>, truth: &Matrix2<f64>) -> f64 {
 }
 
 fn config(window: usize, hop: usize, model: ModelOrder, solver: Solver) -> EstimatorConfig {
-    EstimatorConfig { window, hop, model, solver, max_condition: 1.0e6, sample_rate_hz: FS, max_relative_se: 0.25 }
+    EstimatorConfig { window, hop, model, solver, max_condition: 1.0e6, sample_rate_hz: FS, max_relative_se: 0.25, signal_band_hz: None }
 }
 
 fn solved(w: &WindowEstimate) -> &Coefficients {
