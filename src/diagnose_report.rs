@@ -13,6 +13,8 @@ use oilfilm_diagnosis::show::{ComponentKind, Show, Trend, TrendVariable, COEFFIC
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::figures::padded;
+
 const FONT: &str = "sans-serif";
 const MEASURED: RGBColor = RGBColor(31, 119, 180);
 const PREDICTED: RGBColor = RGBColor(214, 39, 40);
@@ -59,19 +61,6 @@ fn variable_slug(v: TrendVariable) -> &'static str {
     }
 }
 
-/// `[lo, hi]` of the finite values with 8 % padding and a minimum span.
-fn padded(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in values.into_iter().filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    if !(lo.is_finite() && hi.is_finite()) {
-        return (0.0, 1.0);
-    }
-    let span = (hi - lo).max(1e-3 * hi.abs().max(lo.abs()).max(1e-12));
-    (lo - 0.08 * span, hi + 0.08 * span)
-}
 
 fn header<'a>(root: &Area<'a>, title: &str, sub: &str) -> Result<Area<'a>> {
     root.fill(&WHITE)?;

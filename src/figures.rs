@@ -53,8 +53,10 @@ pub fn write_all(c: &Campaign, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// `[lo, hi]` of the values with 8 % padding (and a minimum span).
-fn padded(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
+/// `[lo, hi]` of the finite values with 8 % padding and a minimum span (a thousandth of the
+/// largest magnitude, so a flat series of micrometres still gets an axis). Shared by every
+/// figure of the CLI.
+pub(crate) fn padded(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.into_iter().filter(|v| v.is_finite()) {
         lo = lo.min(v);
@@ -63,7 +65,7 @@ fn padded(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
     if !(lo.is_finite() && hi.is_finite()) {
         return (0.0, 1.0);
     }
-    let span = (hi - lo).max(1e-3 * hi.abs().max(lo.abs()).max(1e-3));
+    let span = (hi - lo).max(1e-3 * hi.abs().max(lo.abs()).max(1e-12));
     (lo - 0.08 * span, hi + 0.08 * span)
 }
 

@@ -10,16 +10,16 @@ mcap-ros2-support and our reader must all return exactly those messages, with eq
 values.
 """
 
-import math
 import os
 import signal
 import subprocess
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 from ruamel.yaml import YAML
+
+from bag_values import assert_same, plain
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(os.environ["OILFILM_BIN"])
@@ -106,39 +106,6 @@ def killed_bag():
     return bag, before
 
 
-def plain(v):
-    if isinstance(v, np.ndarray):
-        return [plain(x) for x in v.tolist()]
-    if isinstance(v, (bytes, bytearray)):
-        return list(v)
-    if isinstance(v, (list, tuple)):
-        return [plain(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, (bool, int, float, str)) or v is None:
-        return v
-    if isinstance(v, dict):
-        return {k: plain(x) for k, x in v.items()}
-    slots = getattr(v, "__slots__", None) or list(getattr(v, "__dataclass_fields__", {}))
-    return {k: plain(getattr(v, k)) for k in slots if not k.startswith("_") and k != "__msgtype__"}
-
-
-def same(got, want, path):
-    if isinstance(want, dict):
-        for k, w in want.items():
-            same(got[k], w, f"{path}.{k}")
-    elif isinstance(want, list):
-        assert len(got) == len(want), f"{path}: length {len(got)} != {len(want)}"
-        for i, (g, w) in enumerate(zip(got, want)):
-            same(g, w, f"{path}[{i}]")
-    elif isinstance(want, float):
-        assert got == want or (math.isnan(got) and math.isnan(want)), f"{path}: {got!r} != {want!r}"
-    elif isinstance(want, bool):
-        assert got == want, f"{path}: {got!r} != {want!r}"
-    else:
-        assert got == want, f"{path}: {got!r} != {want!r}"
-
-
 @pytest.fixture(scope="module")
 def ours(killed_bag):
     bag, _ = killed_bag
@@ -173,7 +140,7 @@ def test_rosbags_anyreader_reads_the_recovered_bag(killed_bag, ours):
     want = sorted_key([(m["topic"], m["log_time"], m["value"]) for m in ours])
     for (gt, glt, gv, _), (wt, wlt, wv) in zip(sorted_key(got), want):
         assert (gt, glt) == (wt, wlt)
-        same(plain(gv), wv, f"{gt}@{glt}")
+        assert_same(plain(gv), wv, f"{gt}@{glt}")
 
 
 def test_mcap_ros2_reads_the_recovered_bag(killed_bag, ours):
@@ -192,4 +159,4 @@ def test_mcap_ros2_reads_the_recovered_bag(killed_bag, ours):
     assert len(got) == len(want)
     for (gt, glt, gv), (wt, wlt, wv) in zip(sorted_key(got), want):
         assert (gt, glt) == (wt, wlt)
-        same(plain(gv), wv, f"{gt}@{glt}")
+        assert_same(plain(gv), wv, f"{gt}@{glt}")
