@@ -45,7 +45,7 @@ mod stats;
 
 use nalgebra::{Matrix2, Vector2};
 use oilfilm_identification::conditioning::{self, Conditioned, RawRecord};
-use oilfilm_identification::estimator::{self, spectrum, Coefficients, Signals};
+use oilfilm_identification::estimator::{self, Coefficients, Signals};
 use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::Calibration;
@@ -501,7 +501,7 @@ pub fn show(
         wide.fx_n.iter().zip(&wide.housing_ax_m_s2).map(|(f, a)| f + m * a).collect(),
         wide.fy_n.iter().zip(&wide.housing_ay_m_s2).map(|(f, a)| f + m * a).collect(),
     ];
-    let lines = excitation_lines(&applied[0][valid.clone()], &applied[1][valid.clone()], fs, config.max_lines);
+    let lines = strongest_lines(&pipeline::excitation_lines(raw)?, &applied[0][valid.clone()], &applied[1][valid.clone()], fs, config.max_lines);
     if lines.is_empty() {
         notes.push("no excitation line found in the applied forces: no line-by-line comparison".into());
     }
@@ -530,16 +530,15 @@ pub fn show(
     })
 }
 
-/// Lines of the applied forces (both directions), strongest first, at most `max`.
-fn excitation_lines(fx: &[f64], fy: &[f64], fs: f64, max: usize) -> Vec<f64> {
-    let analysis = spectrum::analyse(fx, fy, fx, fy, fs);
-    if analysis.merged.is_empty() {
+/// The excitation lines (the pipeline's one line search, on the measured exciter forces)
+/// ranked by the applied forces' power there (both directions), strongest first, at most `max`.
+fn strongest_lines(lines: &[f64], fx: &[f64], fy: &[f64], fs: f64, max: usize) -> Vec<f64> {
+    if lines.is_empty() {
         return Vec::new();
     }
     let seg = segment_len(fx.len(), 1 << 16);
     let w = welch(&[fx, fy], seg, fs);
-    let mut scored: Vec<(f64, f64)> = analysis
-        .merged
+    let mut scored: Vec<(f64, f64)> = lines
         .iter()
         .map(|&f| (f, w[0].line_power(f).unwrap_or(0.0) + w[1].line_power(f).unwrap_or(0.0)))
         .collect();
