@@ -492,8 +492,9 @@ impl ReportFeed {
             *s = c[..n].iter().fold(*s, |a, v| a + v);
         }
         self.n += n;
-        let mut pts: Vec<[f64; 2]> = std::mem::take(&mut self.hull);
-        pts.extend(x[..n].iter().zip(&y[..n]).map(|(a, b)| [*a, *b]));
+        // The new samples' own hull first (most of them go), then the union with the old one.
+        let mut pts = convex_hull(x[..n].iter().zip(&y[..n]).map(|(a, b)| [*a, *b]).collect());
+        pts.append(&mut self.hull);
         self.hull = convex_hull(pts);
     }
 }
@@ -503,7 +504,7 @@ impl ReportFeed {
 /// points go, as the amplitude's `f64::max` ignores them; infinite ones stay).
 fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     pts.retain(|p| !(p[0].is_nan() || p[1].is_nan()));
-    pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    pts.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     pts.dedup();
     if pts.len() < 3 {
         return pts;
@@ -512,7 +513,7 @@ fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     let inside = |o: &[f64; 2], a: &[f64; 2], b: &[f64; 2]| {
         let (ux, uy, vx, vy) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
         let cross = ux * vy - uy * vx;
-        cross < -1e-12 * ux.hypot(uy) * vx.hypot(vy)
+        cross < 0.0 && cross * cross > 1e-24 * (ux * ux + uy * uy) * (vx * vx + vy * vy)
     };
     let chain = |iter: &mut dyn Iterator<Item = [f64; 2]>| {
         let mut h: Vec<[f64; 2]> = Vec::new();
@@ -528,7 +529,7 @@ fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     let upper = chain(&mut pts.iter().rev().copied());
     let mut out = lower;
     out.extend(upper);
-    out.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    out.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     out.dedup();
     out
 }
