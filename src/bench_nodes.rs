@@ -7,7 +7,11 @@
 //! completes the data an output needs (the conditioned block plus the filters' edge
 //! samples; for an estimate, the last block of its window) to its reception here: it
 //! includes transport, conditioning and estimation, not the waiting for data that the
-//! block and window lengths impose by definition.
+//! block and window lengths impose by definition. Beside it, each row states that wait: the
+//! conditioner's zero-phase edge (`edge scans / rate`: a block is filtered only once the
+//! samples that far past its end are in) and acquisition-to-estimate, from the acquisition of
+//! a window's last sample to the estimate's reception (the edge, the rest of the last
+//! conditioner block, and frame-to-estimate).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -85,8 +89,8 @@ pub fn run(seconds: f64) -> Result<()> {
     println!("oilfilm bench nodes: conditioner and estimator binaries on loopback DDS (ros2-client), frames published at real-time pace, {seconds} s per row");
     println!("machine: {} cores; the publisher, the two nodes and this receiver share them", std::thread::available_parallelism().map_or(1, |n| n.get()));
     println!();
-    println!("| configuration | frames/s | frame->conditioned median / p99 / max (ms) | frame->estimate median / p99 / max (ms) | estimates | drops | CPU conditioner / estimator (% of a core) |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| configuration | frames/s | frame->conditioned median / p99 / max (ms) | frame->estimate median / p99 / max (ms) | zero-phase edge wait (ms) | acquisition->estimate median / p99 (ms) | estimates | drops | CPU conditioner / estimator (% of a core) |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for case in &CASES {
         let row = run_case(case, seconds, &bin_dir).with_context(|| case.label)?;
         println!("{row}");
@@ -233,11 +237,16 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     }
     let bc = case.conditioner_block as u64;
     let mut est_lat = Vec::new();
+    let mut acq_lat = Vec::new();
     for (e, t) in &estimates {
         let last = e.window_end_sample - 1;
         let block_end = s0 + ((last - s0) / bc + 1) * bc;
-        if let Some(p) = frame_of(block_end + edge as u64 - 1) {
-            est_lat.push(t.duration_since(p).as_secs_f64() * 1e3);
+        let trigger = block_end + edge as u64 - 1;
+        if let Some(p) = frame_of(trigger) {
+            let lat = t.duration_since(p).as_secs_f64() * 1e3;
+            est_lat.push(lat);
+            // The trigger scan is acquired (trigger - last) scans after the window's last.
+            acq_lat.push(lat + (trigger - last) as f64 / case.rate_hz * 1e3);
         }
     }
     // Drops: every conditioned block must follow the previous one, none restarted.
@@ -257,11 +266,13 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     };
     let (m1, p1, x1) = (percentile(&mut cond_lat.clone(), 0.5), percentile(&mut cond_lat.clone(), 0.99), percentile(&mut cond_lat, 1.0));
     let (m2, p2, x2) = (percentile(&mut est_lat.clone(), 0.5), percentile(&mut est_lat.clone(), 0.99), percentile(&mut est_lat, 1.0));
+    let (m3, p3) = (percentile(&mut acq_lat.clone(), 0.5), percentile(&mut acq_lat, 0.99));
     Ok(format!(
-        "| {} | {:.0} ({:.1} M samples/s) | {m1:.2} / {p1:.2} / {x1:.2} | {m2:.2} / {p2:.2} / {x2:.2} | {} ({} solved) | {drops} of {expected_blocks} blocks | {} / {} |",
+        "| {} | {:.0} ({:.1} M samples/s) | {m1:.2} / {p1:.2} / {x1:.2} | {m2:.2} / {p2:.2} / {x2:.2} | {:.1} ({edge} scans) | {m3:.1} / {p3:.1} | {} ({} solved) | {drops} of {expected_blocks} blocks | {} / {} |",
         case.label,
         frames.len() as f64 / wall,
         (frames.len() * case.daq_block * case.channels) as f64 / wall / 1e6,
+        edge as f64 / case.rate_hz * 1e3,
         estimates.len(),
         solved,
         cpu(cpu0.0, cpu1.0),

@@ -10,9 +10,8 @@
 //! file's, and the estimate's flags say which.
 
 use nalgebra::Matrix2;
-use oilfilm_identification::estimator::spectrum::LineSearch;
-use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver};
-use oilfilm_identification::pipeline::{window_report, WindowReport};
+use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver, WindowFeed};
+use oilfilm_identification::pipeline::{window_report_fed, ReportFeed, WindowReport};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, Header, RigStatus, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
 use serde::{Deserialize, Serialize};
@@ -144,9 +143,10 @@ pub struct EstimatorCore {
     status_speed_rpm: Option<f64>,
     sequence: u64,
     restart_note: Option<String>,
-    /// The line search of the window at `next_start` (its first sample, and the search), fed
-    /// as conditioned frames arrive so that little of it is left when the window completes.
-    search: Option<(u64, LineSearch)>,
+    /// The analysis of the window at `next_start` (its first sample, the estimator's feed and
+    /// the report's), fed as conditioned frames arrive so that little of it is left when the
+    /// window completes.
+    feed: Option<(u64, WindowFeed, ReportFeed)>,
     /// Highest low-pass cutoff the conditioned frames declared (`lowpass_hz=` flag) since the
     /// windows last restarted.
     frame_cutoff_hz: Option<f64>,
@@ -165,7 +165,7 @@ impl EstimatorCore {
             status_speed_rpm: None,
             sequence: 0,
             restart_note: None,
-            search: None,
+            feed: None,
             frame_cutoff_hz: None,
         })
     }
@@ -180,7 +180,7 @@ impl EstimatorCore {
         let hop = params.hop as u64;
         self.params = params;
         self.next_start = self.buffer.end().div_ceil(hop) * hop;
-        self.search = None;
+        self.feed = None;
         Ok(())
     }
 
@@ -224,7 +224,7 @@ impl EstimatorCore {
                 ));
             }
             self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
-            self.search = None;
+            self.feed = None;
             self.frame_cutoff_hz = None;
             self.rate_hz = frame.sample_rate_hz;
             self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
@@ -265,37 +265,40 @@ impl EstimatorCore {
             self.next_start += hop;
         }
         self.buffer.drop_before(self.next_start);
-        self.feed_search(&config);
+        self.feed_window(&config);
         Ok(out)
     }
 
-    /// Feeds the samples buffered for the window at `next_start` to its line search (started
-    /// here if there is none for that window yet). Only when the estimate runs the Kc or Kcm
-    /// model on x, y, x', y': the search depends on nothing else.
-    fn feed_search(&mut self, config: &EstimatorConfig) {
+    /// Feeds the samples buffered for the window at `next_start` to its analysis (started
+    /// here if there is none for that window and configuration yet): the line search, QR
+    /// chunks, decimated samples and report sums sit at fixed offsets in the window, so the
+    /// estimate is the same bits however the frames cut it.
+    fn feed_window(&mut self, config: &EstimatorConfig) {
         let start = self.next_start;
         if self.buffer.end() <= start || self.buffer.first > start {
             return;
         }
-        let fresh = !matches!(&self.search, Some((s, ls)) if *s == start && ls.window() == (config.window, config.sample_rate_hz));
+        let fresh = !matches!(&self.feed, Some((s, f, _)) if *s == start && f.fits(config));
         if fresh {
-            self.search = Some((start, LineSearch::new(config.window, config.sample_rate_hz)));
+            self.feed = Some((start, WindowFeed::new(config), ReportFeed::default()));
         }
         let b = &self.buffer;
         let from = (start - b.first) as usize;
         let to = b.x.len().min(from + config.window);
-        if let Some((_, ls)) = self.search.as_mut() {
-            ls.advance(&b.x[from..to], &b.y[from..to], &b.vx[from..to], &b.vy[from..to]);
+        if let Some((_, wf, rf)) = self.feed.as_mut() {
+            feed(wf, rf, &window_signals(b, from..to, config.model));
         }
     }
 
     /// The window at `next_start` (at the front of the buffer).
     fn estimate(&mut self, config: &EstimatorConfig) -> Result<CoefficientEstimate, NodeError> {
         let w = config.window;
-        // The window's search, if it was fed for this window (else the estimate searches).
-        let search = self.search.take().filter(|(s, _)| *s == self.next_start).map(|(_, ls)| ls);
+        // The window's analysis as fed so far (a new one if none was fed for this window).
+        let (mut wf, mut rf) = match self.feed.take() {
+            Some((s, wf, rf)) if s == self.next_start && wf.fits(config) => (wf, rf),
+            _ => (WindowFeed::new(config), ReportFeed::default()),
+        };
         let b = &self.buffer;
-        let (x, y, vx, vy, ax, ay, fx, fy) = (&b.x[..w], &b.y[..w], &b.vx[..w], &b.vy[..w], &b.ax[..w], &b.ay[..w], &b.fx[..w], &b.fy[..w]);
         let temperature = b.temperature.iter().take(w).sum::<f64>() / w as f64;
         let invalid: Vec<usize> = b.valid.iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
         let start = self.next_start;
@@ -331,17 +334,39 @@ impl EstimatorCore {
             msg.speed_rad_s = speed_rpm * std::f64::consts::PI / 30.0;
             return Ok(msg);
         }
-        let acc = config.model == ModelOrder::Kcm;
-        let signals = Signals { x_m: x, y_m: y, vx_m_s: vx, vy_m_s: vy, ax_m_s2: acc.then_some(ax), ay_m_s2: acc.then_some(ay), fx_n: fx, fy_n: fy };
-        // Same bits with or without the fed search (it only moves work before the window's end).
-        let estimate = match search {
-            Some(ls) => estimator::estimate_window_with_search(&signals, 0..w, config, ls)?,
-            None => estimator::estimate_window(&signals, 0..w, config)?,
-        };
-        let report = window_report(&signals, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
+        // The rest of the window (its last samples) into the feeds; the same bits as analysing
+        // the window in one piece (the feeds only move work before the window's end).
+        let signals = window_signals(b, 0..w, config.model);
+        feed(&mut wf, &mut rf, &signals);
+        let estimate = estimator::estimate_window_fed(&signals, 0..w, config, wf)?;
+        let report = window_report_fed(rf, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
         fill(&mut msg, &report);
         Ok(msg)
     }
+}
+
+/// The buffered samples `range` as the estimator's columns (accelerations only for Kcm).
+fn window_signals(b: &Buffer, range: std::ops::Range<usize>, model: ModelOrder) -> Signals<'_> {
+    let r = range;
+    let acc = model == ModelOrder::Kcm;
+    Signals {
+        x_m: &b.x[r.clone()],
+        y_m: &b.y[r.clone()],
+        vx_m_s: &b.vx[r.clone()],
+        vy_m_s: &b.vy[r.clone()],
+        ax_m_s2: acc.then(|| &b.ax[r.clone()]),
+        ay_m_s2: acc.then(|| &b.ay[r.clone()]),
+        fx_n: &b.fx[r.clone()],
+        fy_n: &b.fy[r],
+    }
+}
+
+/// Feeds `signals` (from the window's first sample) to the window's feeds: what they have not
+/// taken yet.
+fn feed(wf: &mut WindowFeed, rf: &mut ReportFeed, signals: &Signals) {
+    wf.advance(signals);
+    let done = rf.samples().min(signals.len());
+    rf.advance(&signals.x_m[done..], &signals.y_m[done..], &signals.fx_n[done..], &signals.fy_n[done..]);
 }
 
 /// The low-pass cutoff a conditioned frame declares in its `lowpass_hz=` flag.
@@ -511,6 +536,13 @@ mod tests {
         let full = EstimatorParams { window, hop: window, speed_rpm: 1500.0, ..EstimatorParams::default() };
         let banded = EstimatorParams { signal_band_hz: 55.5, ..full.clone() };
         let (a, b) = (estimates(&fr, &full), estimates(&fr, &banded));
+        // The decimated samples and the factor are fed at fixed offsets: frames cut otherwise
+        // give the same bits.
+        let mut cut = noisy_frames(2 * window as usize, 7_777, fs, Some(40.0));
+        for f in &mut cut {
+            f.flags.push("lowpass_hz=55.5".into());
+        }
+        assert_eq!(format!("{:?}", estimates(&cut, &banded)), format!("{b:?}"));
         assert_eq!(a.len(), 2);
         assert_eq!(a.len(), b.len());
         for (a, b) in a.iter().zip(&b) {

@@ -385,15 +385,57 @@ pub fn window_report(
             format!("window {}..{} is empty or outside the record of {} samples", range.start, range.end, signals.len()),
         ));
     }
+    let cut = |c: &[f64]| -> f64 { c[range.clone()].iter().fold(0.0, |a, v| a + v) };
+    let sums = [cut(signals.x_m), cut(signals.y_m), cut(signals.fx_n), cut(signals.fy_n)];
+    let [mx, my] = [sums[0], sums[1]].map(|s| s / range.len() as f64);
+    let (x, y) = (&signals.x_m[range.clone()], &signals.y_m[range.clone()]);
+    let amplitude = x.iter().zip(y).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+    report_from(sums, amplitude, range.len(), estimate, temperature_c, rig, speed_rpm, times_s)
+}
+
+/// [`window_report`] from a [`ReportFeed`] given every sample of the estimate's window: the
+/// same bits as [`window_report`] on those samples (the amplitude is the largest distance
+/// from the mean position over the hull's vertices instead of every sample: the same sample
+/// wins, unless one inside the hull by a relative 1e-12 came within an ulp of it).
+pub fn window_report_fed(
+    feed: ReportFeed,
+    estimate: WindowEstimate,
+    temperature_c: f64,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    times_s: [f64; 2],
+) -> Result<WindowReport, IdentificationError> {
+    let len = estimate.end.saturating_sub(estimate.start);
+    if len == 0 || feed.n != len {
+        return Err(IdentificationError::invalid(
+            "estimate",
+            format!("window {}..{} is empty or not the {} samples the report was fed", estimate.start, estimate.end, feed.n),
+        ));
+    }
+    let [mx, my] = [feed.sums[0], feed.sums[1]].map(|s| s / len as f64);
+    // The farthest sample from the mean position is a vertex of the orbit's convex hull.
+    let amplitude = feed.hull.iter().map(|[a, b]| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+    report_from(feed.sums, amplitude, len, estimate, temperature_c, rig, speed_rpm, times_s)
+}
+
+/// The report from the window's sums of x, y, fx, fy (in sample order) and its amplitude.
+#[allow(clippy::too_many_arguments)] // the window's parts
+fn report_from(
+    sums: [f64; 4],
+    amplitude: f64,
+    len: usize,
+    estimate: WindowEstimate,
+    temperature_c: f64,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    times_s: [f64; 2],
+) -> Result<WindowReport, IdentificationError> {
     let geometry = rig.bearing;
-    let mean = |v: &[f64]| v[range.clone()].iter().sum::<f64>() / range.len() as f64;
-    let (x, y) = (signals.x_m, signals.y_m);
-    let (mx, my) = (mean(x), mean(y));
-    let static_force_n = [mean(signals.fx_n), mean(signals.fy_n)];
+    let [mx, my, mfx, mfy] = sums.map(|s| s / len as f64);
+    let static_force_n = [mfx, mfy];
     let load_n = static_force_n[0].hypot(static_force_n[1]);
     let viscosity_pa_s = rig.oil.viscosity_pa_s(temperature_c)?;
     let running = Running::from_rpm(speed_rpm, viscosity_pa_s);
-    let amplitude = x[range.clone()].iter().zip(&y[range.clone()]).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
     let (lund, zhou) = match &estimate.result {
         Ok(c) if load_n > 0.0 => (
             Some(dimensionless::lund(&c.stiffness_n_m, &c.damping_n_s_m, &geometry, &running, load_n)),
@@ -421,6 +463,77 @@ pub fn window_report(
     })
 }
 
+/// What the window report needs from every sample of a window, gathered as the samples
+/// arrive: the sums of x, y, fx and fy (in sample order, so the means are the same bits
+/// however the samples were cut) and the convex hull of the (x, y) orbit, which holds the
+/// sample farthest from any centre (the mean position is known only at the end). A sample is
+/// dropped from the hull only when it lies inside it by more than a relative 1e-12, so
+/// round-off in the orientation test never drops a vertex.
+#[derive(Debug, Clone, Default)]
+pub struct ReportFeed {
+    n: usize,
+    sums: [f64; 4],
+    hull: Vec<[f64; 2]>,
+}
+
+impl ReportFeed {
+    /// Samples taken so far.
+    pub fn samples(&self) -> usize {
+        self.n
+    }
+
+    /// Take the next samples of the window (the shortest column counts).
+    pub fn advance(&mut self, x: &[f64], y: &[f64], fx: &[f64], fy: &[f64]) {
+        let n = x.len().min(y.len()).min(fx.len()).min(fy.len());
+        if n == 0 {
+            return;
+        }
+        for (s, c) in self.sums.iter_mut().zip([x, y, fx, fy]) {
+            *s = c[..n].iter().fold(*s, |a, v| a + v);
+        }
+        self.n += n;
+        // The new samples' own hull first (most of them go), then the union with the old one.
+        let mut pts = convex_hull(x[..n].iter().zip(&y[..n]).map(|(a, b)| [*a, *b]).collect());
+        pts.append(&mut self.hull);
+        self.hull = convex_hull(pts);
+    }
+}
+
+/// The vertices of the convex hull of `pts` (Andrew's monotone chain), keeping every point not
+/// clearly inside (collinear and nearly collinear points stay; exact duplicates go; NaN
+/// points go, as the amplitude's `f64::max` ignores them; infinite ones stay).
+fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    pts.retain(|p| !(p[0].is_nan() || p[1].is_nan()));
+    pts.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    // Turn o -> a -> b clearly clockwise (a clearly inside the chain).
+    let inside = |o: &[f64; 2], a: &[f64; 2], b: &[f64; 2]| {
+        let (ux, uy, vx, vy) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
+        let cross = ux * vy - uy * vx;
+        cross < 0.0 && cross * cross > 1e-24 * (ux * ux + uy * uy) * (vx * vx + vy * vy)
+    };
+    let chain = |iter: &mut dyn Iterator<Item = [f64; 2]>| {
+        let mut h: Vec<[f64; 2]> = Vec::new();
+        for p in iter {
+            while h.len() >= 2 && inside(&h[h.len() - 2], &h[h.len() - 1], &p) {
+                h.pop();
+            }
+            h.push(p);
+        }
+        h
+    };
+    let lower = chain(&mut pts.iter().copied());
+    let upper = chain(&mut pts.iter().rev().copied());
+    let mut out = lower;
+    out.extend(upper);
+    out.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    out.dedup();
+    out
+}
+
 /// Median time step of a sampled time base.
 fn median_step(t: &[f64]) -> Option<f64> {
     if t.len() < 2 {
@@ -430,4 +543,41 @@ fn median_step(t: &[f64]) -> Option<f64> {
     d.sort_by(f64::total_cmp);
     let m = d[d.len() / 2];
     (m.is_finite() && m > 0.0).then_some(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hull keeps the farthest sample from any centre, and a feed cut into pieces gives the
+    /// sums and amplitude of one pass, bit for bit.
+    #[test]
+    fn report_feed_in_pieces_is_the_full_pass() {
+        let n = 20_011;
+        let x: Vec<f64> = (0..n).map(|t| 3e-6 * (t as f64 * 0.013).sin() + 1e-6 * (t as f64 * 0.0371).cos() - 2e-5 + 1e-9 * ((t * 7919) % 101) as f64).collect();
+        let y: Vec<f64> = (0..n).map(|t| 4e-6 * (t as f64 * 0.0371).cos() + 2e-6 * (t as f64 * 0.013).sin() - 6e-5).collect();
+        let fx: Vec<f64> = x.iter().map(|v| 150.0 - 1e8 * v).collect();
+        let fy: Vec<f64> = y.iter().map(|v| 8000.0 - 2e8 * v).collect();
+        let mut whole = ReportFeed::default();
+        whole.advance(&x, &y, &fx, &fy);
+        assert!(whole.hull.len() < n / 10, "hull of {} points", whole.hull.len());
+        for c in [[0.0, 0.0], [-2e-5, -6e-5], [-2.3e-5, -5.7e-5], [1.0, -1.0]] {
+            let brute = x.iter().zip(&y).map(|(a, b)| (a - c[0]).hypot(b - c[1])).fold(0.0, f64::max);
+            let hull = whole.hull.iter().map(|[a, b]| (a - c[0]).hypot(b - c[1])).fold(0.0, f64::max);
+            assert_eq!(hull, brute, "centre {c:?}");
+        }
+        for step in [1_000, 777, 5] {
+            let mut feed = ReportFeed::default();
+            let mut i = 0;
+            while i < n {
+                let j = (i + step).min(n);
+                feed.advance(&x[i..j], &y[i..j], &fx[i..j], &fy[i..j]);
+                i = j;
+            }
+            assert_eq!(feed.samples(), n);
+            assert_eq!(feed.sums, whole.sums, "fed {step} at a time");
+            let amp = |f: &ReportFeed| f.hull.iter().map(|[a, b]| (a - -2e-5f64).hypot(b - -6e-5)).fold(0.0, f64::max);
+            assert_eq!(amp(&feed), amp(&whole), "fed {step} at a time");
+        }
+    }
 }

@@ -63,6 +63,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 mod explain;
+pub mod feed;
+pub mod fft;
 pub mod frequency;
 pub mod normal_equations;
 pub mod qr;
@@ -81,9 +83,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::IdentificationError;
 
+pub use feed::WindowFeed;
 pub use frequency::{frequency_domain, Axis, FrequencyEstimate, LinePhasors};
 pub use streaming::{Sample, StreamingEstimator, WindowFactors};
 
+use feed::FedWindow;
 use solve::ScaledFactor;
 use spectrum::{LineAnalysis, LineSearch};
 use window::BlockSummary;
@@ -446,7 +450,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     let mut start = 0;
     while start <= n - config.window {
         let cols = signals.design(config.model, start..start + config.window);
-        out.push(analyse_window(&cols, start, None, None, config));
+        out.push(analyse_window(&cols, start, None, None, None, config));
         match start.checked_add(config.hop) {
             Some(next) => start = next,
             None => break,
@@ -473,6 +477,36 @@ pub fn estimate_window_with_search(
     estimate_window_searched(signals, range, config, Some(search))
 }
 
+/// [`estimate_window`] with the window's analysis fed while its samples arrived
+/// ([`WindowFeed`], for windows of `range.len()` samples with `config`; a feed that does not
+/// fit, or has not taken all of the window, is ignored and the window analysed from its
+/// samples). The result is [`estimate_window`]'s, bit for bit: only the time after the last
+/// sample is shorter.
+pub fn estimate_window_fed(
+    signals: &Signals,
+    range: Range<usize>,
+    config: &EstimatorConfig,
+    feed: WindowFeed,
+) -> Result<WindowEstimate, IdentificationError> {
+    let n = range.len();
+    let fed = if feed.fits(&EstimatorConfig { window: n, ..config.clone() }) { feed.into_window(n) } else { None };
+    match fed {
+        Some(fed) => {
+            config.validate()?;
+            signals.check(config.model)?;
+            if range.start >= range.end || range.end > signals.len() {
+                return Err(IdentificationError::invalid(
+                    "range",
+                    format!("{}..{} is empty or outside the record of {} samples", range.start, range.end, signals.len()),
+                ));
+            }
+            let cols = signals.design(config.model, range.clone());
+            Ok(analyse_window(&cols, range.start, None, None, Some(fed), config))
+        }
+        None => estimate_window_searched(signals, range, config, None),
+    }
+}
+
 /// The checks and the analysis both single-window entry points share.
 fn estimate_window_searched(
     signals: &Signals,
@@ -490,17 +524,19 @@ fn estimate_window_searched(
         ));
     }
     let cols = signals.design(config.model, range.clone());
-    Ok(analyse_window(&cols, range.start, None, search, config))
+    Ok(analyse_window(&cols, range.start, None, search, None, config))
 }
 
 /// The common path of batch and streaming estimation. `cols` are the regressors then fx, fy,
 /// sliced to the window; `summary` is the window's factor if the caller already has it (the
-/// streaming estimator combines block factors), otherwise it is computed here.
+/// streaming estimator combines block factors), otherwise it is computed here; `fed` is
+/// what a [`WindowFeed`] of all of the window kept (the same bits as computing it here).
 pub(crate) fn analyse_window(
     cols: &[(&'static str, &[f64])],
     start: usize,
     summary: Option<&BlockSummary>,
     search: Option<LineSearch>,
+    fed: Option<FedWindow>,
     config: &EstimatorConfig,
 ) -> WindowEstimate {
     let model = config.model;
@@ -517,9 +553,14 @@ pub(crate) fn analyse_window(
         flags: Vec::new(),
     };
     // 1. Every sample finite (earliest offending sample; ties go to the first column).
+    let fed = fed.filter(|f| f.first_bad.len() == cols.len());
     let mut first_bad: Option<(usize, &str)> = None;
-    for (name, c) in cols {
-        if let Some(i) = c[..n].iter().position(|v| !v.is_finite()) {
+    for (k, (name, c)) in cols.iter().enumerate() {
+        let bad = match &fed {
+            Some(f) => f.first_bad[k],
+            None => c[..n].iter().position(|v| !v.is_finite()),
+        };
+        if let Some(i) = bad {
             if first_bad.is_none_or(|(j, _)| i < j) {
                 first_bad = Some((i, name));
             }
@@ -537,6 +578,10 @@ pub(crate) fn analyse_window(
     // 3. Excitation lines (from the search fed while the samples arrived, if it is this
     // window's: the same bits).
     let (x, y, vx, vy) = (data[0], data[1], data[2], data[3]);
+    let (search, fed_summary, decimated) = match fed {
+        Some(f) => (Some(f.search), Some(f.summary), Some((f.q, f.decimated))),
+        None => (search, None, None),
+    };
     let lines = match search.filter(|s| s.window() == (n, config.sample_rate_hz)) {
         Some(s) => s.finish(x, y, vx, vy),
         None => spectrum::analyse(x, y, vx, vy, config.sample_rate_hz),
@@ -546,7 +591,9 @@ pub(crate) fn analyse_window(
     let structural = explain::structural_rank(model, &lines);
     excitation_flags(&mut est.flags, model, &lines);
 
-    // 4. Solve.
+    // 4. Solve. The factor's last columns give each force's residual sum of squares and its
+    // centred sum of squares (`qr`: the column norms of `T` and of the force column).
+    let mut sums_of_squares: Option<([f64; 2], [f64; 2])> = None;
     let (mean, scale, coef, ginv) = match config.solver {
         Solver::NormalEquations => {
             let ne = normal_equations::solve(&data, p);
@@ -575,13 +622,22 @@ pub(crate) fn analyse_window(
         }
         Solver::Qr | Solver::Svd => {
             let owned;
-            let summary = match summary {
-                Some(s) => s,
-                None => {
+            let summary = match (summary, fed_summary) {
+                (Some(s), _) => s,
+                (None, Some(s)) => {
+                    owned = s;
+                    &owned
+                }
+                (None, None) => {
                     owned = BlockSummary::from_columns(&data);
                     &owned
                 }
             };
+            if summary.r.cols() == p + 2 {
+                let r = &summary.r;
+                let t = |i: usize, j: usize| r.get(i, j) * r.get(i, j);
+                sums_of_squares = Some(([t(p, p), t(p, p + 1) + t(p + 1, p + 1)], [r.column_norm(p).powi(2), r.column_norm(p + 1).powi(2)]));
+            }
             let Some(factor) = ScaledFactor::new(summary, p) else {
                 est.condition_number = f64::INFINITY;
                 est.result = Err(Refusal::IllConditioned {
@@ -632,13 +688,39 @@ pub(crate) fn analyse_window(
     };
 
     // 5. Residuals and standard errors (fixed-regressor spectral form, see `uncertainty`).
+    // With the factor's sums of squares, only the decimated samples are needed.
     let q = se_decimation(n, config.sample_rate_hz, config.signal_band_hz);
-    let hac = uncertainty::spectral_decimated(&data, p, &mean, &scale, &coef, &ginv, q);
+    let (hac, centred_ss) = match sums_of_squares {
+        Some((residual_ss, centred_ss)) => {
+            let owned: Vec<Vec<f64>>;
+            let decimated: Vec<&[f64]> = match &decimated {
+                Some((qf, d)) if *qf == q => d.iter().map(|c| c.as_slice()).collect(),
+                _ => {
+                    owned = data.iter().map(|c| c.iter().step_by(q).copied().collect()).collect();
+                    owned.iter().map(|c| c.as_slice()).collect()
+                }
+            };
+            let mut hac = uncertainty::spectral_of_decimated(&decimated, n, p, &mean, &scale, &coef, &ginv, q);
+            for k in 0..2 {
+                hac.residual_rms[k] = (residual_ss[k].max(0.0) / n as f64).sqrt();
+            }
+            (hac, centred_ss)
+        }
+        None => {
+            let hac = uncertainty::spectral_decimated(&data, p, &mean, &scale, &coef, &ginv, q);
+            let centred_ss = [p, p + 1].map(|j| {
+                let f = data[j];
+                let mean = f.iter().sum::<f64>() / f.len() as f64;
+                f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>()
+            });
+            (hac, centred_ss)
+        }
+    };
     est.residual_rms_n = [hac.residual_rms[0], hac.residual_rms[1]];
     let coefficients = assemble(model, &coef, &hac.se);
     let accel_noise = (model == ModelOrder::Kcm).then(|| spectrum::noise_fraction(data[4], data[5], &lines, config.sample_rate_hz));
     let fit = Fit { scale: &scale, coef: &coef, ginv_s: &ginv, se: &hac.se };
-    flags(&mut est.flags, model, &lines, &data, &hac, &fit, accel_noise);
+    flags(&mut est.flags, model, &lines, n, centred_ss, &hac, &fit, accel_noise);
     if let Some(refusal) = undetermined(&coefficients, &lines, config.max_relative_se) {
         if config.solver == Solver::NormalEquations {
             // The paper's method answers whatever the data (it is kept for comparison); say
@@ -884,7 +966,8 @@ fn flags(
     out: &mut Vec<String>,
     model: ModelOrder,
     lines: &LineAnalysis,
-    data: &[&[f64]],
+    n: usize,
+    centred_ss: [f64; 2],
     hac: &uncertainty::Hac,
     fit: &Fit,
     accel_noise: Option<[f64; 2]>,
@@ -893,11 +976,8 @@ fn flags(
     if hac.lag_capped {
         out.push("the window is so short that the residual spectrum's lag window was clipped to a quarter of it: standard errors may be optimistic".to_string());
     }
-    let p = model.regressors();
     for (k, name) in ["fx", "fy"].iter().enumerate() {
-        let f = data[p + k];
-        let mean = f.iter().sum::<f64>() / f.len() as f64;
-        let var = f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / f.len() as f64;
+        let var = centred_ss[k] / n as f64;
         let r2 = 1.0 - hac.residual_rms[k] * hac.residual_rms[k] / var;
         if var > 0.0 && r2 < 0.9 {
             out.push(format!(

@@ -18,6 +18,10 @@
 //! mistaken for a line). Its frequency is refined by Gaussian (log-parabolic) interpolation of
 //! the three top bins. Lines closer than the main-lobe width (4 bins) are one line.
 
+use rustfft::num_complex::Complex;
+
+use super::fft;
+
 /// Half-width of the Blackman–Harris main lobe, in bins.
 pub const MAIN_LOBE_BINS: usize = 4;
 /// A line must stand this far (power ratio) above the local median floor: 30 dB.
@@ -196,13 +200,13 @@ fn fft_kernel(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
 /// Per-segment-length tables shared by the Welch passes of one window.
 struct Tables {
     taper: Vec<f64>,
-    tc: Vec<f64>,
-    ts: Vec<f64>,
+    /// Sum of the taper.
+    taper_sum: f64,
 }
 
 thread_local! {
     /// The tables of the last segment length used on this thread: every window of a run has
-    /// the same length, and building them costs ~5 trigonometric calls per sample.
+    /// the same length, and building them costs ~3 trigonometric calls per sample.
     static TABLES: std::cell::RefCell<Option<std::rc::Rc<Tables>>> = const { std::cell::RefCell::new(None) };
 }
 
@@ -222,14 +226,14 @@ impl Tables {
     }
 
     fn new(seg: usize) -> Self {
-        let taper = (0..seg)
+        let taper: Vec<f64> = (0..seg)
             .map(|k| {
                 let x = 2.0 * std::f64::consts::PI * k as f64 / seg as f64;
                 0.35875 - 0.48829 * x.cos() + 0.14128 * (2.0 * x).cos() - 0.01168 * (3.0 * x).cos()
             })
             .collect();
-        let (tc, ts) = twiddles(seg);
-        Self { taper, tc, ts }
+        let taper_sum = taper.iter().sum();
+        Self { taper, taper_sum }
     }
 }
 
@@ -253,14 +257,13 @@ fn segment_starts(n: usize, seg: usize) -> Vec<usize> {
 struct WelchPair {
     pa: Vec<f64>,
     pb: Vec<f64>,
-    re: Vec<f64>,
-    im: Vec<f64>,
+    z: Vec<Complex<f64>>,
 }
 
 impl WelchPair {
     fn new(seg: usize) -> Self {
         let nb = seg / 2 + 1;
-        Self { pa: vec![0.0; nb], pb: vec![0.0; nb], re: vec![0.0; seg], im: vec![0.0; seg] }
+        Self { pa: vec![0.0; nb], pb: vec![0.0; nb], z: vec![Complex::new(0.0, 0.0); seg] }
     }
 
     /// Adds the periodograms of one segment (`a`, `b` at least a segment long; the first
@@ -269,26 +272,44 @@ impl WelchPair {
         let taper = &tables.taper;
         let seg = taper.len();
         let nb = seg / 2 + 1;
-        let (re, im) = (&mut self.re, &mut self.im);
+        let z = &mut self.z;
         // Taper-weighted means: removing them leaves the tapered segment with exactly zero DC
         // (a plain mean would leave a small constant that leaks into the lowest bins).
-        let wsum: f64 = taper.iter().sum();
-        let ma = a[..seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
-        let mb = b[..seg].iter().zip(taper.iter()).map(|(v, w)| v * w).sum::<f64>() / wsum;
-        for k in 0..seg {
-            re[k] = (a[k] - ma) * taper[k];
-            im[k] = (b[k] - mb) * taper[k];
+        let wsum = tables.taper_sum;
+        let ma = weighted_sum(&a[..seg], taper) / wsum;
+        let mb = weighted_sum(&b[..seg], taper) / wsum;
+        for (((zk, av), bv), w) in z.iter_mut().zip(&a[..seg]).zip(&b[..seg]).zip(taper) {
+            *zk = Complex::new((av - ma) * w, (bv - mb) * w);
         }
-        fft_with(re, im, &tables.tc, &tables.ts);
-        for k in 0..nb {
-            let kn = (seg - k) % seg;
-            // X_k = (Z_k + conj Z_{N-k}) / 2, Y_k = (Z_k - conj Z_{N-k}) / (2i).
-            let (xr, xi) = (0.5 * (re[k] + re[kn]), 0.5 * (im[k] - im[kn]));
-            let (yr, yi) = (0.5 * (im[k] + im[kn]), -0.5 * (re[k] - re[kn]));
-            self.pa[k] += xr * xr + xi * xi;
-            self.pb[k] += yr * yr + yi * yi;
+        fft::forward(z);
+        // X_k = (Z_k + conj Z_{N-k}) / 2, Y_k = (Z_k - conj Z_{N-k}) / (2i); Z_N is Z_0.
+        let (pa, pb) = (&mut self.pa[..nb], &mut self.pb[..nb]);
+        let mut add = |k: usize, zk: Complex<f64>, zn: Complex<f64>| {
+            let (xr, xi) = (0.5 * (zk.re + zn.re), 0.5 * (zk.im - zn.im));
+            let (yr, yi) = (0.5 * (zk.im + zn.im), -0.5 * (zk.re - zn.re));
+            pa[k] += xr * xr + xi * xi;
+            pb[k] += yr * yr + yi * yi;
+        };
+        add(0, z[0], z[0]);
+        for (k, (zk, zn)) in z[1..nb].iter().zip(z[seg - nb + 1..].iter().rev()).enumerate() {
+            add(k + 1, *zk, *zn);
         }
     }
+}
+
+/// `Σ v_k w_k` with four independent partial sums (one running sum is a chain of dependent
+/// additions: it cost as much as the FFT of the segment).
+fn weighted_sum(v: &[f64], w: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let mut vc = v.chunks_exact(4);
+    let mut wc = w.chunks_exact(4);
+    for (a, b) in (&mut vc).zip(&mut wc) {
+        for l in 0..4 {
+            acc[l] += a[l] * b[l];
+        }
+    }
+    let tail: f64 = vc.remainder().iter().zip(wc.remainder()).map(|(a, b)| a * b).sum();
+    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
 }
 
 /// The line search of one window of `n` samples, fed as its samples arrive.

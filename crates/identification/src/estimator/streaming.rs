@@ -267,7 +267,7 @@ impl StreamingEstimator {
         let s = start % w;
         let cols: Vec<(&'static str, &[f64])> =
             self.names.iter().zip(&self.ring).map(|(name, c)| (*name, &c[s..s + w])).collect();
-        Some(analyse_window(&cols, start, Some(&summary), None, &self.config))
+        Some(analyse_window(&cols, start, Some(&summary), None, None, &self.config))
     }
 
     /// Push a block of samples; returns the windows that complete.

@@ -139,7 +139,9 @@
 //! counted by exactly `L + 1 - |s - s'|` of the windows. That costs `O(n p²)` whatever the lag,
 //! and is positive semi-definite by construction.
 
-use super::spectrum::{fft_with, twiddles};
+use rustfft::num_complex::Complex;
+
+use super::fft;
 
 /// Standard errors of one window.
 #[derive(Debug, Clone)]
@@ -174,29 +176,6 @@ pub fn parzen_lag(n: usize) -> (usize, bool) {
     if l > cap { (cap, true) } else { (l, false) }
 }
 
-thread_local! {
-    /// FFT twiddles of the last length used on this thread: every window of a run has the same
-    /// length, and building them costs two trigonometric calls per point.
-    static TWIDDLES: std::cell::RefCell<Option<std::rc::Rc<Twiddles>>> = const { std::cell::RefCell::new(None) };
-}
-
-/// Cosines and sines of every FFT stage ([`twiddles`]).
-type Twiddles = (Vec<f64>, Vec<f64>);
-
-fn cached_twiddles(nfft: usize) -> std::rc::Rc<Twiddles> {
-    TWIDDLES.with(|cell| {
-        let mut slot = cell.borrow_mut();
-        match slot.as_ref() {
-            Some(t) if t.0.len() + 1 == nfft => t.clone(),
-            _ => {
-                let t = std::rc::Rc::new(twiddles(nfft));
-                *slot = Some(t.clone());
-                t
-            }
-        }
-    })
-}
-
 /// Parzen's lag window at `u = l / L` (zero for `|u| ≥ 1`).
 fn parzen(u: f64) -> f64 {
     let u = u.abs();
@@ -209,37 +188,39 @@ fn parzen(u: f64) -> f64 {
     }
 }
 
-/// Forward FFT of two real signals at once (`z = a + i b`, zero-padded to `tc.len() + 1`);
-/// returns the spectra of `a` and `b` for bins `0..=N/2` as (re, im) pairs.
-fn fft_pair(a: &[f64], b: Option<&[f64]>, tc: &[f64], ts: &[f64]) -> ([Vec<f64>; 2], [Vec<f64>; 2]) {
-    let nfft = tc.len() + 1;
-    let mut re = vec![0.0; nfft];
-    let mut im = vec![0.0; nfft];
-    re[..a.len()].copy_from_slice(a);
-    if let Some(b) = b {
-        im[..b.len()].copy_from_slice(b);
+/// Forward FFT of two real signals at once (`z = a + i b`, zero-padded to `nfft`); returns
+/// the spectra of `a` and `b` for bins `0..=N/2` as (re, im) pairs.
+fn fft_pair(a: &[f64], b: Option<&[f64]>, nfft: usize) -> ([Vec<f64>; 2], [Vec<f64>; 2]) {
+    let mut z = vec![Complex::new(0.0, 0.0); nfft];
+    for (zk, v) in z.iter_mut().zip(a) {
+        zk.re = *v;
     }
-    fft_with(&mut re, &mut im, tc, ts);
+    if let Some(b) = b {
+        for (zk, v) in z.iter_mut().zip(b) {
+            zk.im = *v;
+        }
+    }
+    fft::forward(&mut z);
     let nb = nfft / 2 + 1;
     let mut sa = [vec![0.0; nb], vec![0.0; nb]];
     let mut sb = [vec![0.0; nb], vec![0.0; nb]];
     for k in 0..nb {
-        let kn = (nfft - k) % nfft;
+        let (zk, zn) = (z[k], z[(nfft - k) % nfft]);
         // A_k = (Z_k + conj Z_{N-k}) / 2, B_k = (Z_k - conj Z_{N-k}) / (2i).
-        sa[0][k] = 0.5 * (re[k] + re[kn]);
-        sa[1][k] = 0.5 * (im[k] - im[kn]);
-        sb[0][k] = 0.5 * (im[k] + im[kn]);
-        sb[1][k] = -0.5 * (re[k] - re[kn]);
+        sa[0][k] = 0.5 * (zk.re + zn.re);
+        sa[1][k] = 0.5 * (zk.im - zn.im);
+        sb[0][k] = 0.5 * (zk.im + zn.im);
+        sb[1][k] = -0.5 * (zk.re - zn.re);
     }
     (sa, sb)
 }
 
 /// Forward FFT of two real, even sequences given on `0..N` (their transforms are real):
 /// returns both transforms, bins `0..N`.
-fn fft_even_pair(a: Vec<f64>, b: Vec<f64>, tc: &[f64], ts: &[f64]) -> (Vec<f64>, Vec<f64>) {
-    let (mut re, mut im) = (a, b);
-    fft_with(&mut re, &mut im, tc, ts);
-    (re, im)
+fn fft_even_pair(a: Vec<f64>, b: Vec<f64>) -> (Vec<f64>, Vec<f64>) {
+    let mut z: Vec<Complex<f64>> = a.iter().zip(&b).map(|(r, i)| Complex::new(*r, *i)).collect();
+    fft::forward(&mut z);
+    (z.iter().map(|c| c.re).collect(), z.iter().map(|c| c.im).collect())
 }
 
 /// Standard errors from the fixed-regressor covariance `S = Σ_l γ_e(l) R_a(l)` with a Parzen
@@ -258,47 +239,17 @@ pub fn spectral(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[
 /// residual RMS stay those of the full window. `q = 1` is [`spectral`], bit for bit; `q = 0`
 /// gives NaN errors. The reported lag is in full-rate samples (`q ⌈L/q⌉`).
 pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64], q: usize) -> Hac {
-    let nq_cols = cols.len();
-    let m = nq_cols.saturating_sub(p);
+    let m = cols.len().saturating_sub(p);
     let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
-    let mut out = Hac::nan(p, m);
-    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < nq_cols || q == 0 {
-        return out;
+    if q == 0 || mean.len() < cols.len() || coef.len() != p * m {
+        return Hac::nan(p, m);
     }
-    let dof = n as f64 / (n - p - 1) as f64;
-    let (full_lag, capped) = parzen_lag(n);
-    out.lag_capped = capped;
-    // Samples and lag on the decimated grid (the full ones when q = 1).
-    let nd = n.div_ceil(q);
-    let lag = if q == 1 { full_lag } else { full_lag.div_ceil(q) };
-    if nd <= p + 2 {
-        return out;
-    }
-    let nfft = (nd + lag + 1).next_power_of_two();
-    let tw = cached_twiddles(nfft);
-    let (tc, ts) = (&tw.0, &tw.1);
-    let nb = nfft / 2 + 1;
-    // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
-    let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
-
-    // Spectra of the centred, scaled regressors, two per FFT.
-    let scaled: Vec<Vec<f64>> = (0..p).map(|j| cols[j][..n].iter().step_by(q).map(|v| (v - mean[j]) / scale[j]).collect()).collect();
-    let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
-    for j in (0..p).step_by(2) {
-        let (a, b) = fft_pair(&scaled[j], scaled.get(j + 1).map(|v| v.as_slice()), tc, ts);
-        spec.push(a);
-        if j + 1 < p {
-            spec.push(b);
-        }
-    }
-
-    // Residuals of every right-hand side (the RMS over every sample, the series decimated),
-    // all right-hand sides in one pass over the regressors (each sum still in sample order).
-    let mut resid: Vec<Vec<f64>> = (0..m).map(|_| Vec::with_capacity(nd)).collect();
+    let decimated: Vec<Vec<f64>> = cols.iter().map(|c| c[..n].iter().step_by(q).copied().collect()).collect();
+    let views: Vec<&[f64]> = decimated.iter().map(|c| c.as_slice()).collect();
+    let mut out = spectral_of_decimated(&views, n, p, mean, scale, coef, ginv_s, q);
+    // The residual RMS over every sample of the window.
     let mut sse = vec![0.0; m];
     let mut centred = vec![0.0; p];
-    // Samples until the next kept one (a countdown: no division per sample).
-    let mut skip = 0;
     for t in 0..n {
         for j in 0..p {
             centred[j] = cols[j][t] - mean[j];
@@ -309,17 +260,67 @@ pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64]
                 e -= centred[j] * coef[j * m + k];
             }
             sse[k] += e * e;
-            if skip == 0 {
-                resid[k].push(e);
-            }
         }
-        if skip == 0 {
-            skip = q;
-        }
-        skip -= 1;
     }
     for k in 0..m {
         out.residual_rms[k] = (sse[k] / n as f64).sqrt();
+    }
+    out
+}
+
+/// The spectral standard errors from the window's every `q`-th sample alone: `decimated` holds
+/// samples `0, q, 2q, ...` of each column (regressors, then right-hand sides) of a window of
+/// `n` samples, `⌈n/q⌉` each; the rest as [`spectral_decimated`], whose errors these are, bit
+/// for bit. The residual RMS is left NaN: it needs every sample, and the caller has it from
+/// the window's factor (the column norms of `T`, see `qr`) without another pass.
+#[allow(clippy::too_many_arguments)] // the solved window in its parts
+pub fn spectral_of_decimated(decimated: &[&[f64]], n: usize, p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64], q: usize) -> Hac {
+    let nq_cols = decimated.len();
+    let m = nq_cols.saturating_sub(p);
+    let mut out = Hac::nan(p, m);
+    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < nq_cols || q == 0 {
+        return out;
+    }
+    let dof = n as f64 / (n - p - 1) as f64;
+    let (full_lag, capped) = parzen_lag(n);
+    out.lag_capped = capped;
+    // Samples and lag on the decimated grid (the full ones when q = 1).
+    let nd = n.div_ceil(q);
+    let lag = if q == 1 { full_lag } else { full_lag.div_ceil(q) };
+    if nd <= p + 2 || decimated.iter().any(|c| c.len() < nd) {
+        return out;
+    }
+    let nfft = (nd + lag + 1).next_power_of_two();
+    let nb = nfft / 2 + 1;
+    // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
+    let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
+
+    // Spectra of the centred, scaled regressors, two per FFT.
+    let scaled: Vec<Vec<f64>> = (0..p).map(|j| decimated[j][..nd].iter().map(|v| (v - mean[j]) / scale[j]).collect()).collect();
+    let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
+    for j in (0..p).step_by(2) {
+        let (a, b) = fft_pair(&scaled[j], scaled.get(j + 1).map(|v| v.as_slice()), nfft);
+        spec.push(a);
+        if j + 1 < p {
+            spec.push(b);
+        }
+    }
+
+    // Residuals of every right-hand side on the decimated grid, all right-hand sides in one
+    // pass over the regressors.
+    let mut resid: Vec<Vec<f64>> = (0..m).map(|_| Vec::with_capacity(nd)).collect();
+    let mut centred = vec![0.0; p];
+    for t in 0..nd {
+        for j in 0..p {
+            centred[j] = decimated[j][t] - mean[j];
+        }
+        for k in 0..m {
+            let mut e = decimated[p + k][t] - mean[p + k];
+            for j in 0..p {
+                e -= centred[j] * coef[j * m + k];
+            }
+            resid[k].push(e);
+        }
     }
 
     // Residual spectral densities per right-hand side, bins 0..=N/2.
@@ -327,7 +328,7 @@ pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64]
     for k0 in (0..m).step_by(2) {
         let pair = [Some(k0), (k0 + 1 < m).then_some(k0 + 1)];
         // Periodograms |E_k|², full length N (real and even).
-        let (ea, eb) = fft_pair(&resid[k0], pair[1].map(|k| resid[k].as_slice()), tc, ts);
+        let (ea, eb) = fft_pair(&resid[k0], pair[1].map(|k| resid[k].as_slice()), nfft);
         let full = |s: &[Vec<f64>; 2]| -> Vec<f64> {
             let mut v = vec![0.0; nfft];
             for i in 0..nb {
@@ -338,7 +339,7 @@ pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64]
             v
         };
         // Autocovariances Σ_t e_t e_{t+l} = FFT(|E|²)(l) / N (exact for l ≤ N - n).
-        let (ca, cb) = fft_even_pair(full(&ea), full(&eb), tc, ts);
+        let (ca, cb) = fft_even_pair(full(&ea), full(&eb));
         // Lag-windowed, biased autocovariances, placed symmetrically on 0..N.
         let windowed = |c: &[f64]| -> Vec<f64> {
             let mut g = vec![0.0; nfft];
@@ -352,7 +353,7 @@ pub fn spectral_decimated(cols: &[&[f64]], p: usize, mean: &[f64], scale: &[f64]
             g
         };
         // Spectral densities on the grid (real: the sequences are even).
-        let (sa, sb) = fft_even_pair(windowed(&ca), windowed(&cb), tc, ts);
+        let (sa, sb) = fft_even_pair(windowed(&ca), windowed(&cb));
         for ((slot, dens), raw) in pair.iter().zip([&sa, &sb]).zip([&ea, &eb]) {
             let Some(k) = *slot else { continue };
             // Lines in the residual (misfit) stay at their own height.

@@ -63,45 +63,12 @@ impl BlockSummary {
     /// One pass over the data: each cache-sized chunk is centred on its own means while it is
     /// copied, annihilated into the running factor, and the running factor is corrected for
     /// the difference of means by one extra row, `sqrt(n_a n_c / (n_a + n_c)) (m_a - m_c)`
-    /// (the same identity as [`BlockSummary::merge`]).
+    /// (the same identity as [`BlockSummary::merge`]). [`SummaryBuilder`] is this pass fed in
+    /// pieces, with the same bits.
     pub fn from_columns(cols: &[&[f64]]) -> Self {
-        let q = cols.len();
-        let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
-        let mut out = Self::empty(q);
-        if n == 0 {
-            return out;
-        }
-        let mut buf = vec![0.0; CHUNK_ROWS * q];
-        let mut chunk_mean = vec![0.0; q];
-        let mut row = vec![0.0; q];
-        let mut start = 0;
-        while start < n {
-            let rows = CHUNK_ROWS.min(n - start);
-            let block = &mut buf[..rows * q];
-            for (j, c) in cols.iter().enumerate() {
-                let src = &c[start..start + rows];
-                let m = mean(src);
-                chunk_mean[j] = m;
-                for (dst, v) in block[j * rows..(j + 1) * rows].iter_mut().zip(src) {
-                    *dst = v - m;
-                }
-            }
-            out.r.absorb(block, rows);
-            let (na, nc) = (out.n as f64, rows as f64);
-            if out.n > 0 {
-                let w = (na * nc / (na + nc)).sqrt();
-                for j in 0..q {
-                    row[j] = w * (out.mean[j] - chunk_mean[j]);
-                }
-                out.r.absorb(&mut row, 1);
-            }
-            for j in 0..q {
-                out.mean[j] += (chunk_mean[j] - out.mean[j]) * nc / (na + nc);
-            }
-            out.n += rows;
-            start += rows;
-        }
-        out
+        let mut b = SummaryBuilder::new(cols.len());
+        b.push(cols);
+        b.finish()
     }
 
     /// The summary of the union of the rows of `self` and `other`.
@@ -127,6 +94,117 @@ impl BlockSummary {
         out.r.absorb_triangle(&other.r);
         out.r.absorb_row(&row);
         out
+    }
+}
+
+/// [`BlockSummary::from_columns`] fed as the rows arrive: chunks of [`CHUNK_ROWS`] rows at
+/// fixed offsets from the first row are reduced as soon as they are complete, so
+/// [`SummaryBuilder::finish`] has at most one partial chunk left. The result is
+/// `from_columns` of all the rows pushed, bit for bit, however they were cut.
+#[derive(Debug, Clone)]
+pub struct SummaryBuilder {
+    out: BlockSummary,
+    /// Rows of the current incomplete chunk, one vector per column.
+    pending: Vec<Vec<f64>>,
+    buf: Vec<f64>,
+    chunk_mean: Vec<f64>,
+    row: Vec<f64>,
+}
+
+impl SummaryBuilder {
+    /// A builder for `cols` columns.
+    pub fn new(cols: usize) -> Self {
+        Self {
+            out: BlockSummary::empty(cols),
+            pending: (0..cols).map(|_| Vec::new()).collect(),
+            buf: Vec::new(),
+            chunk_mean: vec![0.0; cols],
+            row: vec![0.0; cols],
+        }
+    }
+
+    /// Rows pushed so far.
+    pub fn rows(&self) -> usize {
+        self.out.n + self.pending.first().map_or(0, |p| p.len())
+    }
+
+    /// Push rows given as columns (the shortest length is used; nothing if the number of
+    /// columns is not the builder's).
+    pub fn push(&mut self, cols: &[&[f64]]) {
+        if cols.len() != self.pending.len() || cols.is_empty() {
+            return;
+        }
+        let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
+        let mut i = 0;
+        while i < n {
+            let have = self.pending[0].len();
+            if have == 0 && n - i >= CHUNK_ROWS {
+                // A whole chunk straight from the caller's slices.
+                let view: Vec<&[f64]> = cols.iter().map(|c| &c[i..i + CHUNK_ROWS]).collect();
+                self.absorb(&view);
+                i += CHUNK_ROWS;
+                continue;
+            }
+            let take = (CHUNK_ROWS - have).min(n - i);
+            for (dst, src) in self.pending.iter_mut().zip(cols) {
+                dst.extend_from_slice(&src[i..i + take]);
+            }
+            i += take;
+            if self.pending[0].len() == CHUNK_ROWS {
+                self.flush();
+            }
+        }
+    }
+
+    /// The summary of every row pushed.
+    pub fn finish(mut self) -> BlockSummary {
+        if self.pending.first().is_some_and(|p| !p.is_empty()) {
+            self.flush();
+        }
+        self.out
+    }
+
+    fn flush(&mut self) {
+        let pending = std::mem::take(&mut self.pending);
+        let view: Vec<&[f64]> = pending.iter().map(|c| c.as_slice()).collect();
+        self.absorb(&view);
+        self.pending = pending;
+        for c in &mut self.pending {
+            c.clear();
+        }
+    }
+
+    /// One chunk (columns of one length, at most `CHUNK_ROWS`).
+    fn absorb(&mut self, cols: &[&[f64]]) {
+        let q = cols.len();
+        let rows = cols.iter().map(|c| c.len()).min().unwrap_or(0);
+        if rows == 0 {
+            return;
+        }
+        self.buf.resize(rows * q, 0.0);
+        let block = &mut self.buf[..rows * q];
+        for (j, c) in cols.iter().enumerate() {
+            let src = &c[..rows];
+            let m = mean(src);
+            self.chunk_mean[j] = m;
+            for (dst, v) in block[j * rows..(j + 1) * rows].iter_mut().zip(src) {
+                *dst = v - m;
+            }
+        }
+        let out = &mut self.out;
+        out.r.absorb(block, rows);
+        let (na, nc) = (out.n as f64, rows as f64);
+        if out.n > 0 {
+            let w = (na * nc / (na + nc)).sqrt();
+            for j in 0..q {
+                self.row[j] = w * (out.mean[j] - self.chunk_mean[j]);
+            }
+            out.r.absorb(&mut self.row, 1);
+        }
+        for j in 0..q {
+            out.mean[j] += (self.chunk_mean[j] - out.mean[j]) * nc / (na + nc);
+        }
+        out.n += rows;
     }
 }
 
@@ -156,6 +234,25 @@ mod tests {
         }
         for (x, y) in whole.mean.iter().zip(&acc.mean) {
             assert!((x - y).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn builder_fed_in_pieces_is_from_columns_bit_for_bit() {
+        let n = 3 * CHUNK_ROWS + 77;
+        let a: Vec<f64> = (0..n).map(|t| 3.0 + (t as f64 * 0.1).sin()).collect();
+        let b: Vec<f64> = (0..n).map(|t| -7.0 + (t as f64 * 0.37).cos()).collect();
+        let whole = BlockSummary::from_columns(&[&a, &b]);
+        for step in [1, 100, CHUNK_ROWS, 700] {
+            let mut builder = SummaryBuilder::new(2);
+            let mut i = 0;
+            while i < n {
+                let j = (i + step).min(n);
+                builder.push(&[&a[i..j], &b[i..j]]);
+                i = j;
+            }
+            assert_eq!(builder.rows(), n);
+            assert_eq!(builder.finish(), whole, "fed {step} rows at a time");
         }
     }
 }
