@@ -818,10 +818,14 @@ pub fn condition_into(
     let mut force_finite = true;
     for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
         sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
+            // Locals, not the captured flag and mass: written through a reference on every
+            // sample they kept this loop scalar (a store and a reload per sample).
+            let (m, mut finite) = (mass, true);
             for (f, &a) in force[range].iter_mut().zip(a) {
-                *f -= mass * a;
-                force_finite &= f.is_finite();
+                *f -= m * a;
+                finite &= f.is_finite();
             }
+            force_finite &= finite;
         })?;
     }
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
