@@ -63,8 +63,10 @@
 //! the sample. [`condition`] allocates the 17 output columns and nothing else of size;
 //! [`condition_into`] reuses those of a previous result and allocates nothing of size.
 //! Measured on one core of the shared 2-core development machine for a 300 000-scan,
-//! 10-channel record, best of 15: `condition_into` about 16-22 ms depending on the load
-//! (140-190 M samples/s); the zero-phase low-pass is the largest part, about 7 ms.
+//! 10-channel record, best of 15: `condition_into` about 16-17 ms under a load average of
+//! 4-5 (175-185 M samples/s; 18.4-19.8 ms before the transposed low-pass lanes and the
+//! AVX-512 derivative, in the same runs); the front end is now the largest part, then the
+//! zero-phase low-pass.
 
 pub mod calibrate;
 pub mod deskew;
