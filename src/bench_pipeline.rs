@@ -166,7 +166,7 @@ fn run_python(
         "window": window,
         "hop": window,
         "trim": trim,
-        "repeats": 3,
+        "repeats": 5, // as many as the Rust rows: best of fewer runs would handicap Python on a loaded machine
     });
     let meta_path = dir.join("meta.json");
     std::fs::write(&meta_path, serde_json::to_vec(&meta)?)?;

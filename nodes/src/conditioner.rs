@@ -99,6 +99,10 @@ struct Stream {
     origin_stamp: Stamp,
     /// Raw columns, scan order.
     columns: Vec<Vec<f64>>,
+    /// The record of the block being conditioned: its columns are refilled from `columns`
+    /// for every block (no allocation once they are a block long), channels and units fixed
+    /// for the stream.
+    raw: RawRecord,
     /// Next scan to publish.
     next_out: u64,
     edge: usize,
@@ -240,6 +244,13 @@ impl ConditionerCore {
             origin_scan: frame.first_scan,
             origin_stamp: Stamp::from_time(&frame.header.stamp),
             columns: vec![Vec::new(); channels.len()],
+            raw: RawRecord {
+                sample_rate_hz: frame.sample_rate_hz,
+                start_time_s: 0.0,
+                channels: channels.clone(),
+                units: if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
+                columns: vec![Vec::new(); channels.len()],
+            },
             channels,
             next_out: frame.first_scan + edge as u64,
             edge,
@@ -255,13 +266,10 @@ impl ConditionerCore {
         let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
         let begin = (s.next_out - s.first_scan) as usize - s.edge;
         let end = begin + block + 2 * s.edge;
-        let raw = RawRecord {
-            sample_rate_hz: s.rate_hz,
-            start_time_s: 0.0,
-            channels: s.channels.clone(),
-            units: if s.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
-            columns: s.columns.iter().map(|c| c[begin..end].to_vec()).collect(),
-        };
+        for (dst, src) in s.raw.columns.iter_mut().zip(&s.columns) {
+            dst.clear();
+            dst.extend_from_slice(&src[begin..end]);
+        }
         let stamp = s.origin_stamp.after_samples((s.next_out - s.origin_scan) as i64, s.rate_hz);
         let mut frame = ConditionedFrame {
             header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
@@ -279,7 +287,7 @@ impl ConditionerCore {
             frame.flags.push(note);
         }
         let edge = s.edge;
-        match conditioning::condition_into(&raw, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
+        match conditioning::condition_into(&s.raw, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
             Ok(()) => {
                 let w = &self.work;
                 let r = edge..edge + block;

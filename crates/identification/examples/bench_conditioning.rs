@@ -1,7 +1,8 @@
 //! Throughput of the conditioning chain on a record the size of the paper's (50 000 scans of
 //! 10 channels at 5 kHz): each stage on its own, then the whole `condition` call.
 //!
-//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats]`
+//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into]`
+//! (`into`: only the whole `condition_into`, e.g. under `perf record`)
 //!
 //! "samples" are channel samples: a 50 000-scan record has 500 000. Each figure is the best
 //! of `repeats` runs (default 15), to show the code's speed rather than the machine's load.
@@ -49,6 +50,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(15)
         .max(1);
+    let only_into = args.next().as_deref() == Some("into");
 
     // A record through the DAQ model: a few sines per channel, default sensor noise.
     let cfg = DaqConfig::zhou2004();
@@ -89,6 +91,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "record: {n} scans x {channels} channels = {all} samples at {fs} Hz; best of {repeats} runs"
     );
+    if only_into {
+        // `... [scans] [repeats] into`: only `condition_into`, for a profiler.
+        let mut out = condition(&raw, &cal, &mech, &conf)?;
+        let t = best_of(repeats, || {
+            condition_into(&raw, &cal, &mech, &conf, &mut out).unwrap(); // validated above
+            black_box(&out);
+        });
+        report("condition_into (reusing the output buffers)", all, t);
+        return Ok(());
+    }
 
     let t = best_of(repeats, || {
         black_box(RawRecord::from_scans(black_box(&recs), fs).unwrap()); // same input as above

@@ -63,8 +63,10 @@
 //! the sample. [`condition`] allocates the 17 output columns and nothing else of size;
 //! [`condition_into`] reuses those of a previous result and allocates nothing of size.
 //! Measured on one core of the shared 2-core development machine for a 300 000-scan,
-//! 10-channel record, best of 15: `condition_into` about 16-22 ms depending on the load
-//! (140-190 M samples/s); the zero-phase low-pass is the largest part, about 7 ms.
+//! 10-channel record, best of 15: `condition_into` about 16-17 ms under a load average of
+//! 4-5 (175-185 M samples/s; 18.4-19.8 ms before the transposed low-pass lanes and the
+//! AVX-512 derivative, in the same runs); the front end is now the largest part, then the
+//! zero-phase low-pass.
 
 pub mod calibrate;
 pub mod deskew;
@@ -818,10 +820,14 @@ pub fn condition_into(
     let mut force_finite = true;
     for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
         sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
+            // Locals, not the captured flag and mass: written through a reference on every
+            // sample they kept this loop scalar (a store and a reload per sample).
+            let (m, mut finite) = (mass, true);
             for (f, &a) in force[range].iter_mut().zip(a) {
-                *f -= mass * a;
-                force_finite &= f.is_finite();
+                *f -= m * a;
+                finite &= f.is_finite();
             }
+            force_finite &= finite;
         })?;
     }
     let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
