@@ -6,15 +6,16 @@
 //!   1 MiB chunks, closed and fsynced: a recorder's whole job), with zstd, lz4 and no chunk
 //!   compression; then every topic of the graph as `oilfilm record` would write it. MB/s
 //!   counts message payload bytes (what the recorder is handed), per second of wall clock.
-//! * Re-analysis: a bag of the whole graph through `records::read_bag_inputs` (open, read,
-//!   decode every message) and the node conditioner and estimator (`harness::reanalyse`,
-//!   the sim_rig launch parameters: 5 s windows every 2.5 s), as a multiple of the bag's real
-//!   time.
+//! * Re-analysis: bags a user can choose (every topic with zstd, lz4 or no compression; only
+//!   the DAQ frames and rig status with zstd) through `records::read_bag_inputs` (read and
+//!   decode the inputs) and `records::reanalyse_bag` (what `oilfilm identify BAG` runs: the
+//!   node conditioner and estimator, sim_rig parameters, 5 s windows every 2.5 s, fed as
+//!   the chunks are decoded), wall time as a multiple of the bag's real time.
 //!
 //! Targets (issue 5): >= 300 MB/s recording with zstd on rig data, re-analysis >= 1000x real
-//! time. The writer runs on one thread; zstd compresses on the mcap crate's worker threads
-//! (its default: one per physical core). The machine's other load shows in the numbers (the
-//! best of the passes is reported).
+//! time. The writer runs on one thread and compresses there (zstd level -1, no mcap worker
+//! threads: ADR 0012; `--zstd-sweep` measures the alternatives). The machine's other load
+//! shows in the numbers (the best of the passes is reported).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -137,7 +138,7 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
         all_bytes as f64 / 1e6
     );
     println!(
-        "{} cores (zstd compresses on the mcap crate's worker threads, the rest is one thread); best of >= 3 passes (a pass writes, closes and fsyncs a new bag); MB/s counts message payload bytes",
+        "{} cores (the writer and its compression on one thread unless a row says otherwise); best of >= 3 passes (a pass writes, closes and fsyncs a new bag); MB/s counts message payload bytes",
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!();
@@ -152,11 +153,12 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
     }
     println!();
     println!(
-        "Re-analysis (`oilfilm identify BAG`, the sim_rig conditioner and estimator: {} estimates, {} solved, equal to the live ones in every row below: {}); best of {REANALYSIS_PASSES} passes, wall clock, {} reader threads:",
+        "Re-analysis (`oilfilm identify BAG`, the sim_rig conditioner and estimator: {} estimates, {} solved, equal to the live ones in every row below: {}); best of {REANALYSIS_PASSES} passes, wall clock; reading alone on {} threads, overlapped with the analysis on {} beside it:",
         re.estimates,
         re.solved,
         if re.rows.iter().all(|r| r.equal_to_live) { "yes" } else { "NO" },
         crate::records::reader_threads(),
+        crate::records::reader_threads_beside_analysis(),
     );
     println!("the conditioner + estimator alone, on frames already in memory: {:.1} ms ({:.0}x real time)", re.analyse_s * 1e3, seconds / re.analyse_s);
     println!("every message of the whole-graph zstd bag read and checked (`Bag::messages`, one thread): {:.1} ms", re.all_messages_s * 1e3);
@@ -285,7 +287,7 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
             }
             drop((frames, status));
             let started = Instant::now();
-            let (out, _, _) = crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, threads)?;
+            let (out, _, _) = crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis())?;
             row.total_s = row.total_s.min(started.elapsed().as_secs_f64());
             row.equal_to_live &= out.estimates == rec.estimates;
         }

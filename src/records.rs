@@ -348,9 +348,15 @@ fn decode_input(m: &oilfilm_bag::MessageRef) -> oilfilm_bag::Result<Input> {
     Ok(if m.type_name == oilfilm_msgs::DaqFrame::TYPE_NAME { Input::Frame(m.decode()?) } else { Input::Status(m.decode()?) })
 }
 
-/// Threads that decompress and decode a bag's chunks ahead of the consumer.
+/// Threads that decompress and decode a bag's chunks when nothing else runs: one per core.
 pub fn reader_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Threads that decompress and decode a bag's chunks while this thread conditions the
+/// frames: the other cores (at least one).
+pub fn reader_threads_beside_analysis() -> usize {
+    reader_threads().saturating_sub(1).max(1)
 }
 
 /// The DAQ frames and rig status of a bag, in log-time order: what `oilfilm identify BAG`
@@ -443,7 +449,7 @@ fn identify_bag(args: &IdentifyArgs) -> Result<()> {
     if args.no_deskew {
         bail!("{name}: --no-deskew is for ASCII records; for a bag set `deskew: false` in the conditioner's params");
     }
-    let (out, frames, status) = reanalyse_bag(&args.file, &rig, &conditioner, &estimator, reader_threads())?;
+    let (out, frames, status) = reanalyse_bag(&args.file, &rig, &conditioner, &estimator, reader_threads_beside_analysis())?;
     if args.json {
         let doc = serde_json::json!({
             "bag": name,
