@@ -57,7 +57,7 @@ impl BagMessage {
             index: self.index,
             chunk_offset: None,
             log_time: self.log_time,
-            source,
+            source: Box::new(source),
         })
     }
 

@@ -65,12 +65,18 @@ impl MessageRef<'_> {
             index: self.index,
             chunk_offset: self.chunk_offset,
             log_time: self.log_time,
-            source,
+            source: Box::new(source),
         })
     }
 }
 
-/// A chunk to read: where, and the channels of the file.
+/// A file's channels: topic, type, and whether the caller wants it.
+type Channels = BTreeMap<u16, (String, String, bool)>;
+
+/// A worker's result: the job's index and its decoded messages with their log times.
+type Done<T> = (usize, Result<Vec<(u64, T)>>);
+
+/// A chunk to read: which file, and its index.
 struct Job {
     file: usize,
     index: ChunkIndex,
@@ -79,7 +85,7 @@ struct Job {
 /// What one file contributes: its chunks to read, or (no usable summary) its wanted
 /// messages already decoded by the full reader.
 enum Plan<T> {
-    Chunks { channels: Arc<BTreeMap<u16, (String, String, bool)>>, jobs: Vec<ChunkIndex> },
+    Chunks { channels: Arc<Channels>, jobs: Vec<ChunkIndex> },
     Decoded(Vec<T>),
 }
 
@@ -112,7 +118,7 @@ impl Bag {
                 Plan::Decoded(_) => Vec::new(),
             })
             .collect();
-        let channels: Vec<Option<Arc<BTreeMap<u16, (String, String, bool)>>>> = plans
+        let channels: Vec<Option<Arc<Channels>>> = plans
             .iter()
             .map(|p| match p {
                 Plan::Chunks { channels, .. } => Some(Arc::clone(channels)),
@@ -132,7 +138,11 @@ impl Bag {
         // Jobs handed out in order to whichever worker is free (chunks differ in size: a
         // topic's chunks can alternate with another's much smaller ones).
         let taken = AtomicUsize::new(0);
-        let (tx, rx) = mpsc::channel::<(usize, Result<Vec<(u64, T)>>)>();
+        // Bounded: the workers run at most a few chunks ahead of the consumer (a long bag is
+        // not decoded into memory faster than it is used). The consumer receives whatever
+        // comes while it waits for the chunk it needs, so a worker blocked here is always
+        // released.
+        let (tx, rx) = mpsc::sync_channel::<Done<T>>(2 * threads + 2);
         std::thread::scope(|s| {
             for _ in 0..threads {
                 let tx = tx.clone();
@@ -269,7 +279,7 @@ fn read_chunk_of<T>(
     file: &File,
     path: &Path,
     index: &ChunkIndex,
-    channels: &BTreeMap<u16, (String, String, bool)>,
+    channels: &Channels,
     decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync),
 ) -> Result<Vec<(u64, T)>> {
     let offset = index.chunk_start_offset;
@@ -339,7 +349,7 @@ fn read_chunk_of<T>(
 /// chunks), the ties in file order. Chunks of one series that do not overlap (one topic's,
 /// or a writer's that mixes all topics) are so handed out as each arrives.
 struct Stream<'a, T> {
-    rx: mpsc::Receiver<(usize, Result<Vec<(u64, T)>>)>,
+    rx: mpsc::Receiver<Done<T>>,
     pending: BTreeMap<usize, Result<Vec<(u64, T)>>>,
     next: usize,
     dir: &'a Path,
