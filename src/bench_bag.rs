@@ -13,7 +13,7 @@
 //!   the chunks are decoded), wall time as a multiple of the bag's real time.
 //!
 //! Targets (issue 5): >= 300 MB/s recording with zstd on rig data, re-analysis >= 1000x real
-//! time. The writer runs on one thread and compresses there (zstd level -1, no mcap worker
+//! time. The writer runs on one thread and compresses there (zstd level 1, no mcap worker
 //! threads: ADR 0012; `--zstd-sweep` measures the alternatives). The machine's other load
 //! shows in the numbers (the best of the passes is reported).
 

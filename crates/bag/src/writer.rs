@@ -58,9 +58,10 @@ pub struct WriterOptions {
 }
 
 impl WriterOptions {
-    /// zstd level of the recorder: -1, zstd's first fast level (ADR 0012: on the rig's DAQ
-    /// frames as fast as any level measured, 0.28 of the payload against level 1's 0.26).
-    pub const DEFAULT_ZSTD_LEVEL: i32 = -1;
+    /// zstd level of the recorder: 1 (ADR 0012: the fast levels were not reliably faster on
+    /// the rig's DAQ frames, and level -1 makes a chunk of one small message larger than the
+    /// message, which `pymcap-cli doctor` warns about).
+    pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
     /// zstd worker threads of the recorder: none, compression on the writing thread (ADR
     /// 0012: a chunk of 1 s is smaller than one zstd job, so workers only add hand-offs; one
     /// worker was the slowest setting in every sweep).
