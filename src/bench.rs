@@ -60,6 +60,10 @@ enum BenchWhat {
         /// Seconds of simulated rig (5 kHz x 10 channels).
         #[arg(long, default_value_t = 60.0)]
         seconds: f64,
+        /// Also sweep zstd levels (fast levels included) and the mcap crate's compression
+        /// worker threads on the DAQ frames (ratio against MB/s: how ADR 0013 chose).
+        #[arg(long)]
+        zstd_sweep: bool,
     },
     /// Film coefficient set at the Zhou point and rig simulation speed.
     Physics {
@@ -78,7 +82,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
         BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
         BenchWhat::Diagnose { repeats, seconds } => crate::bench_diagnose::run(repeats, seconds),
-        BenchWhat::Bag { seconds } => crate::bench_bag::run(seconds),
+        BenchWhat::Bag { seconds, zstd_sweep } => crate::bench_bag::run(seconds, zstd_sweep),
     }
 }
 

@@ -13,6 +13,8 @@ use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::effects::{ChannelDelay, FilmRelaxation, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
 
+use oilfilm_nodes::harness::Input;
+
 use crate::RigSource;
 
 /// A progress line on stderr, only when stderr is a terminal.
@@ -334,27 +336,73 @@ fn print_identification(name: &str, id: &Identification) {
     }
 }
 
+/// Whether a bag topic is an input of the re-analysis: the DAQ frames and the rig status
+/// (what else a bag holds, e.g. the conditioned frames, is neither read nor decoded).
+fn is_input(_topic: &str, type_name: &str) -> bool {
+    use oilfilm_msgs::RosMessage;
+    type_name == oilfilm_msgs::DaqFrame::TYPE_NAME || type_name == oilfilm_msgs::RigStatus::TYPE_NAME
+}
+
+fn decode_input(m: &oilfilm_bag::MessageRef) -> oilfilm_bag::Result<Input> {
+    use oilfilm_msgs::RosMessage;
+    Ok(if m.type_name == oilfilm_msgs::DaqFrame::TYPE_NAME { Input::Frame(m.decode()?) } else { Input::Status(m.decode()?) })
+}
+
+/// Threads that decompress and decode a bag's chunks when nothing else runs: one per core.
+pub fn reader_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Threads that decompress and decode a bag's chunks while this thread conditions the
+/// frames: the other cores (at least one).
+pub fn reader_threads_beside_analysis() -> usize {
+    reader_threads().saturating_sub(1).max(1)
+}
+
 /// The DAQ frames and rig status of a bag, in log-time order: what `oilfilm identify BAG`
-/// feeds the conditioner and estimator (`oilfilm bench bag` times the same path).
-pub fn read_bag_inputs(dir: &std::path::Path) -> Result<(Vec<oilfilm_msgs::DaqFrame>, Vec<oilfilm_msgs::RigStatus>)> {
+/// feeds the conditioner and estimator, all decoded first (tests and the benchmark's
+/// read-only row; `identify` streams them, [`reanalyse_bag`]).
+pub fn read_bag_inputs(dir: &std::path::Path, threads: usize) -> Result<(Vec<oilfilm_msgs::DaqFrame>, Vec<oilfilm_msgs::RigStatus>)> {
     let bag = oilfilm_bag::Bag::open(dir)?;
     let (mut frames, mut status) = (Vec::new(), Vec::new());
-    for m in bag.messages()? {
-        // Only the conditioner's and estimator's inputs are decoded (what else the bag holds,
-        // e.g. the conditioned frames, would cost as much again to decode for nothing).
-        if !matches!(&*m.type_name, <oilfilm_msgs::DaqFrame as oilfilm_msgs::RosMessage>::TYPE_NAME | <oilfilm_msgs::RigStatus as oilfilm_msgs::RosMessage>::TYPE_NAME) {
-            continue;
+    bag.read_topics(&is_input, &decode_input, threads, |inputs| {
+        for i in inputs {
+            match i {
+                Input::Frame(f) => frames.push(f),
+                Input::Status(s) => status.push(s),
+            }
         }
-        match m.decode_ours()? {
-            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
-            oilfilm_bag::OilfilmMessage::RigStatus(s) => status.push(s),
-            _ => {}
-        }
-    }
+    })?;
     if frames.is_empty() {
         bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
     }
     Ok((frames, status))
+}
+
+/// A bag's DAQ frames and rig status through a fresh conditioner and estimator
+/// (`harness::reanalyse_stream`), the frames conditioned on this thread as worker threads
+/// read and decode the chunks after them. Returns what the estimator published and how many
+/// frames and status messages went in.
+pub fn reanalyse_bag(
+    dir: &std::path::Path,
+    rig: &RigConfig,
+    conditioner: &oilfilm_nodes::conditioner::ConditionerParams,
+    estimator: &oilfilm_nodes::estimator::EstimatorParams,
+    threads: usize,
+) -> Result<(oilfilm_nodes::harness::Recording, usize, usize)> {
+    let bag = oilfilm_bag::Bag::open(dir)?;
+    let (mut frames, mut status) = (0usize, 0usize);
+    let out = bag.read_topics(&is_input, &decode_input, threads, |inputs| {
+        let counted = inputs.inspect(|i| match i {
+            Input::Frame(_) => frames += 1,
+            Input::Status(_) => status += 1,
+        });
+        oilfilm_nodes::harness::reanalyse_stream(rig, conditioner, estimator, counted)
+    })??;
+    if frames == 0 {
+        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
+    }
+    Ok((out, frames, status))
 }
 
 /// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
@@ -401,13 +449,12 @@ fn identify_bag(args: &IdentifyArgs) -> Result<()> {
     if args.no_deskew {
         bail!("{name}: --no-deskew is for ASCII records; for a bag set `deskew: false` in the conditioner's params");
     }
-    let (frames, status) = read_bag_inputs(&args.file)?;
-    let out = oilfilm_nodes::harness::reanalyse(&rig, &conditioner, &estimator, &frames, &status)?;
+    let (out, frames, status) = reanalyse_bag(&args.file, &rig, &conditioner, &estimator, reader_threads_beside_analysis())?;
     if args.json {
         let doc = serde_json::json!({
             "bag": name,
             "frame": pipeline::FRAME,
-            "frames": frames.len(),
+            "frames": frames,
             "conditioner": conditioner,
             "estimator": estimator,
             "estimates": out.estimates,
@@ -415,7 +462,7 @@ fn identify_bag(args: &IdentifyArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
-    println!("{name}: {} DAQ frames, {} rig status messages through the node conditioner and estimator", frames.len(), status.len());
+    println!("{name}: {frames} DAQ frames, {status} rig status messages through the node conditioner and estimator");
     println!("frame: {}", pipeline::FRAME);
     for e in &out.estimates {
         crate::launch::print_estimate(e);

@@ -109,14 +109,53 @@ pub fn reanalyse(
     frames: &[DaqFrame],
     status: &[RigStatus],
 ) -> Result<Recording, NodeError> {
+    let inputs = status.iter().cloned().map(Input::Status).chain(frames.iter().cloned().map(Input::Frame));
+    reanalyse_stream(rig, conditioner, estimator, inputs)
+}
+
+/// One recorded input of the re-analysis, in the order read.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    Frame(DaqFrame),
+    Status(RigStatus),
+}
+
+/// [`reanalyse`] on inputs as they arrive (e.g. decoded from a bag on other threads): each
+/// frame goes through the conditioner when it comes, status messages are kept for the
+/// estimator, which then takes all of them before the conditioned frames, as [`reanalyse`]
+/// does. The result is [`reanalyse`]'s for the same frames and status, bit for bit.
+pub fn reanalyse_stream(
+    rig: &RigConfig,
+    conditioner: &ConditionerParams,
+    estimator: &EstimatorParams,
+    inputs: impl IntoIterator<Item = Input>,
+) -> Result<Recording, NodeError> {
     let mut cond = ConditionerCore::new(rig.clone(), conditioner)?;
     let mut est = EstimatorCore::new(rig.clone(), estimator.clone())?;
-    let mut frames_in = Replay::new(frames.iter().cloned());
-    let mut status_in = Replay::new(status.iter().cloned());
+    let mut frames_in = Inputs { inputs: inputs.into_iter(), status: Vec::new() };
     let conditioned = Bus::<ConditionedFrame>::new();
     let (mut rec, mut es_in, mut co_out) = (conditioned.subscriber(), conditioned.subscriber(), conditioned.publisher());
     let mut estimates = Collect::default();
     poll::conditioner(&mut cond, &mut ConditionerPorts { frames: &mut frames_in, conditioned: &mut co_out })?;
+    let mut status_in = Replay::new(frames_in.status);
     poll::estimator(&mut est, &mut EstimatorPorts { conditioned: &mut es_in, status: &mut status_in, estimates: &mut estimates })?;
     Ok(Recording { conditioned: rec.drain(), estimates: estimates.0, ..Recording::default() })
+}
+
+/// The frames of a stream of inputs, as a port; the status messages met on the way are kept.
+struct Inputs<I> {
+    inputs: I,
+    status: Vec<RigStatus>,
+}
+
+impl<I: Iterator<Item = Input>> crate::ports::Receive<DaqFrame> for Inputs<I> {
+    fn receive(&mut self) -> Result<Option<DaqFrame>, NodeError> {
+        for input in self.inputs.by_ref() {
+            match input {
+                Input::Frame(f) => return Ok(Some(f)),
+                Input::Status(s) => self.status.push(s),
+            }
+        }
+        Ok(None)
+    }
 }

@@ -11,8 +11,9 @@
 //! * Each topic is subscribed with the QoS its publisher offers ([`crate::topics`]), and that
 //!   QoS is what the bag records as `offered_qos_profiles`, so `ros2 bag play` (and ours)
 //!   republish with it.
-//! * A crash loses at most the chunk being filled: the writer closes a chunk every
-//!   `chunk_size` bytes or 1 s of log time and hands it to the OS then.
+//! * A crash loses at most the chunk being filled of each topic (each topic has chunks of
+//!   its own): the writer closes a topic's chunk at `chunk_size` bytes or once it is 1 s of
+//!   log time old and hands it to the OS then; so at most the last ~1 s of each topic.
 //!
 //! The core owns no port and no clock: [`poll`] takes what waits on the inputs and stamps
 //! it with the clock it is given.

@@ -70,13 +70,17 @@ fn sigkill_mid_chunk_loses_at_most_the_open_chunk() {
         .expect("start oilfilm-recorder");
     let mut graph = Supervisor::start(&[node("exciter", &[]), node("daq", &["rate_factor:=1.0"])], &bin_dir()).unwrap();
 
-    // Wait for three complete chunks (about 3 s of recording at the default 1 s chunks).
+    // Wait for three complete chunks of DAQ frames (about 3 s of recording at the default
+    // 1 s chunks; each topic has chunks of its own, so count the frames they hold).
     let deadline = Instant::now() + Duration::from_secs(60);
     let mut chunks = 0;
     while Instant::now() < deadline {
         if let Ok(bytes) = std::fs::read(&file) {
-            chunks = oilfilm_bag::scan::scan(&bytes).chunks;
-            if chunks >= 3 {
+            let scanned = oilfilm_bag::scan::scan(&bytes);
+            let daq = scanned.channels.iter().find(|(_, c)| c.topic == "/oilfilm/daq/frames").map(|(&id, _)| id);
+            let frames = scanned.messages.iter().filter(|m| Some(m.channel_id) == daq).count();
+            chunks = scanned.chunks;
+            if frames >= 25 {
                 break;
             }
         }
@@ -85,7 +89,7 @@ fn sigkill_mid_chunk_loses_at_most_the_open_chunk() {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert!(chunks >= 3, "only {chunks} chunk(s) written in 60 s");
+    assert!(chunks >= 3, "only {chunks} chunk(s), fewer than 25 frames, written in 60 s");
     // Let the next chunk fill for a part of a second, so the kill lands mid-chunk.
     std::thread::sleep(Duration::from_millis(600));
     let killed_at = Stamp::now();

@@ -64,10 +64,12 @@ def killed_bag():
     ]
     try:
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not (mcap_file.exists() and complete_chunks(mcap_file) >= 3):
+        # Each topic (command, frames, status) has chunks of its own: nine complete chunks
+        # are about three seconds, three chunks of DAQ frames.
+        while time.monotonic() < deadline and not (mcap_file.exists() and complete_chunks(mcap_file) >= 9):
             assert recorder.poll() is None, "the recorder died by itself"
             time.sleep(0.1)
-        assert complete_chunks(mcap_file) >= 3, "three chunks not written in 60 s"
+        assert complete_chunks(mcap_file) >= 9, "nine chunks not written in 60 s"
         time.sleep(0.6)  # the kill lands inside the next chunk
         recorder.send_signal(signal.SIGKILL)
         recorder.wait(timeout=10)

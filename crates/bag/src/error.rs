@@ -20,8 +20,10 @@ pub enum BagError {
     Metadata { path: PathBuf, what: String },
 
     /// A message's CDR does not decode as its topic's type.
-    #[error("{}: message {index} on {topic} (log time {log_time} ns): {source}", path.display())]
-    Decode { path: PathBuf, topic: String, index: u64, log_time: u64, source: oilfilm_msgs::CdrError },
+    /// `index` counts the file's messages, or the chunk's when `chunk_offset` names it (a
+    /// reader that skips chunks does not know the file's count).
+    #[error("{}: message {index}{} on {topic} (log time {log_time} ns): {source}", path.display(), chunk_offset.map(|o| format!(" of the chunk at byte {o}")).unwrap_or_default())]
+    Decode { path: PathBuf, topic: String, index: u64, chunk_offset: Option<u64>, log_time: u64, source: Box<oilfilm_msgs::CdrError> },
 
     /// The caller asked for something the bag or writer cannot do (unknown topic id, a
     /// type this crate has no definition for, a message of another type).

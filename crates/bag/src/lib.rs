@@ -5,6 +5,8 @@
 //!   on close.
 //! * [`Bag`]: reads a bag's messages (topic, type, log time, CDR bytes) in log-time order and
 //!   decodes our types ([`BagMessage::decode`], [`BagMessage::decode_ours`]).
+//! * [`Bag::read_topics`]: only the chunks holding the wanted topics (from the summary),
+//!   decompressed and decoded on worker threads while the caller consumes them in order.
 //! * [`recover`]: a bag whose writer was killed (no footer, no metadata.yaml) rewritten into a
 //!   valid bag holding every message of every complete chunk.
 //!
@@ -18,11 +20,13 @@ pub mod metadata;
 pub mod reader;
 pub mod recover;
 pub mod scan;
+pub mod select;
 pub mod writer;
 
 pub use error::{BagError, Result};
 pub use metadata::{Duration, FileInfo, MetadataFile, QosProfile, StartingTime};
 pub use reader::{Bag, BagMessage, OilfilmMessage};
+pub use select::MessageRef;
 pub use recover::{recover, FileRecovery, Recovery};
 pub use writer::{BagWriter, Compression, TopicId, TopicSpec, WriterOptions};
 

@@ -55,8 +55,9 @@ impl BagMessage {
             path: self.file.to_path_buf(),
             topic: self.topic.to_string(),
             index: self.index,
+            chunk_offset: None,
             log_time: self.log_time,
-            source,
+            source: Box::new(source),
         })
     }
 

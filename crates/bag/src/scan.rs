@@ -225,28 +225,7 @@ impl Staged {
 
 /// Decompresses a chunk, checks its CRC and splits it into records.
 fn read_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<Owned>, String> {
-    let size = header.uncompressed_size;
-    let records: std::borrow::Cow<[u8]> = match header.compression.as_str() {
-        "" => std::borrow::Cow::Borrowed(data),
-        "zstd" => {
-            let d = zstd::stream::read::Decoder::new(data).map_err(|e| format!("zstd chunk: {e}"))?;
-            std::borrow::Cow::Owned(read_limited(d, size).map_err(|e| format!("zstd chunk: {e}"))?)
-        }
-        "lz4" => {
-            let d = lz4::Decoder::new(data).map_err(|e| format!("lz4 chunk: {e}"))?;
-            std::borrow::Cow::Owned(read_limited(d, size).map_err(|e| format!("lz4 chunk: {e}"))?)
-        }
-        other => return Err(format!("chunk compression `{other}` is not zstd, lz4 or none")),
-    };
-    if records.len() as u64 != size {
-        return Err(format!("chunk holds {} bytes uncompressed, its header says {size}", records.len()));
-    }
-    if header.uncompressed_crc != 0 {
-        let crc = crc32fast::hash(&records);
-        if crc != header.uncompressed_crc {
-            return Err(format!("chunk CRC {crc:#010x} differs from its header's {:#010x}", header.uncompressed_crc));
-        }
-    }
+    let records = decompress_chunk(header, data)?;
     let mut out = Vec::new();
     let mut at = 0usize;
     while at < records.len() {
@@ -269,10 +248,46 @@ fn read_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<Ow
     Ok(out)
 }
 
+/// A chunk's records: decompressed (zstd, lz4 or none), their size and CRC checked against
+/// the chunk header.
+pub(crate) fn decompress_chunk<'a>(header: &mcap::records::ChunkHeader, data: &'a [u8]) -> Result<std::borrow::Cow<'a, [u8]>, String> {
+    use std::borrow::Cow;
+    /// Up to this size a zstd chunk is decompressed in one call into a buffer of the
+    /// header's size (not touched beyond what the frame fills); a larger claim streams into
+    /// a growing buffer instead of being trusted for an allocation.
+    const BULK_MAX: u64 = 1 << 30;
+    let size = header.uncompressed_size;
+    let records: Cow<[u8]> = match header.compression.as_str() {
+        "" => Cow::Borrowed(data),
+        "zstd" if size <= BULK_MAX => Cow::Owned(zstd::bulk::decompress(data, size as usize).map_err(|e| format!("zstd chunk: {e}"))?),
+        "zstd" => {
+            let d = zstd::stream::read::Decoder::new(data).map_err(|e| format!("zstd chunk: {e}"))?;
+            Cow::Owned(read_limited(d, size).map_err(|e| format!("zstd chunk: {e}"))?)
+        }
+        "lz4" => {
+            let d = lz4::Decoder::new(data).map_err(|e| format!("lz4 chunk: {e}"))?;
+            Cow::Owned(read_limited(d, size).map_err(|e| format!("lz4 chunk: {e}"))?)
+        }
+        other => return Err(format!("chunk compression `{other}` is not zstd, lz4 or none")),
+    };
+    if records.len() as u64 != size {
+        return Err(format!("chunk holds {} bytes uncompressed, its header says {size}", records.len()));
+    }
+    if header.uncompressed_crc != 0 {
+        let crc = crc32fast::hash(&records);
+        if crc != header.uncompressed_crc {
+            return Err(format!("chunk CRC {crc:#010x} differs from its header's {:#010x}", header.uncompressed_crc));
+        }
+    }
+    Ok(records)
+}
+
 /// Reads at most `size` bytes (and one more, to notice a longer stream), growing the buffer
 /// as data arrives rather than trusting the header's size for an allocation.
 fn read_limited(r: impl Read, size: u64) -> std::io::Result<Vec<u8>> {
-    let mut out = Vec::new();
+    // A buffer of the claimed size up to 64 MiB (more than any chunk of ours) saves the
+    // copies of growing it; beyond that it grows as data arrives.
+    let mut out = Vec::with_capacity(size.min(64 << 20) as usize + 1);
     r.take(size.saturating_add(1)).read_to_end(&mut out)?;
     Ok(out)
 }

@@ -4,6 +4,13 @@
 //! Each file is a chunked MCAP file with profile `ros2`; a chunk is closed when it reaches
 //! `chunk_size` bytes or spans `max_chunk_duration_ns` of log time, and flushed to the OS
 //! then, so a writer killed at any moment loses at most the chunk it was filling.
+//!
+//! With `chunk_per_topic` (the default) each topic's messages are gathered in memory and
+//! written as chunks of that topic alone, so a reader that wants some topics (re-analysis:
+//! the DAQ frames and rig status) decompresses only their chunks. A topic's chunk is closed
+//! when it holds `chunk_size` bytes or once any message is `max_chunk_duration_ns` of log
+//! time after its first, so a killed writer loses at most the last
+//! `max_chunk_duration_ns` of each topic (one chunk per topic). ADR 0013.
 
 use std::cell::Cell;
 use std::fs::{self, File};
@@ -40,6 +47,25 @@ pub struct WriterOptions {
     pub split_duration_ns: Option<u64>,
     /// `ros_distro` in metadata.yaml.
     pub ros_distro: String,
+    /// zstd level (negative: zstd's fast levels) or lz4 acceleration level; ignored without
+    /// compression. See [`WriterOptions::DEFAULT_ZSTD_LEVEL`].
+    pub compression_level: i32,
+    /// zstd worker threads of the mcap crate (0: compress on the writing thread).
+    pub compression_threads: u32,
+    /// Chunks of one topic each (see the module docs); `false`: chunks hold the messages of
+    /// every topic in the order written.
+    pub chunk_per_topic: bool,
+}
+
+impl WriterOptions {
+    /// zstd level of the recorder: 1 (ADR 0013: the fast levels were not reliably faster on
+    /// the rig's DAQ frames, and level -1 makes a chunk of one small message larger than the
+    /// message, which `pymcap-cli doctor` warns about).
+    pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
+    /// zstd worker threads of the recorder: none, compression on the writing thread (ADR
+    /// 0013: a chunk of 1 s is smaller than one zstd job, so workers only add hand-offs; one
+    /// worker was the slowest setting in every sweep).
+    pub const DEFAULT_COMPRESSION_THREADS: u32 = 0;
 }
 
 impl Default for WriterOptions {
@@ -51,6 +77,9 @@ impl Default for WriterOptions {
             split_size_bytes: None,
             split_duration_ns: None,
             ros_distro: "kilted".into(),
+            compression_level: Self::DEFAULT_ZSTD_LEVEL,
+            compression_threads: Self::DEFAULT_COMPRESSION_THREADS,
+            chunk_per_topic: true,
         }
     }
 }
@@ -115,6 +144,24 @@ struct OpenFile {
     count: u64,
     chunk_start: Option<u64>,
     len: Rc<Cell<u64>>,
+    /// Each topic's messages not yet written (`chunk_per_topic`).
+    pending: Vec<Pending>,
+}
+
+/// One topic's messages gathered for its next chunk: their bytes back to back.
+#[derive(Default)]
+struct Pending {
+    data: Vec<u8>,
+    /// Sequence, log time and end in `data` of each message.
+    messages: Vec<(u32, u64, usize)>,
+    /// The earliest log time among them.
+    first: Option<u64>,
+}
+
+impl Pending {
+    fn first_time(&self) -> Option<u64> {
+        self.first
+    }
 }
 
 /// Writes one bag. Call [`BagWriter::close`] at the end; dropping it closes it too (errors
@@ -169,6 +216,7 @@ impl BagWriter {
             let ch = add_channel(&mut f.writer, &spec, &hash).map_err(mcap_err(&f.path))?;
             f.channels.push(ch);
             f.sequences.push(0);
+            f.pending.push(Pending::default());
         }
         self.topics.push(spec);
         self.hashes.push(hash);
@@ -189,19 +237,37 @@ impl BagWriter {
         if self.should_split(log_time) {
             self.split()?;
         }
-        let max_chunk = self.options.max_chunk_duration_ns;
+        let (max_chunk, chunk_size, per_topic) = (self.options.max_chunk_duration_ns, self.options.chunk_size, self.options.chunk_per_topic);
         let Some(f) = self.current.as_mut() else {
             return Err(BagError::Usage { path: self.dir.clone(), what: "the bag is closed".into() });
         };
-        if f.chunk_start.is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
-            f.writer.flush().map_err(mcap_err(&f.path))?;
-            f.chunk_start = None;
-        }
         let sequence = f.sequences[topic.0];
         f.sequences[topic.0] = sequence.wrapping_add(1);
-        let header = MessageHeader { channel_id: f.channels[topic.0], sequence, log_time, publish_time: log_time };
-        f.writer.write_to_known_channel(&header, cdr).map_err(mcap_err(&f.path))?;
-        f.chunk_start.get_or_insert(log_time);
+        if per_topic {
+            let p = &mut f.pending[topic.0];
+            p.data.extend_from_slice(cdr);
+            p.messages.push((sequence, log_time, p.data.len()));
+            p.first = Some(p.first.map_or(log_time, |t| t.min(log_time)));
+            let full = p.data.len() as u64 >= chunk_size;
+            if full {
+                f.write_pending(topic.0)?;
+            }
+            // Any topic whose chunk now spans the longest a chunk may: written, so a crash
+            // loses at most that much of each topic.
+            for t in 0..f.pending.len() {
+                if f.pending[t].first_time().is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
+                    f.write_pending(t)?;
+                }
+            }
+        } else {
+            if f.chunk_start.is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
+                f.writer.flush().map_err(mcap_err(&f.path))?;
+                f.chunk_start = None;
+            }
+            let header = MessageHeader { channel_id: f.channels[topic.0], sequence, log_time, publish_time: log_time };
+            f.writer.write_to_known_channel(&header, cdr).map_err(mcap_err(&f.path))?;
+            f.chunk_start.get_or_insert(log_time);
+        }
         f.first = Some(f.first.map_or(log_time, |t| t.min(log_time)));
         f.last = f.last.max(log_time);
         f.count += 1;
@@ -268,22 +334,27 @@ impl BagWriter {
                 Compression::None => None,
             })
             .chunk_size(Some(self.options.chunk_size))
-            // zstd level 1 (lz4 stays in its fast mode): on the rig's DAQ frames it is faster than the
-            // default level 3 and compresses them as well (`oilfilm bench bag`: 0.26 of the
-            // payload against 0.29).
-            .compression_level(1);
+            .compression_threads(self.options.compression_threads)
+            .compression_level(level_for_mcap(self.options.compression, self.options.compression_level));
         let mut writer = options.create(sink).map_err(mcap_err(&path))?;
         let mut channels = Vec::with_capacity(self.topics.len());
         for (t, hash) in self.topics.iter().zip(&self.hashes) {
             channels.push(add_channel(&mut writer, t, hash).map_err(mcap_err(&path))?);
         }
         let sequences = vec![0; channels.len()];
-        self.current = Some(OpenFile { path, writer, channels, sequences, first: None, last: 0, count: 0, chunk_start: None, len });
+        let pending = channels.iter().map(|_| Pending::default()).collect();
+        self.current = Some(OpenFile { path, writer, channels, sequences, first: None, last: 0, count: 0, chunk_start: None, len, pending });
         Ok(())
     }
 
     fn finish_current(&mut self) -> Result<()> {
         let Some(mut f) = self.current.take() else { return Ok(()) };
+        // The topics' last chunks, the earliest first.
+        let mut order: Vec<(u64, usize)> = f.pending.iter().enumerate().filter_map(|(t, p)| p.first_time().map(|s| (s, t))).collect();
+        order.sort_unstable();
+        for (_, t) in order {
+            f.write_pending(t)?;
+        }
         f.writer.finish().map_err(mcap_err(&f.path))?;
         let mut sink = f.writer.into_inner();
         sink.flush().map_err(io(&f.path))?;
@@ -321,6 +392,25 @@ impl BagWriter {
 }
 
 impl OpenFile {
+    /// Writes a topic's gathered messages as a chunk of their own and hands it to the OS.
+    fn write_pending(&mut self, topic: usize) -> Result<()> {
+        let p = &mut self.pending[topic];
+        if p.messages.is_empty() {
+            return Ok(());
+        }
+        let channel_id = self.channels[topic];
+        let mut start = 0;
+        for &(sequence, log_time, end) in &p.messages {
+            let header = MessageHeader { channel_id, sequence, log_time, publish_time: log_time };
+            self.writer.write_to_known_channel(&header, &p.data[start..end]).map_err(mcap_err(&self.path))?;
+            start = end;
+        }
+        p.data.clear();
+        p.messages.clear();
+        p.first = None;
+        self.writer.flush().map_err(mcap_err(&self.path))
+    }
+
     /// Bytes written to the file so far (through the buffer).
     fn writer_len(&self) -> u64 {
         self.len.get()
@@ -333,6 +423,16 @@ impl Drop for BagWriter {
             // Best effort: a writer dropped without close still leaves a readable bag.
             let _ = self.finish_current().and_then(|()| self.write_metadata());
         }
+    }
+}
+
+/// The level as the mcap crate takes it: a `u32` that it casts back to `i32` for zstd
+/// (`zstd_encoder`: `compression_level as i32`), so a negative zstd level (a fast level)
+/// goes through as its two's complement; lz4's level is a `u32` (0 = fast mode).
+fn level_for_mcap(compression: Compression, level: i32) -> u32 {
+    match compression {
+        Compression::Zstd => level as u32,
+        Compression::Lz4 | Compression::None => level.max(0) as u32,
     }
 }
 
