@@ -332,12 +332,7 @@ impl SavitzkyGolayDerivative {
             j += 8;
         }
         for (j, o) in dst.iter_mut().enumerate().skip(body) {
-            let i = j + M;
-            let mut acc = c[0] * (x[i + 1] - x[i - 1]);
-            for k in 2..M + 1 {
-                acc += c[k - 1] * (x[i + k] - x[i - k]);
-            }
-            *o = acc;
+            *o = interior_point(&c, x, j + M);
         }
     }
 
@@ -390,12 +385,7 @@ impl SavitzkyGolayDerivative {
             o.copy_from_slice(&acc);
         }
         for (j, o) in rest.iter_mut().enumerate() {
-            let i = lanes + j + M;
-            let mut acc = c[0] * (x[i + 1] - x[i - 1]);
-            for k in 2..M + 1 {
-                acc += c[k - 1] * (x[i + k] - x[i - k]);
-            }
-            *o = acc;
+            *o = interior_point(&c, x, lanes + j + M);
         }
     }
 
@@ -525,4 +515,15 @@ pub fn fir_derivative(
         return Err(super::non_finite_error(channel, i, column[i], "sample"));
     }
     SavitzkyGolayDerivative::new(half_length, sample_rate_hz)?.apply(column)
+}
+
+/// One interior output, `sum_k c[k-1] (x[i+k] - x[i-k])` for k = 1..=M, summed in the order
+/// the vector kernels use (so their scalar tails give the same bits as their lanes).
+#[inline(always)]
+fn interior_point<const M: usize>(c: &[f64; M], x: &[f64], i: usize) -> f64 {
+    let mut acc = c[0] * (x[i + 1] - x[i - 1]);
+    for k in 2..M + 1 {
+        acc += c[k - 1] * (x[i + k] - x[i - k]);
+    }
+    acc
 }
