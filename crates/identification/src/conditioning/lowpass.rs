@@ -56,6 +56,9 @@
 //! AVX2 it is done by 4 x 4 register transposes ([`transpose8`]). Ten columns of 300 000
 //! samples: 7.4-8.0 ms against 8.9-9.8 ms sample by sample, in the same run on the shared
 //! development machine. The only scratch memory is the two reflections and one tile.
+//! [`super::condition`] feeds the forward pass from its front end tile by tile
+//! (`filtfilt8_fed`: the same operations in the same order), so the eight columns are not
+//! written out by the front end and read straight back by the filter.
 
 use oilfilm_physics::daq::ChannelId;
 
@@ -173,6 +176,15 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
         }
         v
     }
+}
+
+/// What [`Butterworth::filtfilt8_fed`] filters: `produce(a, b, cols)` writes samples `a..b`
+/// of the eight columns. A trait with an `#[inline(always)]` method rather than a closure,
+/// so that the producer's code is compiled into the caller's `target_feature` function (a
+/// closure is a function of its own, compiled without the caller's features).
+pub(crate) trait Produce8 {
+    type Error;
+    fn produce(&mut self, from: usize, to: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), Self::Error>;
 }
 
 /// Samples per tile of [`cascade_pass`] (a tile of eight lanes is 2 kB, L1-resident).
@@ -621,6 +633,141 @@ impl Butterworth {
                 [a] => finite &= self.filtfilt_lanes::<1>([a], scratch),
                 _ => {}
             }
+        }
+        Ok(finite)
+    }
+
+    /// [`Butterworth::filtfilt_many_in_place_finite`] on eight columns of `n >= 2` samples
+    /// that `producer` writes as the filter goes: `produce(a, b, cols)` must write samples
+    /// `a..b` of all eight columns; it is called with adjacent ranges of at most `step`
+    /// samples (the first may be longer: it covers the left reflection's `pad + 1` samples)
+    /// that cover `0..n` in order, and an error from it is returned as is. Each range goes
+    /// through the forward pass while it is still in cache, instead of being written out by
+    /// the producer and read back by the filter.
+    ///
+    /// The same operations in the same order as the two-step version, so the same result
+    /// bit for bit: the reflections are formed from the unfiltered samples (the right one's
+    /// are copied aside before their range is filtered), each group of sections starts in
+    /// steady state for its first reflected input exactly as there, and a section's
+    /// recursion does not care where its input was cut into ranges (its state is carried).
+    #[inline(always)]
+    pub(crate) fn filtfilt8_fed<P: Produce8>(
+        &self,
+        cols: [&mut [f64]; 8],
+        scratch: &mut Vec<f64>,
+        step: usize,
+        producer: &mut P,
+    ) -> Result<bool, P::Error> {
+        let mut produce = |a, b, cols: &mut [&mut [f64]; 8]| producer.produce(a, b, cols);
+        const L: usize = 8;
+        let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
+        let mut cols = cols.map(|c| &mut c[..n]);
+        if n < 2 {
+            // Nothing to filter (the callers check the length first): produce and leave.
+            produce(0, n, &mut cols)?;
+            return Ok(cols.iter().all(|c| c.iter().all(|v| v.is_finite())));
+        }
+        let step = step.max(1);
+        let pad = self.settling.min(n - 1);
+        scratch.clear();
+        scratch.resize(2 * pad * L, 0.0);
+        let (frames, _) = scratch.as_chunks_mut::<L>();
+        let (left, right) = frames.split_at_mut(pad);
+
+        // The first range reaches sample `pad`, which the left reflection needs unfiltered.
+        let mut produced = (pad + 1).max(step).min(n);
+        produce(0, produced, &mut cols)?;
+        for i in 1..=pad {
+            for l in 0..L {
+                left[pad - i][l] = 2.0 * cols[l][0] - cols[l][i];
+            }
+        }
+        // Each group of sections in steady state for its first input (the previous group's
+        // first output of the left reflection), run over the left reflection.
+        let mut groups = self.sections.chunks_exact(FUSED);
+        let mut states: Vec<Cascade<'_, L, FUSED>> = Vec::with_capacity(MAX_ORDER / FUSED);
+        for g in &mut groups {
+            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
+                let x0 = left.first().copied().unwrap_or(std::array::from_fn(|l| cols[l][0]));
+                let mut st = Cascade::steady(g, x0);
+                for f in left.iter_mut() {
+                    *f = st.step(*f);
+                }
+                states.push(st);
+            }
+        }
+        let mut last: Option<Cascade<'_, L, 1>> = None;
+        if let Some(s) = groups.remainder().first() {
+            let x0 = left.first().copied().unwrap_or(std::array::from_fn(|l| cols[l][0]));
+            let mut st = Cascade::steady(std::array::from_ref(s), x0);
+            for f in left.iter_mut() {
+                *f = st.step(*f);
+            }
+            last = Some(st);
+        }
+
+        // Forward over each produced range: first copy aside what the right reflection needs
+        // (samples n-1-pad .. n-1, unfiltered), then filter the range.
+        let mut last_sample = [0.0; L];
+        let mut a = 0;
+        loop {
+            let tail = (n - 1 - pad).max(a)..(n - 1).min(produced);
+            for j in tail {
+                for l in 0..L {
+                    right[n - 2 - j][l] = cols[l][j];
+                }
+            }
+            if produced == n {
+                last_sample = std::array::from_fn(|l| cols[l][n - 1]);
+            }
+            let mut sub = cols.each_mut().map(|c| &mut c[a..produced]);
+            let len = produced - a;
+            // Each state copied into a local for the pass: behind the Vec's pointer the
+            // compiler kept it in memory, a load and a store per lane and sample.
+            for st in states.iter_mut() {
+                let mut local = *st;
+                cascade_pass(&mut local, &mut sub, len, false);
+                *st = local;
+            }
+            if let Some(st) = last.as_mut() {
+                let mut local = *st;
+                cascade_pass(&mut local, &mut sub, len, false);
+                *st = local;
+            }
+            if produced == n {
+                break;
+            }
+            a = produced;
+            produced = (a + step).min(n);
+            produce(a, produced, &mut cols)?;
+        }
+        // right[i - 1] held x[n - 1 - i]; the reflection is 2 x[n - 1] - x[n - 1 - i].
+        for f in right.iter_mut() {
+            for l in 0..L {
+                f[l] = 2.0 * last_sample[l] - f[l];
+            }
+        }
+        for st in states.iter_mut() {
+            for f in right.iter_mut() {
+                *f = st.step(*f);
+            }
+        }
+        if let Some(st) = last.as_mut() {
+            for f in right.iter_mut() {
+                *f = st.step(*f);
+            }
+        }
+
+        // Backward, group after group, as in the two-step version.
+        let mut finite = true;
+        let mut groups = self.sections.chunks_exact(FUSED);
+        for g in &mut groups {
+            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
+                finite = backward(g, &mut cols, n, right);
+            }
+        }
+        for s in groups.remainder() {
+            finite = backward(std::array::from_ref(s), &mut cols, n, right);
         }
         Ok(finite)
     }

@@ -500,70 +500,83 @@ struct FrontChannel<'a> {
     interior: Range<usize>,
 }
 
-/// Steps 3, 2, 4 and the linear combinations of steps 5 and 7 for a record of volts, scan
-/// tile by scan tile: each channel is calibrated into L1 and de-skewed from there, its
-/// readings counted against the linear range and for finiteness on the way, and the tile's
-/// ten channels are combined into `out` = `[x, y, tilt_x, tilt_y, frame_x, frame_y, fx
-/// (applied), fy (applied), f3, temperature]`. The same operations in the same order as
-/// [`calibrate::to_si_into`], [`deskew::FractionalDelay::apply_into`],
-/// [`kinematics::mean_and_difference_in_place`] and the applied part of eq. 2, so the same
-/// result bit for bit, with the raw columns read once and each output written once instead
-/// of some twenty passes over memory.
+/// Steps 3, 2, 4, the linear combinations of steps 5 and 7 and step 1 (the low-pass) for a
+/// record of volts, scan tile by scan tile: each channel is calibrated into L1 and de-skewed
+/// from there, its readings counted against the linear range and for finiteness on the way,
+/// the tile's ten channels are combined into `out` = `[x, y, tilt_x, tilt_y, frame_x,
+/// frame_y, fx (applied), fy (applied), f3, temperature]`, and the eight columns with
+/// dynamics go through the low-pass's forward pass while the tile is still in L1
+/// ([`lowpass::Butterworth::filtfilt8_fed`]), then backward. The same operations in the same
+/// order as [`calibrate::to_si_into`], [`deskew::FractionalDelay::apply_into`],
+/// [`kinematics::mean_and_difference_in_place`], the applied part of eq. 2 and
+/// [`lowpass::Butterworth::filtfilt_many_in_place`], so the same result bit for bit, with the
+/// raw columns read once and each output written once per filter direction instead of some
+/// twenty passes over memory.
 ///
-/// Returns `Ok(false)` (and `out` is to be discarded) when a reading is non-finite, does not
+/// Returns `Ok(None)` (and `out` is to be discarded) when a reading is non-finite, does not
 /// convert to a finite value or is out of range, or a calibration or stencil is unusable:
-/// the caller then runs the stages one by one, which report the cause exactly.
+/// the caller then runs the stages one by one, which report the cause exactly. Otherwise
+/// `Ok(Some(finite))`: whether every low-pass output is finite.
+#[allow(clippy::too_many_arguments)]
 fn front_end(
     raw: &RawRecord,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
     mechanics: &Mechanics,
+    lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
-) -> Result<bool, IdentificationError> {
+    scratch: &mut Vec<f64>,
+) -> Result<Option<bool>, IdentificationError> {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature, which was checked on the line above.
-            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, out) };
+            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
         }
     }
-    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
 }
 
 /// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
 /// multiply-add), so the same result bit for bit.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 fn front_end_avx2(
     raw: &RawRecord,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
     mechanics: &Mechanics,
+    lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
-) -> Result<bool, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, out)
+    scratch: &mut Vec<f64>,
+) -> Result<Option<bool>, IdentificationError> {
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn front_end_body(
     raw: &RawRecord,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
     mechanics: &Mechanics,
+    lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
-) -> Result<bool, IdentificationError> {
+    scratch: &mut Vec<f64>,
+) -> Result<Option<bool>, IdentificationError> {
     let len = raw.len();
-    if raw.units != RawUnits::Volts || out.iter().any(|c| c.len() != len) {
-        return Ok(false);
+    if raw.units != RawUnits::Volts || len < 2 || out.iter().any(|c| c.len() != len) {
+        return Ok(None);
     }
     let mut chans = Vec::with_capacity(CHANNEL_COUNT);
     for (&ch, delay) in ChannelId::ALL.iter().zip(delays) {
         let (Some(delay), Some(volts)) = (delay, raw.columns.get(col_of[ch.index()])) else {
-            return Ok(false);
+            return Ok(None);
         };
         let c = calibration.channel(ch)?;
         let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
@@ -571,7 +584,7 @@ fn front_end_body(
             || len < delay.taps()
             || !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite())
         {
-            return Ok(false);
+            return Ok(None);
         }
         let (lo, hi) = range_check::volts_bounds(ch, calibration)?;
         chans.push(FrontChannel {
@@ -584,66 +597,153 @@ fn front_end_body(
             interior: delay.interior(len),
         });
     }
-    let applied = film_force::Applied::new(mechanics);
-    let mut tile = [[0.0; TILE]; CHANNEL_COUNT];
-    let mut input = [0.0; TILE + deskew::MAX_TAPS];
-    let mut bad = 0usize;
-    let mut o0 = 0;
-    while o0 < len {
-        let o1 = (o0 + TILE).min(len);
-        for (c, t) in chans.iter().zip(tile.iter_mut()) {
-            let t = &mut t[..o1 - o0];
-            let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
-            let si = |v: f64| (v - offset) * gain;
-            // `&` and `|`, not `&&`: no branch per reading, so the count vectorises.
-            bad += c.volts[o0..o1]
-                .iter()
-                .map(|&v| (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize)
-                .sum::<usize>();
-            // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
-            // a >= interior.start and b <= interior.end).
-            let a = o0.max(c.interior.start).min(o1);
-            let b = o1.min(c.interior.end).max(a);
-            if a < b {
-                let w = c.delay.weights();
-                let taps = w.len();
-                let i0 = (a as isize + c.delay.stencil_start()) as usize;
-                let i1 = i0 + (b - a) + taps - 1;
-                let x = &mut input[..i1 - i0];
-                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
-                    *x = si(v);
-                }
-                let m = b - a;
-                let dst = &mut t[a - o0..b - o0];
-                for (o, &x) in dst.iter_mut().zip(&x[..m]) {
-                    *o = w[0] * x;
-                }
-                for (j, &wj) in w.iter().enumerate().skip(1) {
-                    for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
-                        *o += wj * x;
-                    }
-                }
-            }
-            for n in (o0..a).chain(b..o1) {
-                t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
-            }
+    let [x, y, tilt_x, tilt_y, hx, hy, fx, fy, load, temp] = out;
+    let dynamic = [&mut x[..], &mut y[..], &mut tilt_x[..], &mut tilt_y[..], &mut hx[..], &mut hy[..], &mut fx[..], &mut fy[..]];
+    let mut producer = FrontTiles {
+        chans: &chans,
+        applied: film_force::Applied::new(mechanics),
+        len,
+        tile: [[0.0; TILE]; CHANNEL_COUNT],
+        input: [0.0; TILE + deskew::MAX_TAPS],
+        load,
+        temp,
+        bad: 0,
+    };
+    let finite = lp.filtfilt8_fed(dynamic, scratch, TILE, &mut producer)?;
+    Ok((producer.bad == 0).then_some(finite))
+}
+
+/// [`front_end`]'s work before the low-pass, tile by tile as the low-pass asks for samples.
+struct FrontTiles<'a, 'b> {
+    chans: &'b [FrontChannel<'a>],
+    applied: film_force::Applied,
+    len: usize,
+    tile: [[f64; TILE]; CHANNEL_COUNT],
+    input: [f64; TILE + deskew::MAX_TAPS],
+    load: &'b mut [f64],
+    temp: &'b mut [f64],
+    /// Readings out of range or not finite so far.
+    bad: usize,
+}
+
+impl lowpass::Produce8 for FrontTiles<'_, '_> {
+    type Error = IdentificationError;
+
+    #[inline(always)]
+    fn produce(&mut self, from: usize, to: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), IdentificationError> {
+        let mut o0 = from;
+        while o0 < to {
+            let o1 = (o0 + TILE).min(to);
+            self.bad += front_tile(self.chans, &self.applied, self.len, o0, o1, &mut self.tile, &mut self.input, cols, self.load, self.temp);
+            o0 = o1;
         }
-        let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &tile;
-        let [x, y, tilt_x, tilt_y, hx, hy, fx, fy, load, temp] = &mut *out;
-        for (i, n) in (o0..o1).enumerate() {
-            [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
-            [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
-            [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
-        }
-        // The temperature is final here (it is not filtered): check it while it is in L1.
-        bad += temperature[..o1 - o0].iter().map(|v| !v.is_finite() as usize).sum::<usize>();
-        hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
-        hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
-        load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
-        temp[o0..o1].copy_from_slice(&temperature[..o1 - o0]);
-        o0 = o1;
+        Ok(())
     }
-    Ok(bad == 0)
+}
+
+/// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
+/// that order (as [`deskew::FractionalDelay::apply_into`]), with `T` taps known at compile
+/// time so each output is summed in registers and stored once (a pass per tap loaded and
+/// stored every output `T` times: the front end was bound by those L1 accesses).
+#[inline(always)]
+fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let Ok(w) = <&[f64; T]>::try_from(w) else {
+        return stencil_passes(w, x, dst);
+    };
+    for (o, xs) in dst.iter_mut().zip(x.windows(T)) {
+        let mut acc = w[0] * xs[0];
+        for j in 1..T {
+            acc += w[j] * xs[j];
+        }
+        *o = acc;
+    }
+}
+
+/// [`stencil`] for any number of taps: a pass over the tile per tap, the same sums.
+#[inline(always)]
+fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let m = dst.len();
+    for (o, &x) in dst.iter_mut().zip(&x[..m]) {
+        *o = w[0] * x;
+    }
+    for (j, &wj) in w.iter().enumerate().skip(1) {
+        for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
+            *o += wj * x;
+        }
+    }
+}
+
+/// One tile `o0..o1` (at most [`TILE`] scans) of [`front_end`] before the low-pass: the
+/// number of readings that are out of range or not finite.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn front_tile(
+    chans: &[FrontChannel<'_>],
+    applied: &film_force::Applied,
+    len: usize,
+    o0: usize,
+    o1: usize,
+    tile: &mut [[f64; TILE]; CHANNEL_COUNT],
+    input: &mut [f64; TILE + deskew::MAX_TAPS],
+    dynamic: &mut [&mut [f64]; 8],
+    load: &mut [f64],
+    temp: &mut [f64],
+) -> usize {
+    let mut bad = 0;
+    for (c, t) in chans.iter().zip(tile.iter_mut()) {
+        let t = &mut t[..o1 - o0];
+        let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
+        let si = |v: f64| (v - offset) * gain;
+        // `&` and `|`, not `&&`: no branch per reading, so the count vectorises. A plain
+        // loop: the iterator's `sum` became a call of its own (`fold`) compiled without the
+        // caller's AVX2 once the low-pass was fed from here.
+        for &v in &c.volts[o0..o1] {
+            bad += (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize;
+        }
+        // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
+        // a >= interior.start and b <= interior.end).
+        let a = o0.max(c.interior.start).min(o1);
+        let b = o1.min(c.interior.end).max(a);
+        if a < b {
+            let w = c.delay.weights();
+            let taps = w.len();
+            let i0 = (a as isize + c.delay.stencil_start()) as usize;
+            let i1 = i0 + (b - a) + taps - 1;
+            let x = &mut input[..i1 - i0];
+            for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                *x = si(v);
+            }
+            let dst = &mut t[a - o0..b - o0];
+            match taps {
+                2 => stencil::<2>(w, x, dst),
+                3 => stencil::<3>(w, x, dst),
+                4 => stencil::<4>(w, x, dst),
+                5 => stencil::<5>(w, x, dst),
+                6 => stencil::<6>(w, x, dst),
+                8 => stencil::<8>(w, x, dst),
+                _ => stencil_passes(w, x, dst),
+            }
+        }
+        for n in (o0..a).chain(b..o1) {
+            t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
+        }
+    }
+    let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &*tile;
+    let [x, y, tilt_x, tilt_y, hx, hy, fx, fy] = dynamic;
+    for (i, n) in (o0..o1).enumerate() {
+        [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
+        [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
+        [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
+    }
+    // The temperature is final here (it is not filtered): check it while it is in L1.
+    for v in &temperature[..o1 - o0] {
+        bad += !v.is_finite() as usize;
+    }
+    hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
+    hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
+    load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
+    temp[o0..o1].copy_from_slice(&temperature[..o1 - o0]);
+    bad
 }
 
 /// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
@@ -765,9 +865,9 @@ pub fn condition_into(
     }
     let valid = trim..n - trim;
 
-    // Per channel: SI, range check on the raw column, deskew; then the low-pass on all ten
-    // together (eight lanes at a time, see `lowpass::Butterworth::filtfilt_many_in_place`).
-    // `tmp` ends up as the velocity `vx`.
+    // Per channel: SI, range check on the raw column, deskew; then the low-pass on the eight
+    // columns with dynamics together (eight lanes, see `lowpass::Butterworth::filtfilt_many_in_place`),
+    // its forward pass fed tile by tile by the front end. `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
     let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
@@ -775,8 +875,9 @@ pub fn condition_into(
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
-    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &mut front)?;
-    if !fused {
+    let mut scratch = Vec::new();
+    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch)?;
+    if fused.is_none() {
         // Something to report (or a record of SI values): the stages one by one.
         let mut si = front;
         for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
@@ -807,7 +908,10 @@ pub fn condition_into(
     }
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n, f3, temperature] = front;
     let mut dynamic = [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, fx_n, fy_n];
-    let filtered_finite = lp.filtfilt_many_in_place_finite(&mut dynamic, &mut Vec::new())?;
+    let filtered_finite = match fused {
+        Some(finite) => finite,
+        None => lp.filtfilt_many_in_place_finite(&mut dynamic, &mut scratch)?,
+    };
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
     // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`), and
@@ -845,7 +949,7 @@ pub fn condition_into(
     // front end the temperature, the low-pass r and the tilt, eq. 2 the force, the
     // differentiator r''); only if one of them saw a non-finite value, or the front end did
     // not run, are the columns searched here, to name the first one.
-    let known_finite = fused && filtered_finite && force_finite && ax_finite && ay_finite;
+    let known_finite = fused.is_some() && filtered_finite && force_finite && ax_finite && ay_finite;
     for (name, col) in [
         ("x_m", &x_m),
         ("y_m", &y_m),
@@ -921,4 +1025,99 @@ pub fn edge_samples(
         }
     }
     Ok(deskew_trim + lp.settling_samples() + 2 * sg.half_length())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oilfilm_physics::daq::DaqConfig;
+
+    /// A volts record of smooth motion plus noise, every reading inside its probe's linear
+    /// range (so the fused front end runs), from a small deterministic generator.
+    fn volts_record(n: usize, calibration: &Calibration, seed: u64) -> RawRecord {
+        let mut state = seed;
+        let mut uniform = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let fs = 5000.0;
+        let columns = ChannelId::ALL
+            .iter()
+            .enumerate()
+            .map(|(k, &ch)| {
+                let (lo, hi) = range_check::volts_bounds(ch, calibration).unwrap();
+                let (lo, hi) = (lo.max(-10.0), hi.min(10.0));
+                let (mid, span) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+                (0..n)
+                    .map(|i| {
+                        let t = i as f64 / fs;
+                        let phase = 2.0 * std::f64::consts::PI * (23.0 + k as f64) * t;
+                        mid + span * (0.3 * phase.sin() + 0.05 * (uniform() - 0.5))
+                    })
+                    .collect()
+            })
+            .collect();
+        RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
+    }
+
+    /// The fused front end (calibration, range check, de-skew, the linear combinations and
+    /// the low-pass's forward pass tile by tile) against the stages run one after the other
+    /// on the same volts: the same bits, at record lengths that cut the tiles and the
+    /// reflections differently (the shortest has fewer samples than the low-pass's reflection
+    /// beyond the edges it trims).
+    #[test]
+    fn fused_front_end_equals_the_stages_bit_for_bit() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let mechanics = Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
+        for (config, n) in [
+            (ConditioningConfig::default(), 1201),
+            (ConditioningConfig::default(), 4099),
+            (ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() }, 3 * TILE * 7 + 5),
+            (ConditioningConfig { lowpass_order: 5, ..ConditioningConfig::default() }, 2600),
+        ] {
+            let raw = volts_record(n, &calibration, n as u64);
+            let c = condition(&raw, &calibration, &mechanics, &config).unwrap();
+            assert!(c.range_violations.is_empty());
+
+            let mut si: Vec<Vec<f64>> = Vec::new();
+            for (&ch, column) in ChannelId::ALL.iter().zip(&raw.columns) {
+                let mut v = vec![0.0; n];
+                calibrate::to_si_into(ch, column, &calibration, &mut v).unwrap();
+                let d = deskew::FractionalDelay::for_offset(calibration.sample_offset_s(ch).unwrap(), raw.sample_rate_hz, config.deskew_taps).unwrap();
+                let mut out = vec![0.0; n];
+                d.apply_into(&v, &mut out).unwrap();
+                si.push(out);
+            }
+            let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature]: [Vec<f64>; 10] = si.try_into().unwrap();
+            kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x).unwrap();
+            kinematics::mean_and_difference_in_place(&mut a_y, &mut b_y).unwrap();
+            film_force::applied_in_place(&mut f1, &mut f2, &f3, &mechanics).unwrap();
+            let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, raw.sample_rate_hz).unwrap();
+            let mut dynamic = vec![a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2];
+            lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new()).unwrap();
+            // eq. 2's inertial term, on the conditioner's own housing acceleration.
+            let m = mechanics.housing_mass_kg;
+            for (f, a) in dynamic[6].iter_mut().zip(&c.housing_ax_m_s2) {
+                *f -= m * a;
+            }
+            for (f, a) in dynamic[7].iter_mut().zip(&c.housing_ay_m_s2) {
+                *f -= m * a;
+            }
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+            for (name, fused, staged) in [
+                ("x_m", &c.x_m, &dynamic[0]),
+                ("y_m", &c.y_m, &dynamic[1]),
+                ("tilt_x_m", &c.tilt_x_m, &dynamic[2]),
+                ("tilt_y_m", &c.tilt_y_m, &dynamic[3]),
+                ("housing_x_m", &c.housing_x_m, &dynamic[4]),
+                ("housing_y_m", &c.housing_y_m, &dynamic[5]),
+                ("fx_n", &c.fx_n, &dynamic[6]),
+                ("fy_n", &c.fy_n, &dynamic[7]),
+                ("static_load_n", &c.static_load_n, &f3),
+                ("temperature_c", &c.temperature_c, &temperature),
+            ] {
+                assert!(bits(fused) == bits(staged), "{name} differs (n = {n}, {config:?})");
+            }
+        }
+    }
 }
