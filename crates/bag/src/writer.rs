@@ -1,9 +1,15 @@
 //! The rosbag2 bag writer: a directory `NAME/` holding `NAME_0.mcap`, `NAME_1.mcap`, ... and
 //! `metadata.yaml`, written when a file is closed (on split and on close).
 //!
-//! Each file is a chunked MCAP file with profile `ros2`; a chunk is closed when it reaches
-//! `chunk_size` bytes or spans `max_chunk_duration_ns` of log time, and flushed to the OS
-//! then, so a writer killed at any moment loses at most the chunk it was filling.
+//! Each file is a chunked MCAP file with profile `ros2`, framed here (`records`): header,
+//! schemas and channels, chunks each followed by its message indexes, data end with the
+//! data-section CRC, a summary (schemas, channels, statistics, chunk indexes, summary
+//! offsets) and the footer with the summary CRC. A chunk is closed when it reaches
+//! `chunk_size` bytes or spans `max_chunk_duration_ns` of log time and handed to
+//! `compression_threads` workers (`chunks`), which compress it and put it in the file, in
+//! the order chunks were closed, and hand it to the OS as soon as the chunks before it are
+//! there: a writer killed at any moment loses the chunk it was filling and the few closed
+//! in the last milliseconds that were still being compressed (ADR 0015).
 //!
 //! With `chunk_per_topic` (the default) each topic's messages are gathered in memory and
 //! written as chunks of that topic alone, so a reader that wants some topics (re-analysis:
@@ -50,7 +56,10 @@ pub struct WriterOptions {
     /// zstd level (negative: zstd's fast levels) or lz4 acceleration level; ignored without
     /// compression. See [`WriterOptions::DEFAULT_ZSTD_LEVEL`].
     pub compression_level: i32,
-    /// zstd worker threads of the mcap crate (0: compress on the writing thread).
+    /// Threads compressing closed chunks while the writing thread gathers the next ones
+    /// (0: the writing thread compresses each chunk itself). Chunks reach the file in the
+    /// order they were closed either way, the same bytes; at most twice this many chunks are
+    /// in flight (ADR 0015).
     pub compression_threads: u32,
     /// Chunks of one topic each (see the module docs); `false`: chunks hold the messages of
     /// every topic in the order written.
@@ -62,10 +71,10 @@ impl WriterOptions {
     /// the rig's DAQ frames, and level -1 makes a chunk of one small message larger than the
     /// message, which `pymcap-cli doctor` warns about).
     pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
-    /// zstd worker threads of the recorder: none, compression on the writing thread (ADR
-    /// 0013: a chunk of 1 s is smaller than one zstd job, so workers only add hand-offs; one
-    /// worker was the slowest setting in every sweep).
-    pub const DEFAULT_COMPRESSION_THREADS: u32 = 0;
+    /// Compression threads of the recorder: 2, so on the rig PC's two cores compression
+    /// (the bulk of recording's work) runs on both while the writing thread only gathers
+    /// and writes (ADR 0015). At the live data rate they are mostly idle.
+    pub const DEFAULT_COMPRESSION_THREADS: u32 = 2;
 }
 
 impl Default for WriterOptions {
