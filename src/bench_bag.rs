@@ -273,12 +273,12 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
         ("DAQ frames", frames, workers(Compression::Zstd, 1)),
         ("DAQ frames", frames, workers(Compression::Zstd, 2)),
         ("DAQ frames", frames, workers(Compression::Lz4, 0)),
-        ("DAQ frames", frames, workers(Compression::Lz4, 1)),
+        ("DAQ frames", frames, workers(Compression::Lz4, 2)),
         ("DAQ frames", frames, workers(Compression::None, 0)),
-        ("DAQ frames", frames, workers(Compression::None, 1)),
+        ("DAQ frames", frames, workers(Compression::None, 2)),
         ("whole graph", all, workers(Compression::Zstd, 0)),
-        ("whole graph", all, workers(Compression::Zstd, 1)),
-        ("whole graph", all, workers(Compression::None, 1)),
+        ("whole graph", all, workers(Compression::Zstd, 2)),
+        ("whole graph", all, workers(Compression::None, 2)),
     ];
     rows.extend(record_rows(tmp, &settings)?);
 

@@ -44,6 +44,8 @@ struct Compressed {
     start_ns: u64,
     end_ns: u64,
     uncompressed_size: u64,
+    /// The chunk's compression: the file's, or none when compressing did not shrink it.
+    compression: &'static str,
     /// The uncompressed records' buffer, for reuse (when `body` is not that buffer).
     spare: Option<Vec<u8>>,
 }
@@ -83,20 +85,20 @@ impl Codec {
     fn compress(&mut self, g: Gathered, mut out: Vec<u8>) -> std::io::Result<Compressed> {
         let crc = crc32fast::hash(&g.records);
         let uncompressed_size = g.records.len() as u64;
-        let (body, spare) = match (self.compression, self.zstd.as_mut()) {
-            (Compression::None, _) => {
-                // The records are the body: `out` goes back unused.
-                (g.records, (out.capacity() > 0).then_some(out))
-            }
-            (Compression::Zstd, Some(z)) => {
-                out.clear();
+        out.clear();
+        let compressed = match (self.compression, self.zstd.as_mut()) {
+            // The records are the body: `out` goes back unused.
+            (Compression::None, _) => None,
+            (Compression::Zstd, z) => {
+                let z = match z {
+                    Some(z) => z,
+                    None => return Err(std::io::Error::other("no zstd context (Codec::new makes one for zstd)")),
+                };
                 out.reserve(zstd::zstd_safe::compress_bound(g.records.len()));
                 z.compress_to_buffer(&g.records, &mut out)?;
-                (out, Some(g.records))
+                Some(out)
             }
-            (Compression::Zstd, None) => unreachable!("Codec::new makes a zstd context for zstd"),
             (Compression::Lz4, _) => {
-                out.clear();
                 let mut e = lz4::EncoderBuilder::new()
                     .level(self.level.max(0) as u32)
                     // As the mcap crate writes lz4 chunks: the chunk's own CRC covers the
@@ -106,8 +108,16 @@ impl Codec {
                 e.write_all(&g.records)?;
                 let (out, result) = e.finish();
                 result?;
-                (out, Some(g.records))
+                Some(out)
             }
+        };
+        // A chunk that compression does not shrink (a lone small message) is stored as it
+        // is: MCAP names the compression per chunk, and `pymcap-cli doctor` warns about a
+        // compressed chunk that is not smaller than its records.
+        let (body, spare, compression) = match compressed {
+            Some(c) if c.len() < g.records.len() => (c, Some(g.records), self.name()),
+            Some(c) => (g.records, Some(c), ""),
+            None => (g.records, None, ""),
         };
         let mut head = Vec::with_capacity(64);
         records::chunk_head(
@@ -117,7 +127,7 @@ impl Codec {
                 end_ns: g.end_ns,
                 uncompressed_size,
                 uncompressed_crc: crc,
-                compression: self.name(),
+                compression,
                 compressed_size: body.len() as u64,
             },
         );
@@ -135,7 +145,7 @@ impl Codec {
             tail_offsets.push((ch, tail.len() as u64));
             records::message_index(&mut tail, ch, &entries);
         }
-        Ok(Compressed { head, body, tail, tail_offsets, start_ns: g.start_ns, end_ns: g.end_ns, uncompressed_size, spare })
+        Ok(Compressed { head, body, tail, tail_offsets, start_ns: g.start_ns, end_ns: g.end_ns, uncompressed_size, compression, spare })
     }
 }
 
@@ -148,17 +158,11 @@ pub(crate) struct FileSink {
     /// CRC of every byte so far: the data section's, until the data end record.
     crc: crc32fast::Hasher,
     pub chunk_indexes: Vec<ChunkIndex>,
-    compression: &'static str,
 }
 
 impl FileSink {
-    pub fn new(path: PathBuf, file: File, compression: Compression) -> Self {
-        let compression = match compression {
-            Compression::Zstd => "zstd",
-            Compression::Lz4 => "lz4",
-            Compression::None => "",
-        };
-        Self { path, out: BufWriter::with_capacity(1 << 16, file), pos: 0, crc: crc32fast::Hasher::new(), chunk_indexes: Vec::new(), compression }
+    pub fn new(path: PathBuf, file: File) -> Self {
+        Self { path, out: BufWriter::with_capacity(1 << 16, file), pos: 0, crc: crc32fast::Hasher::new(), chunk_indexes: Vec::new() }
     }
 
     pub fn path(&self) -> &Path {
@@ -196,7 +200,7 @@ impl FileSink {
             chunk_length,
             message_index_offsets: c.tail_offsets.iter().map(|&(ch, o)| (ch, index_start + o)).collect(),
             message_index_length: c.tail.len() as u64,
-            compression: self.compression,
+            compression: c.compression,
             compressed_size: c.body.len() as u64,
             uncompressed_size: c.uncompressed_size,
         });

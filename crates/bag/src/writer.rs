@@ -415,7 +415,7 @@ impl BagWriter {
         }
         let gatherings = if per_topic { self.topics.len() } else { 1 };
         f.gathering = (0..gatherings).map(|_| Gathering::new(self.pipeline.take_buffer())).collect();
-        self.pipeline.start_file(FileSink::new(path, file, self.options.compression));
+        self.pipeline.start_file(FileSink::new(path, file));
         self.current = Some(f);
         self.pipeline.submit_raw(start)
     }

@@ -111,7 +111,10 @@ fn check_file(path: &Path, compression: Compression) -> Vec<Msg> {
             Compression::Lz4 => "lz4",
             Compression::None => "",
         };
-        assert_eq!(ci.compression, want, "{name}");
+        // A chunk compression did not shrink is stored uncompressed (doctor warns otherwise).
+        let stored = ci.compression.is_empty() && ci.compressed_size == ci.uncompressed_size;
+        assert!(ci.compression == want || stored, "{name}: chunk compression `{}`", ci.compression);
+        assert!(ci.compression.is_empty() || ci.compressed_size < ci.uncompressed_size, "{name}: a compressed chunk is smaller");
         let msgs: Vec<_> = summary.stream_chunk(&bytes, ci).unwrap().map(|m| m.unwrap()).collect();
         assert!(!msgs.is_empty(), "{name}: no empty chunks");
         assert_eq!(ci.message_start_time, msgs.iter().map(|m| m.log_time).min().unwrap(), "{name}");
@@ -154,8 +157,18 @@ fn check_file(path: &Path, compression: Compression) -> Vec<Msg> {
     assert_eq!(opcodes, want_groups, "{name}: schemas, channels, statistics, chunk indexes");
     for g in &groups {
         let slice = &bytes[g.group_start as usize..(g.group_start + g.group_length) as usize];
-        let n = mcap::read::LinearReader::sans_magic(slice).map(|r| r.unwrap()).count();
-        assert!(n > 0, "{name}");
+        let mut n = 0;
+        for r in mcap::read::LinearReader::sans_magic(slice) {
+            let kind = match r.unwrap() {
+                Record::Schema { .. } => 0x03,
+                Record::Channel(_) => 0x04,
+                Record::Statistics(_) => 0x0B,
+                Record::ChunkIndex(_) => 0x08,
+                other => panic!("{name}: {other:?} in a summary group"),
+            };
+            assert_eq!(kind, g.group_opcode, "{name}: a record of another kind in group {:#04x}", g.group_opcode);
+            n += 1;
+        }
         let expected = match g.group_opcode {
             0x03 => summary.schemas.len(),
             0x04 => summary.channels.len(),
@@ -264,4 +277,47 @@ fn a_closed_chunk_reaches_the_file_while_the_writer_waits() {
     }
     assert!(!scanned.footer, "the file is still open");
     w.close().unwrap();
+}
+
+/// A chunk that compression does not shrink (bytes with no redundancy) is stored as it is,
+/// named uncompressed in its header and index; compressible ones beside it stay compressed.
+#[test]
+fn a_chunk_compression_does_not_shrink_is_stored_uncompressed() {
+    let frames: Vec<&Published> = published().iter().filter(|m| m.topic.ends_with("daq/frames")).take(2).collect();
+    for (compression, name) in [(Compression::Zstd, "zstd"), (Compression::Lz4, "lz4")] {
+        let dir = tmp(&format!("incompressible-{name}"));
+        let mut w = BagWriter::create(&dir, WriterOptions { compression, ..WriterOptions::default() }).unwrap();
+        let noise_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_nodes::topics::ESTIMATES)).unwrap();
+        let frame_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_nodes::topics::DAQ_FRAMES)).unwrap();
+        // xorshift bytes: incompressible for zstd and lz4.
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let noise: Vec<u8> = (0..300)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x as u8
+            })
+            .collect();
+        w.write(noise_topic, frames[0].log_time, &noise).unwrap();
+        for m in &frames {
+            w.write(frame_topic, m.log_time, &m.data).unwrap();
+        }
+        w.close().unwrap();
+        let file = dir.join(format!("incompressible-{name}_0.mcap"));
+        let msgs = check_file(&file, compression);
+        assert_eq!(msgs.len(), 3);
+        let bytes = std::fs::read(&file).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let kinds: Vec<(String, &str)> = summary
+            .chunk_indexes
+            .iter()
+            .map(|c| (summary.stream_chunk(&bytes, c).unwrap().next().unwrap().unwrap().channel.topic.clone(), c.compression.as_str()))
+            .collect();
+        assert_eq!(kinds.len(), 2, "{name}: {kinds:?}");
+        for (topic, c) in &kinds {
+            let want = if topic.ends_with("estimates") { "" } else { name };
+            assert_eq!(*c, want, "{name}: the chunk of {topic}");
+        }
+    }
 }
