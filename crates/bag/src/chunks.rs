@@ -516,3 +516,33 @@ impl Drop for Pipeline {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Handing over waits rather than queueing: with a slow compression (zstd level 19) and
+    /// one worker, no more than 2 chunks are ever between being closed and being in the file,
+    /// and the file gets every chunk, in the order handed over.
+    #[test]
+    fn at_most_twice_the_workers_chunks_are_in_flight_and_they_land_in_order() {
+        let dir = std::env::temp_dir().join(format!("oilfilm-bag-chunks-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bounded.mcap");
+        let mut p = Pipeline::new(Compression::Zstd, 19, 1, &dir).unwrap();
+        p.start_file(FileSink::new(path.clone(), File::create(&path).unwrap()));
+        let mut most = 0;
+        for i in 0..10u64 {
+            let records: Vec<u8> = (0..100_000u32).flat_map(|k| (k.wrapping_mul(2_654_435_761) >> 9).to_le_bytes()).collect();
+            p.submit_chunk(Gathered { records, index: vec![(1, i, 0)], start_ns: i, end_ns: i }).unwrap();
+            most = most.max(lock(&p.shared).in_flight);
+        }
+        let sink = p.finish_file().unwrap();
+        assert!((1..=2).contains(&most), "{most} chunks in flight at most");
+        let starts: Vec<u64> = sink.chunk_indexes.iter().map(|c| c.start_ns).collect();
+        assert_eq!(starts, (0..10).collect::<Vec<_>>());
+        assert!(sink.chunk_indexes.windows(2).all(|w| w[0].chunk_start_offset < w[1].chunk_start_offset));
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), sink.position());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
