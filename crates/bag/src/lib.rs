@@ -15,9 +15,11 @@
 //! What a bag must look like for the readers to accept it is in issue 5's "facts found by
 //! trying" and the module docs.
 
+mod chunks;
 pub mod error;
 pub mod metadata;
 pub mod reader;
+mod records;
 pub mod recover;
 pub mod scan;
 pub mod select;

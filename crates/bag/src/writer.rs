@@ -1,9 +1,15 @@
 //! The rosbag2 bag writer: a directory `NAME/` holding `NAME_0.mcap`, `NAME_1.mcap`, ... and
 //! `metadata.yaml`, written when a file is closed (on split and on close).
 //!
-//! Each file is a chunked MCAP file with profile `ros2`; a chunk is closed when it reaches
-//! `chunk_size` bytes or spans `max_chunk_duration_ns` of log time, and flushed to the OS
-//! then, so a writer killed at any moment loses at most the chunk it was filling.
+//! Each file is a chunked MCAP file with profile `ros2`, framed here (`records`): header,
+//! schemas and channels, chunks each followed by its message indexes, data end with the
+//! data-section CRC, a summary (schemas, channels, statistics, chunk indexes, summary
+//! offsets) and the footer with the summary CRC. A chunk is closed when it reaches
+//! `chunk_size` bytes or spans `max_chunk_duration_ns` of log time and handed to
+//! `compression_threads` workers (`chunks`), which compress it and put it in the file, in
+//! the order chunks were closed, and hand it to the OS as soon as the chunks before it are
+//! there: a writer killed at any moment loses the chunk it was filling and the few closed
+//! in the last milliseconds that were still being compressed (ADR 0015).
 //!
 //! With `chunk_per_topic` (the default) each topic's messages are gathered in memory and
 //! written as chunks of that topic alone, so a reader that wants some topics (re-analysis:
@@ -12,16 +18,16 @@
 //! time after its first, so a killed writer loses at most the last
 //! `max_chunk_duration_ns` of each topic (one chunk per topic). ADR 0013.
 
-use std::cell::Cell;
+use std::collections::BTreeMap;
 use std::fs::{self, File};
-use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
 
-use mcap::records::MessageHeader;
 use oilfilm_msgs::RosMessage;
 
-use crate::error::{io, mcap_err, BagError, Result};
+use crate::chunks::{FileSink, Gathered, Pipeline};
+use crate::error::{io, BagError, Result};
+use crate::records::{self, ChunkIndex};
 use crate::metadata::{qos_to_channel_metadata, FileInfo, MetadataFile, QosProfile, TopicMetadata, TopicWithCount};
 use crate::{Duration as NsDuration, StartingTime, METADATA_FILE};
 
@@ -50,7 +56,10 @@ pub struct WriterOptions {
     /// zstd level (negative: zstd's fast levels) or lz4 acceleration level; ignored without
     /// compression. See [`WriterOptions::DEFAULT_ZSTD_LEVEL`].
     pub compression_level: i32,
-    /// zstd worker threads of the mcap crate (0: compress on the writing thread).
+    /// Threads compressing closed chunks while the writing thread gathers the next ones
+    /// (0: the writing thread compresses each chunk itself). Chunks reach the file in the
+    /// order they were closed either way, the same bytes; at most twice this many chunks are
+    /// in flight (ADR 0015).
     pub compression_threads: u32,
     /// Chunks of one topic each (see the module docs); `false`: chunks hold the messages of
     /// every topic in the order written.
@@ -62,10 +71,10 @@ impl WriterOptions {
     /// the rig's DAQ frames, and level -1 makes a chunk of one small message larger than the
     /// message, which `pymcap-cli doctor` warns about).
     pub const DEFAULT_ZSTD_LEVEL: i32 = 1;
-    /// zstd worker threads of the recorder: none, compression on the writing thread (ADR
-    /// 0013: a chunk of 1 s is smaller than one zstd job, so workers only add hand-offs; one
-    /// worker was the slowest setting in every sweep).
-    pub const DEFAULT_COMPRESSION_THREADS: u32 = 0;
+    /// Compression threads of the recorder: 2, so on the rig PC's two cores compression
+    /// (the bulk of recording's work) runs on both while the writing thread only gathers
+    /// and writes (ADR 0015). At the live data rate they are mostly idle.
+    pub const DEFAULT_COMPRESSION_THREADS: u32 = 2;
 }
 
 impl Default for WriterOptions {
@@ -106,61 +115,122 @@ impl TopicSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct TopicId(usize);
 
-/// Tracks the length of what was written (shared with [`OpenFile`], as `mcap::Writer`
-/// lends no access to its sink), so splitting by size needs no `stat`.
-struct Counting<W> {
-    inner: W,
-    pos: u64,
-    len: Rc<Cell<u64>>,
+/// One chunk being gathered: its message records back to back and where each message is.
+struct Gathering {
+    chunk: Gathered,
+    /// The earliest log time among its messages.
+    first: Option<u64>,
 }
 
-impl<W: Write> Write for Counting<W> {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let n = self.inner.write(buf)?;
-        self.pos += n as u64;
-        self.len.set(self.len.get().max(self.pos));
-        Ok(n)
+impl Gathering {
+    fn new(records: Vec<u8>) -> Self {
+        Self { chunk: Gathered { records, index: Vec::new(), start_ns: u64::MAX, end_ns: 0 }, first: None }
     }
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.inner.flush()
-    }
-}
 
-impl<W: Seek> Seek for Counting<W> {
-    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
-        self.pos = self.inner.seek(to)?;
-        Ok(self.pos)
+    fn add(&mut self, channel_id: u16, sequence: u32, log_time: u64, cdr: &[u8]) {
+        let c = &mut self.chunk;
+        c.index.push((channel_id, log_time, c.records.len() as u64));
+        records::message(&mut c.records, channel_id, sequence, log_time, cdr);
+        c.start_ns = c.start_ns.min(log_time);
+        c.end_ns = c.end_ns.max(log_time);
+        self.first = Some(self.first.map_or(log_time, |t| t.min(log_time)));
     }
 }
 
 struct OpenFile {
     path: PathBuf,
-    writer: mcap::Writer<Counting<BufWriter<File>>>,
     /// Channel id of each topic.
     channels: Vec<u16>,
+    /// Schema id of each (type name, schema text) written to this file.
+    schema_ids: Vec<(String, String, u16)>,
+    /// The schema and channel records as written in the data section, repeated in the
+    /// summary.
+    schema_records: Vec<u8>,
+    channel_records: Vec<u8>,
     sequences: Vec<u32>,
+    /// Messages per channel id.
+    channel_counts: BTreeMap<u16, u64>,
     first: Option<u64>,
     last: u64,
     count: u64,
-    chunk_start: Option<u64>,
-    len: Rc<Cell<u64>>,
-    /// Each topic's messages not yet written (`chunk_per_topic`).
-    pending: Vec<Pending>,
+    /// The chunk being gathered of each topic (`chunk_per_topic`) or the one chunk of all.
+    gathering: Vec<Gathering>,
 }
 
-/// One topic's messages gathered for its next chunk: their bytes back to back.
-#[derive(Default)]
-struct Pending {
-    data: Vec<u8>,
-    /// Sequence, log time and end in `data` of each message.
-    messages: Vec<(u32, u64, usize)>,
-    /// The earliest log time among them.
-    first: Option<u64>,
-}
+impl OpenFile {
+    /// Records of the schema (unless this file has it) and channel of topic `t`, appended to
+    /// `out` and kept for the summary; the channel's id is pushed to `channels`.
+    fn declare(&mut self, t: &TopicSpec, type_hash: &str, out: &mut Vec<u8>) -> Result<()> {
+        let too_long = |what: &str| BagError::Usage { path: self.path.clone(), what: format!("topic {}: {what} is longer than MCAP allows (4 GiB)", t.name) };
+        if !records::fits_u32(t.schema_text.len()) {
+            return Err(too_long("the schema text"));
+        }
+        let schema_id = match self.schema_ids.iter().find(|(n, s, _)| *n == t.type_name && *s == t.schema_text) {
+            Some(&(_, _, id)) => id,
+            None => {
+                let id = u16::try_from(self.schema_ids.len() + 1).map_err(|_| too_long("the file's schema count"))?;
+                let start = self.schema_records.len();
+                records::schema(&mut self.schema_records, id, &t.type_name, "ros2msg", t.schema_text.as_bytes());
+                out.extend_from_slice(&self.schema_records[start..]);
+                self.schema_ids.push((t.type_name.clone(), t.schema_text.clone(), id));
+                id
+            }
+        };
+        let channel_id = u16::try_from(self.channels.len() + 1).map_err(|_| too_long("the file's channel count"))?;
+        let mut metadata = BTreeMap::new();
+        metadata.insert("offered_qos_profiles".to_string(), qos_to_channel_metadata(&t.qos));
+        if !type_hash.is_empty() {
+            // rosbag2's MCAP storage plugin keeps the type description hash under this key.
+            metadata.insert(TYPE_HASH_KEY.to_string(), type_hash.to_string());
+        }
+        let start = self.channel_records.len();
+        records::channel(&mut self.channel_records, channel_id, schema_id, &t.name, "cdr", &metadata);
+        out.extend_from_slice(&self.channel_records[start..]);
+        self.channels.push(channel_id);
+        self.sequences.push(0);
+        Ok(())
+    }
 
-impl Pending {
-    fn first_time(&self) -> Option<u64> {
-        self.first
+    /// The summary section and footer for a data section of `data_len` bytes (the data end
+    /// record included) holding `chunks`.
+    fn summary(&self, data_len: u64, chunks: &[ChunkIndex]) -> Vec<u8> {
+        let mut b = Vec::with_capacity(self.schema_records.len() + self.channel_records.len() + 128 * (chunks.len() + 4));
+        let mut groups = Vec::new();
+        let mut group = |b: &mut Vec<u8>, opcode: u8, start: usize| {
+            if b.len() > start {
+                groups.push((opcode, data_len + start as u64, (b.len() - start) as u64));
+            }
+        };
+        b.extend_from_slice(&self.schema_records);
+        group(&mut b, records::op::SCHEMA, 0);
+        let start = b.len();
+        b.extend_from_slice(&self.channel_records);
+        group(&mut b, records::op::CHANNEL, start);
+        let start = b.len();
+        let stats = records::Statistics {
+            message_count: self.count,
+            schema_count: self.schema_ids.len() as u16,
+            channel_count: self.channels.len() as u32,
+            chunk_count: chunks.len() as u32,
+            start_ns: self.first.unwrap_or(0),
+            end_ns: if self.first.is_some() { self.last } else { 0 },
+            channel_message_counts: self.channel_counts.clone(),
+        };
+        records::statistics(&mut b, &stats);
+        group(&mut b, records::op::STATISTICS, start);
+        let start = b.len();
+        for c in chunks {
+            records::chunk_index(&mut b, c);
+        }
+        group(&mut b, records::op::CHUNK_INDEX, start);
+        let summary_offset_start = data_len + b.len() as u64;
+        for (opcode, start, len) in groups {
+            records::summary_offset(&mut b, opcode, start, len);
+        }
+        records::footer_start(&mut b, data_len, summary_offset_start);
+        let crc = crc32fast::hash(&b);
+        records::footer_end(&mut b, crc);
+        b
     }
 }
 
@@ -176,6 +246,8 @@ pub struct BagWriter {
     counts: Vec<u64>,
     files: Vec<FileInfo>,
     current: Option<OpenFile>,
+    /// Compresses closed chunks and writes them in order (`compression_threads` workers).
+    pipeline: Pipeline,
 }
 
 impl BagWriter {
@@ -189,14 +261,15 @@ impl BagWriter {
                 return Err(BagError::Usage { path: dir, what: "the bag directory exists and is not empty; not overwriting it".into() });
             }
         }
-        fs::create_dir_all(&dir).map_err(io(&dir))?;
         let name = dir
             .file_name()
             .and_then(|n| n.to_str())
             .filter(|n| !n.is_empty())
             .ok_or_else(|| BagError::Usage { path: dir.clone(), what: "the bag directory needs a UTF-8 name".into() })?
             .to_string();
-        let mut w = Self { dir, name, options, topics: Vec::new(), hashes: Vec::new(), counts: Vec::new(), files: Vec::new(), current: None };
+        let pipeline = Pipeline::new(options.compression, options.compression_level, options.compression_threads as usize, &dir)?;
+        fs::create_dir_all(&dir).map_err(io(&dir))?;
+        let mut w = Self { dir, name, options, topics: Vec::new(), hashes: Vec::new(), counts: Vec::new(), files: Vec::new(), current: None, pipeline };
         w.open_next()?;
         Ok(w)
     }
@@ -213,10 +286,12 @@ impl BagWriter {
         let id = TopicId(self.topics.len());
         let hash = type_hash_of(&spec);
         if let Some(f) = self.current.as_mut() {
-            let ch = add_channel(&mut f.writer, &spec, &hash).map_err(mcap_err(&f.path))?;
-            f.channels.push(ch);
-            f.sequences.push(0);
-            f.pending.push(Pending::default());
+            let mut declared = Vec::new();
+            f.declare(&spec, &hash, &mut declared)?;
+            if self.options.chunk_per_topic {
+                f.gathering.push(Gathering::new(Vec::new()));
+            }
+            self.pipeline.submit_raw(declared)?;
         }
         self.topics.push(spec);
         self.hashes.push(hash);
@@ -243,31 +318,27 @@ impl BagWriter {
         };
         let sequence = f.sequences[topic.0];
         f.sequences[topic.0] = sequence.wrapping_add(1);
+        let channel_id = f.channels[topic.0];
+        let g = if per_topic { topic.0 } else { 0 };
+        if !per_topic && f.gathering[0].first.is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
+            // One chunk of every topic: closed before a message that would make it span more
+            // than the longest a chunk may.
+            close_chunk(f, &mut self.pipeline, 0)?;
+        }
+        f.gathering[g].add(channel_id, sequence, log_time, cdr);
+        if f.gathering[g].chunk.records.len() as u64 >= chunk_size {
+            close_chunk(f, &mut self.pipeline, g)?;
+        }
         if per_topic {
-            let p = &mut f.pending[topic.0];
-            p.data.extend_from_slice(cdr);
-            p.messages.push((sequence, log_time, p.data.len()));
-            p.first = Some(p.first.map_or(log_time, |t| t.min(log_time)));
-            let full = p.data.len() as u64 >= chunk_size;
-            if full {
-                f.write_pending(topic.0)?;
-            }
-            // Any topic whose chunk now spans the longest a chunk may: written, so a crash
+            // Any topic whose chunk now spans the longest a chunk may: closed, so a crash
             // loses at most that much of each topic.
-            for t in 0..f.pending.len() {
-                if f.pending[t].first_time().is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
-                    f.write_pending(t)?;
+            for t in 0..f.gathering.len() {
+                if f.gathering[t].first.is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
+                    close_chunk(f, &mut self.pipeline, t)?;
                 }
             }
-        } else {
-            if f.chunk_start.is_some_and(|s| log_time.saturating_sub(s) >= max_chunk) {
-                f.writer.flush().map_err(mcap_err(&f.path))?;
-                f.chunk_start = None;
-            }
-            let header = MessageHeader { channel_id: f.channels[topic.0], sequence, log_time, publish_time: log_time };
-            f.writer.write_to_known_channel(&header, cdr).map_err(mcap_err(&f.path))?;
-            f.chunk_start.get_or_insert(log_time);
         }
+        *f.channel_counts.entry(channel_id).or_default() += 1;
         f.first = Some(f.first.map_or(log_time, |t| t.min(log_time)));
         f.last = f.last.max(log_time);
         f.count += 1;
@@ -295,7 +366,7 @@ impl BagWriter {
         if f.count == 0 {
             return false;
         }
-        let by_size = self.options.split_size_bytes.is_some_and(|max| f.writer_len() >= max);
+        let by_size = self.options.split_size_bytes.is_some_and(|max| self.pipeline.file_len_bound() >= max);
         let by_time = self.options.split_duration_ns.is_some_and(|max| f.first.is_some_and(|s| log_time.saturating_sub(s) >= max));
         by_size || by_time
     }
@@ -323,42 +394,47 @@ impl BagWriter {
         let file_name = format!("{}_{}.mcap", self.name, self.files.len());
         let path = self.dir.join(&file_name);
         let file = File::create_new(&path).map_err(io(&path))?;
-        let len = Rc::new(Cell::new(0));
-        let sink = Counting { inner: BufWriter::with_capacity(1 << 16, file), pos: 0, len: Rc::clone(&len) };
-        let options = mcap::WriteOptions::new()
-            .profile("ros2")
-            .library(concat!("oilfilm-bag ", env!("CARGO_PKG_VERSION")))
-            .compression(match self.options.compression {
-                Compression::Zstd => Some(mcap::Compression::Zstd),
-                Compression::Lz4 => Some(mcap::Compression::Lz4),
-                Compression::None => None,
-            })
-            .chunk_size(Some(self.options.chunk_size))
-            .compression_threads(self.options.compression_threads)
-            .compression_level(level_for_mcap(self.options.compression, self.options.compression_level));
-        let mut writer = options.create(sink).map_err(mcap_err(&path))?;
-        let mut channels = Vec::with_capacity(self.topics.len());
+        let per_topic = self.options.chunk_per_topic;
+        let mut f = OpenFile {
+            path: path.clone(),
+            channels: Vec::with_capacity(self.topics.len()),
+            schema_ids: Vec::new(),
+            schema_records: Vec::new(),
+            channel_records: Vec::new(),
+            sequences: Vec::with_capacity(self.topics.len()),
+            channel_counts: BTreeMap::new(),
+            first: None,
+            last: 0,
+            count: 0,
+            gathering: Vec::new(),
+        };
+        let mut start = records::MAGIC.to_vec();
+        records::header(&mut start, "ros2", concat!("oilfilm-bag ", env!("CARGO_PKG_VERSION")));
         for (t, hash) in self.topics.iter().zip(&self.hashes) {
-            channels.push(add_channel(&mut writer, t, hash).map_err(mcap_err(&path))?);
+            f.declare(t, hash, &mut start)?;
         }
-        let sequences = vec![0; channels.len()];
-        let pending = channels.iter().map(|_| Pending::default()).collect();
-        self.current = Some(OpenFile { path, writer, channels, sequences, first: None, last: 0, count: 0, chunk_start: None, len, pending });
-        Ok(())
+        let gatherings = if per_topic { self.topics.len() } else { 1 };
+        f.gathering = (0..gatherings).map(|_| Gathering::new(self.pipeline.take_buffer())).collect();
+        self.pipeline.start_file(FileSink::new(path, file));
+        self.current = Some(f);
+        self.pipeline.submit_raw(start)
     }
 
     fn finish_current(&mut self) -> Result<()> {
         let Some(mut f) = self.current.take() else { return Ok(()) };
-        // The topics' last chunks, the earliest first.
-        let mut order: Vec<(u64, usize)> = f.pending.iter().enumerate().filter_map(|(t, p)| p.first_time().map(|s| (s, t))).collect();
+        // The last chunks, the earliest first.
+        let mut order: Vec<(u64, usize)> = f.gathering.iter().enumerate().filter_map(|(t, g)| g.first.map(|s| (s, t))).collect();
         order.sort_unstable();
-        for (_, t) in order {
-            f.write_pending(t)?;
+        for (_, g) in order {
+            close_chunk(&mut f, &mut self.pipeline, g)?;
         }
-        f.writer.finish().map_err(mcap_err(&f.path))?;
-        let mut sink = f.writer.into_inner();
-        sink.flush().map_err(io(&f.path))?;
-        sink.inner.get_ref().sync_data().map_err(io(&f.path))?;
+        let mut sink = self.pipeline.finish_file()?;
+        let mut end = Vec::with_capacity(16);
+        records::data_end(&mut end, sink.take_crc());
+        sink.put(&end).map_err(io(&f.path))?;
+        let summary = f.summary(sink.position(), &sink.chunk_indexes);
+        sink.put(&summary).map_err(io(&f.path))?;
+        sink.sync().map_err(io(&f.path))?;
         let first = f.first.unwrap_or(0);
         self.files.push(FileInfo {
             path: f.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
@@ -391,30 +467,14 @@ impl BagWriter {
     }
 }
 
-impl OpenFile {
-    /// Writes a topic's gathered messages as a chunk of their own and hands it to the OS.
-    fn write_pending(&mut self, topic: usize) -> Result<()> {
-        let p = &mut self.pending[topic];
-        if p.messages.is_empty() {
-            return Ok(());
-        }
-        let channel_id = self.channels[topic];
-        let mut start = 0;
-        for &(sequence, log_time, end) in &p.messages {
-            let header = MessageHeader { channel_id, sequence, log_time, publish_time: log_time };
-            self.writer.write_to_known_channel(&header, &p.data[start..end]).map_err(mcap_err(&self.path))?;
-            start = end;
-        }
-        p.data.clear();
-        p.messages.clear();
-        p.first = None;
-        self.writer.flush().map_err(mcap_err(&self.path))
+/// Hands gathering `g`'s chunk to the pipeline (if it holds any message) and starts the next.
+fn close_chunk(f: &mut OpenFile, pipeline: &mut Pipeline, g: usize) -> Result<()> {
+    if f.gathering[g].first.is_none() {
+        return Ok(());
     }
-
-    /// Bytes written to the file so far (through the buffer).
-    fn writer_len(&self) -> u64 {
-        self.len.get()
-    }
+    let next = Gathering::new(pipeline.take_buffer());
+    let closed = std::mem::replace(&mut f.gathering[g], next);
+    pipeline.submit_chunk(closed.chunk)
 }
 
 impl Drop for BagWriter {
@@ -424,27 +484,6 @@ impl Drop for BagWriter {
             let _ = self.finish_current().and_then(|()| self.write_metadata());
         }
     }
-}
-
-/// The level as the mcap crate takes it: a `u32` that it casts back to `i32` for zstd
-/// (`zstd_encoder`: `compression_level as i32`), so a negative zstd level (a fast level)
-/// goes through as its two's complement; lz4's level is a `u32` (0 = fast mode).
-fn level_for_mcap(compression: Compression, level: i32) -> u32 {
-    match compression {
-        Compression::Zstd => level as u32,
-        Compression::Lz4 | Compression::None => level.max(0) as u32,
-    }
-}
-
-fn add_channel<W: Write + Seek>(w: &mut mcap::Writer<W>, t: &TopicSpec, type_hash: &str) -> mcap::McapResult<u16> {
-    let schema = w.add_schema(&t.type_name, "ros2msg", t.schema_text.as_bytes())?;
-    let mut metadata = std::collections::BTreeMap::new();
-    metadata.insert("offered_qos_profiles".to_string(), qos_to_channel_metadata(&t.qos));
-    if !type_hash.is_empty() {
-        // rosbag2's MCAP storage plugin keeps the type description hash under this key.
-        metadata.insert(TYPE_HASH_KEY.to_string(), type_hash.to_string());
-    }
-    w.add_channel(schema, &t.name, "cdr", &metadata)
 }
 
 /// The MCAP channel metadata key of the RIHS01 type hash (as rosbag2_storage_mcap writes it).
