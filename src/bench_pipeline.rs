@@ -150,11 +150,17 @@ fn run_python(
         let c = cal.channel(ch)?;
         calibration.insert(
             ch.name().to_string(),
-            serde_json::json!({ "offset_v": c.offset_v, "sensitivity_v_per_unit": c.sensitivity_v_per_unit, "sample_offset_s": c.sample_offset_s }),
+            serde_json::json!({
+                "offset_v": c.offset_v,
+                "sensitivity_v_per_unit": c.sensitivity_v_per_unit,
+                "sample_offset_s": c.sample_offset_s,
+                "linear_range_v": c.linear_range_v,
+            }),
         );
     }
     let meta = serde_json::json!({
         "sample_rate_hz": rec.sample_rate_hz,
+        "lsb_v": cal.lsb_v(),
         "channels": raw.channels.iter().map(|c| c.name()).collect::<Vec<_>>(),
         "calibration": calibration,
         "lowpass_order": ccfg.lowpass_order,
