@@ -339,7 +339,7 @@ impl EstimatorCore {
         let signals = window_signals(b, 0..w, config.model);
         feed(&mut wf, &mut rf, &signals);
         let estimate = estimator::estimate_window_fed(&signals, 0..w, config, wf)?;
-        let report = window_report_fed(rf, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
+        let report = window_report_fed(rf, signals.x_m, signals.y_m, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
         fill(&mut msg, &report);
         Ok(msg)
     }
