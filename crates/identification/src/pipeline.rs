@@ -425,7 +425,14 @@ pub fn orbit_amplitude(x: &[f64], y: &[f64], centre: [f64; 2]) -> f64 {
     }
     let threshold = top * (1.0 - 1e-12);
     // NaN squares go through `hypot` too: `hypot(NaN, ±inf)` is `inf`.
-    x.iter().zip(y).filter(|(a, b)| !(d2(**a, **b) < threshold)).map(hypot).fold(0.0, f64::max)
+    x.iter()
+        .zip(y)
+        .filter(|(a, b)| {
+            let v = d2(**a, **b);
+            v >= threshold || v.is_nan()
+        })
+        .map(hypot)
+        .fold(0.0, f64::max)
 }
 
 /// [`window_report`] from a [`ReportFeed`] given every sample of the estimate's window and
