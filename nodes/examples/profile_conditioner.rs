@@ -139,7 +139,7 @@ fn main() -> anyhow::Result<()> {
         let e = estimate_window_fed(&signals, 0..w, &cfg, wf)?;
         t_est.push(t0.elapsed().as_secs_f64() * 1e3);
         let t0 = Instant::now();
-        std::hint::black_box(window_report_fed(rf, e, 40.0, &rig, 1500.0, [0.0, 2.0])?);
+        std::hint::black_box(window_report_fed(rf, &x[..w], &y[..w], e, 40.0, &rig, 1500.0, [0.0, 2.0])?);
         t_rep.push(t0.elapsed().as_secs_f64() * 1e3);
     }
     // Its stages: the search's finish (last segment), the solve from the fed factor, the

@@ -339,7 +339,7 @@ impl EstimatorCore {
         let signals = window_signals(b, 0..w, config.model);
         feed(&mut wf, &mut rf, &signals);
         let estimate = estimator::estimate_window_fed(&signals, 0..w, config, wf)?;
-        let report = window_report_fed(rf, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
+        let report = window_report_fed(rf, signals.x_m, signals.y_m, estimate, temperature, &self.rig, speed_rpm, [t0.as_seconds(), t1.as_seconds()])?;
         fill(&mut msg, &report);
         Ok(msg)
     }
@@ -522,8 +522,9 @@ mod tests {
         frames.iter().flat_map(|f| core.push(f).expect("good frame")).collect()
     }
 
-    /// With `signal_band_hz` the standard errors come from a decimated window (here 5-fold:
-    /// 100 000 samples at 50 kHz) and agree with the full ones; the coefficients do not move.
+    /// With `signal_band_hz` the standard errors come from a decimated window (here 50-fold:
+    /// 100 000 samples at 50 kHz, down to the 2 000-sample floor) and agree with the full ones;
+    /// the coefficients do not move.
     /// Frames declaring a wider low-pass than the parameter say the band is theirs.
     #[test]
     fn signal_band_decimates_only_the_standard_errors_and_frames_can_widen_it() {
@@ -554,7 +555,7 @@ mod tests {
             }
         }
         // White noise breaks the band assumption: decimation folds it onto the lines, so the
-        // decimated errors come out larger (about sqrt(5) here), never smaller.
+        // decimated errors come out larger (up to about sqrt(50) here), never smaller.
         let mut white = frames(2 * window as usize, 10_000, fs);
         for f in &mut white {
             f.flags.push("lowpass_hz=55.5".into());

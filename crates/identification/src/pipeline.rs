@@ -388,17 +388,62 @@ pub fn window_report(
     let cut = |c: &[f64]| -> f64 { c[range.clone()].iter().fold(0.0, |a, v| a + v) };
     let sums = [cut(signals.x_m), cut(signals.y_m), cut(signals.fx_n), cut(signals.fy_n)];
     let [mx, my] = [sums[0], sums[1]].map(|s| s / range.len() as f64);
-    let (x, y) = (&signals.x_m[range.clone()], &signals.y_m[range.clone()]);
-    let amplitude = x.iter().zip(y).map(|(a, b)| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+    let amplitude = orbit_amplitude(&signals.x_m[range.clone()], &signals.y_m[range.clone()], [mx, my]);
     report_from(sums, amplitude, range.len(), estimate, temperature_c, rig, speed_rpm, times_s)
 }
 
-/// [`window_report`] from a [`ReportFeed`] given every sample of the estimate's window: the
-/// same bits as [`window_report`] on those samples (the amplitude is the largest distance
-/// from the mean position over the hull's vertices instead of every sample: the same sample
-/// wins, unless one inside the hull by a relative 1e-12 came within an ulp of it).
+/// The largest distance of the orbit's samples from `centre`: `max_t hypot(x_t - cx, y_t - cy)`
+/// (NaN samples ignored, as `f64::max` does), the same bits as that one `hypot` pass over every
+/// sample. Squared distances (no `hypot`, a loop the compiler vectorises) find the samples
+/// that can win: `hypot` is within an ulp of the true distance and the squared distance within
+/// a few ulps of its square, so a sample whose `hypot` reaches the maximum has a squared
+/// distance within a relative 1e-12 of the largest one; `hypot` is then taken of those only.
+/// Where squares could under- or overflow (largest square not a normal number above 1e-280 and
+/// finite) every sample goes through `hypot`.
+pub fn orbit_amplitude(x: &[f64], y: &[f64], centre: [f64; 2]) -> f64 {
+    let [cx, cy] = centre;
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &y[..n]);
+    let d2 = |a: f64, b: f64| (a - cx) * (a - cx) + (b - cy) * (b - cy);
+    // Eight partial maxima (a single running maximum is a chain the compiler cannot widen).
+    let mut acc = [f64::NEG_INFINITY; 8];
+    let (mut xc, mut yc) = (x.chunks_exact(8), y.chunks_exact(8));
+    for (a, b) in (&mut xc).zip(&mut yc) {
+        for l in 0..8 {
+            let v = d2(a[l], b[l]);
+            // NaN never wins (`f64::max`'s rule) and the comparison vectorises.
+            acc[l] = if v > acc[l] { v } else { acc[l] };
+        }
+    }
+    let mut top = acc.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    for (a, b) in xc.remainder().iter().zip(yc.remainder()) {
+        top = top.max(d2(*a, *b));
+    }
+    let hypot = |(a, b): (&f64, &f64)| (a - cx).hypot(b - cy);
+    if !(top.is_finite() && top > 1e-280) {
+        return x.iter().zip(y).map(hypot).fold(0.0, f64::max);
+    }
+    let threshold = top * (1.0 - 1e-12);
+    // NaN squares go through `hypot` too: `hypot(NaN, ±inf)` is `inf`.
+    x.iter()
+        .zip(y)
+        .filter(|(a, b)| {
+            let v = d2(**a, **b);
+            v >= threshold || v.is_nan()
+        })
+        .map(hypot)
+        .fold(0.0, f64::max)
+}
+
+/// [`window_report`] from a [`ReportFeed`] given every sample of the estimate's window and
+/// that window's orbit `x`, `y` (the same samples): the same bits as [`window_report`] on those
+/// samples (the sums were taken in sample order as they arrived; the amplitude needs the mean
+/// position, known only now, and is one pass over the orbit, [`orbit_amplitude`]).
+#[allow(clippy::too_many_arguments)] // the window's parts, as `window_report` plus the feed
 pub fn window_report_fed(
     feed: ReportFeed,
+    x: &[f64],
+    y: &[f64],
     estimate: WindowEstimate,
     temperature_c: f64,
     rig: &RigConfig,
@@ -406,15 +451,21 @@ pub fn window_report_fed(
     times_s: [f64; 2],
 ) -> Result<WindowReport, IdentificationError> {
     let len = estimate.end.saturating_sub(estimate.start);
-    if len == 0 || feed.n != len {
+    if len == 0 || feed.n != len || x.len() != len || y.len() != len {
         return Err(IdentificationError::invalid(
             "estimate",
-            format!("window {}..{} is empty or not the {} samples the report was fed", estimate.start, estimate.end, feed.n),
+            format!(
+                "window {}..{} is empty or not the {} samples the report was fed ({} x, {} y samples given)",
+                estimate.start,
+                estimate.end,
+                feed.n,
+                x.len(),
+                y.len()
+            ),
         ));
     }
     let [mx, my] = [feed.sums[0], feed.sums[1]].map(|s| s / len as f64);
-    // The farthest sample from the mean position is a vertex of the orbit's convex hull.
-    let amplitude = feed.hull.iter().map(|[a, b]| (a - mx).hypot(b - my)).fold(0.0, f64::max);
+    let amplitude = orbit_amplitude(x, y, [mx, my]);
     report_from(feed.sums, amplitude, len, estimate, temperature_c, rig, speed_rpm, times_s)
 }
 
@@ -464,16 +515,13 @@ fn report_from(
 }
 
 /// What the window report needs from every sample of a window, gathered as the samples
-/// arrive: the sums of x, y, fx and fy (in sample order, so the means are the same bits
-/// however the samples were cut) and the convex hull of the (x, y) orbit, which holds the
-/// sample farthest from any centre (the mean position is known only at the end). A sample is
-/// dropped from the hull only when it lies inside it by more than a relative 1e-12, so
-/// round-off in the orientation test never drops a vertex.
+/// arrive: the sums of x, y, fx and fy, in sample order, so the means are the same bits
+/// however the samples were cut. (The amplitude needs the mean position first: it is one pass
+/// over the window's orbit at the end, [`window_report_fed`].)
 #[derive(Debug, Clone, Default)]
 pub struct ReportFeed {
     n: usize,
     sums: [f64; 4],
-    hull: Vec<[f64; 2]>,
 }
 
 impl ReportFeed {
@@ -488,50 +536,15 @@ impl ReportFeed {
         if n == 0 {
             return;
         }
-        for (s, c) in self.sums.iter_mut().zip([x, y, fx, fy]) {
-            *s = c[..n].iter().fold(*s, |a, v| a + v);
+        // The four columns in one loop: four independent chains of additions (each sum still
+        // in sample order) instead of four chains one after the other.
+        let mut s = self.sums;
+        for (((a, b), c), d) in x[..n].iter().zip(&y[..n]).zip(&fx[..n]).zip(&fy[..n]) {
+            s = [s[0] + a, s[1] + b, s[2] + c, s[3] + d];
         }
+        self.sums = s;
         self.n += n;
-        // The new samples' own hull first (most of them go), then the union with the old one.
-        let mut pts = convex_hull(x[..n].iter().zip(&y[..n]).map(|(a, b)| [*a, *b]).collect());
-        pts.append(&mut self.hull);
-        self.hull = convex_hull(pts);
     }
-}
-
-/// The vertices of the convex hull of `pts` (Andrew's monotone chain), keeping every point not
-/// clearly inside (collinear and nearly collinear points stay; exact duplicates go; NaN
-/// points go, as the amplitude's `f64::max` ignores them; infinite ones stay).
-fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
-    pts.retain(|p| !(p[0].is_nan() || p[1].is_nan()));
-    pts.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-    pts.dedup();
-    if pts.len() < 3 {
-        return pts;
-    }
-    // Turn o -> a -> b clearly clockwise (a clearly inside the chain).
-    let inside = |o: &[f64; 2], a: &[f64; 2], b: &[f64; 2]| {
-        let (ux, uy, vx, vy) = (a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]);
-        let cross = ux * vy - uy * vx;
-        cross < 0.0 && cross * cross > 1e-24 * (ux * ux + uy * uy) * (vx * vx + vy * vy)
-    };
-    let chain = |iter: &mut dyn Iterator<Item = [f64; 2]>| {
-        let mut h: Vec<[f64; 2]> = Vec::new();
-        for p in iter {
-            while h.len() >= 2 && inside(&h[h.len() - 2], &h[h.len() - 1], &p) {
-                h.pop();
-            }
-            h.push(p);
-        }
-        h
-    };
-    let lower = chain(&mut pts.iter().copied());
-    let upper = chain(&mut pts.iter().rev().copied());
-    let mut out = lower;
-    out.extend(upper);
-    out.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-    out.dedup();
-    out
 }
 
 /// Median time step of a sampled time base.
@@ -549,24 +562,47 @@ fn median_step(t: &[f64]) -> Option<f64> {
 mod tests {
     use super::*;
 
-    /// The hull keeps the farthest sample from any centre, and a feed cut into pieces gives the
-    /// sums and amplitude of one pass, bit for bit.
+    /// The orbit's amplitude is the one-`hypot`-pass maximum bit for bit (random orbits, odd
+    /// lengths, NaN samples, centres near and far, scales where the squares would underflow),
+    /// and a feed cut into pieces gives the sums of one pass, bit for bit.
     #[test]
-    fn report_feed_in_pieces_is_the_full_pass() {
+    fn amplitude_is_the_hypot_pass_and_a_feed_in_pieces_is_the_full_pass() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut unit = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for (case, scale) in [1e-5, 1.0, 1e3, 1e-150, 1e200].into_iter().cycle().take(40).enumerate() {
+            let n = 1 + case * 137 % 5_003;
+            let mut x: Vec<f64> = (0..n).map(|t| scale * ((t as f64 * 0.013).sin() + 0.01 * unit())).collect();
+            let mut y: Vec<f64> = (0..n).map(|t| scale * ((t as f64 * 0.0371).cos() + 0.01 * unit())).collect();
+            if case % 3 == 0 {
+                x[case % n] = f64::NAN;
+            }
+            if case % 7 == 5 {
+                // hypot(NaN, inf) is inf: such a sample wins.
+                x[n / 2] = f64::NAN;
+                y[n / 2] = f64::INFINITY;
+            }
+            if case % 4 == 1 && n > 2 {
+                // Ties and near-ties: a sample mirrored through the centre.
+                y[n - 1] = -y[0];
+                x[n - 1] = -x[0];
+            }
+            for centre in [[0.0, 0.0], [scale * unit(), scale * unit()], [-scale * 3.0, scale * 0.5]] {
+                let brute = x.iter().zip(&y).map(|(a, b)| (a - centre[0]).hypot(b - centre[1])).fold(0.0, f64::max);
+                assert_eq!(orbit_amplitude(&x, &y, centre).to_bits(), brute.to_bits(), "case {case}, n {n}, centre {centre:?}");
+            }
+        }
         let n = 20_011;
         let x: Vec<f64> = (0..n).map(|t| 3e-6 * (t as f64 * 0.013).sin() + 1e-6 * (t as f64 * 0.0371).cos() - 2e-5 + 1e-9 * ((t * 7919) % 101) as f64).collect();
         let y: Vec<f64> = (0..n).map(|t| 4e-6 * (t as f64 * 0.0371).cos() + 2e-6 * (t as f64 * 0.013).sin() - 6e-5).collect();
         let fx: Vec<f64> = x.iter().map(|v| 150.0 - 1e8 * v).collect();
         let fy: Vec<f64> = y.iter().map(|v| 8000.0 - 2e8 * v).collect();
-        let mut whole = ReportFeed::default();
-        whole.advance(&x, &y, &fx, &fy);
-        assert!(whole.hull.len() < n / 10, "hull of {} points", whole.hull.len());
-        for c in [[0.0, 0.0], [-2e-5, -6e-5], [-2.3e-5, -5.7e-5], [1.0, -1.0]] {
-            let brute = x.iter().zip(&y).map(|(a, b)| (a - c[0]).hypot(b - c[1])).fold(0.0, f64::max);
-            let hull = whole.hull.iter().map(|[a, b]| (a - c[0]).hypot(b - c[1])).fold(0.0, f64::max);
-            assert_eq!(hull, brute, "centre {c:?}");
-        }
-        for step in [1_000, 777, 5] {
+        let one_pass: Vec<f64> = [&x, &y, &fx, &fy].iter().map(|c| c.iter().fold(0.0, |a, v| a + v)).collect();
+        for step in [n, 1_000, 777, 5] {
             let mut feed = ReportFeed::default();
             let mut i = 0;
             while i < n {
@@ -575,9 +611,7 @@ mod tests {
                 i = j;
             }
             assert_eq!(feed.samples(), n);
-            assert_eq!(feed.sums, whole.sums, "fed {step} at a time");
-            let amp = |f: &ReportFeed| f.hull.iter().map(|[a, b]| (a - -2e-5f64).hypot(b - -6e-5)).fold(0.0, f64::max);
-            assert_eq!(amp(&feed), amp(&whole), "fed {step} at a time");
+            assert_eq!(feed.sums.to_vec(), one_pass, "fed {step} at a time");
         }
     }
 }

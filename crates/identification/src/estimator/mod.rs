@@ -212,8 +212,10 @@ impl Default for EstimatorConfig {
 /// The standard errors' decimated rate is at least this many times the signal band (its
 /// Nyquist frequency 4 times the band): see `uncertainty`, "Decimated standard errors".
 pub const SE_RATE_PER_BAND: f64 = 8.0;
-/// The standard errors' decimated window keeps at least this many samples.
-pub const SE_MIN_SAMPLES: usize = 20_000;
+/// The standard errors' decimated window keeps at least this many samples. (Was 20 000, "a
+/// margin"; the statistics depend on the lag window's length against the window's, `L/n`,
+/// which decimation keeps, and 5 kHz windows of 25 000 samples now decimate too: ADR 0011.)
+pub const SE_MIN_SAMPLES: usize = 2_000;
 
 /// Decimation factor of the standard errors for a window of `n` samples at `sample_rate_hz`
 /// whose signals are band-limited to `signal_band_hz`: the largest `q` with

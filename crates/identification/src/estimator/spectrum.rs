@@ -454,23 +454,51 @@ fn fraction_in(pw: &[f64], bins: &[f64]) -> f64 {
     if !(total > 0.0) {
         return f64::NAN;
     }
+    let mask = near_lines(pw.len(), bins);
     let mut inside = 0.0;
     for k in 1..pw.len() {
-        if bins.iter().any(|&b| (k as f64 - b).abs() <= MAIN_LOBE_BINS as f64 + 0.5) {
+        if mask[k] {
             inside += pw[k];
         }
     }
     inside / total
 }
 
+/// Whether bin `k` lies within the main lobe of line bin `b`.
+fn near(k: usize, b: f64) -> bool {
+    (k as f64 - b).abs() <= MAIN_LOBE_BINS as f64 + 0.5
+}
+
+/// The bins `1..` of `line_bin`'s main lobe that exist in `0..nb`, in order: every `k` with
+/// [`near`]`(k, line_bin)` (the range is widened by one bin each side and each bin tested, so
+/// the set is exactly the predicate's, without a pass over every bin).
+fn lobe(nb: usize, line_bin: f64) -> impl Iterator<Item = usize> {
+    let reach = MAIN_LOBE_BINS as f64 + 1.5;
+    let lo = if line_bin - reach > 1.0 { (line_bin - reach).floor() as usize } else { 1 };
+    let hi = if line_bin + reach < nb as f64 { (line_bin + reach).ceil() as usize } else { nb };
+    (lo.max(1)..hi.min(nb).max(lo.max(1))).filter(move |&k| near(k, line_bin))
+}
+
+/// `mask[k]`: bin `k` is within the main lobe of any line of `bins`.
+fn near_lines(nb: usize, bins: &[f64]) -> Vec<bool> {
+    let mut mask = vec![false; nb];
+    for &b in bins {
+        for k in lobe(nb, b) {
+            mask[k] = true;
+        }
+    }
+    mask
+}
+
 /// Per line bin: its main-lobe power over the power outside every line of `bins` (bins 1..).
-/// Infinite when nothing is outside, NaN without power.
+/// Infinite when nothing is outside, NaN without power. (Each line's lobe and the outside are
+/// summed in bin order, as a pass over every bin with the same predicate would.)
 fn line_snr(pw: &[f64], bins: &[f64]) -> Vec<f64> {
-    let near = |k: usize, b: f64| (k as f64 - b).abs() <= MAIN_LOBE_BINS as f64 + 0.5;
-    let outside: f64 = (1..pw.len()).filter(|&k| !bins.iter().any(|&b| near(k, b))).map(|k| pw[k]).sum();
+    let mask = near_lines(pw.len(), bins);
+    let outside: f64 = (1..pw.len()).filter(|&k| !mask[k]).map(|k| pw[k]).sum();
     bins.iter()
         .map(|&b| {
-            let line: f64 = (1..pw.len()).filter(|&k| near(k, b)).map(|k| pw[k]).sum();
+            let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
             if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
         })
         .collect()
@@ -546,6 +574,35 @@ mod tests {
                 si += r0[t] * a.sin() + i0[t] * a.cos();
             }
             assert!((sr - re[f]).abs() < 1e-12 && (si - im[f]).abs() < 1e-12);
+        }
+    }
+
+    /// The line-lobe sums from each lobe's own bins are the passes over every bin with the same
+    /// predicate, bit for bit (lines at the edges, fractional, outside the spectrum, NaN).
+    #[test]
+    fn lobe_sums_equal_the_passes_over_every_bin() {
+        let nb = 8_193;
+        let pw: Vec<f64> = (0..nb).map(|k| 1e-12 * (1.0 + ((k * 7919) % 1013) as f64) * (1.0 + (k as f64 * 0.37).sin().abs())).collect();
+        let cases: [&[f64]; 6] = [&[], &[94.2, 151.7], &[1.0, 2.5, nb as f64 - 1.0], &[0.0, nb as f64 + 0.4], &[f64::NAN, 40.0, f64::INFINITY], &[30.49, 30.51, 4_000.0]];
+        for bins in cases {
+            let near_any = |k: usize| bins.iter().any(|&b| near(k, b));
+            let outside: f64 = (1..nb).filter(|&k| !near_any(k)).map(|k| pw[k]).sum();
+            let snr: Vec<f64> = bins
+                .iter()
+                .map(|&b| {
+                    let line: f64 = (1..nb).filter(|&k| near(k, b)).map(|k| pw[k]).sum();
+                    if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+                })
+                .collect();
+            assert_eq!(format!("{:?}", line_snr(&pw, bins)), format!("{snr:?}"), "lines {bins:?}");
+            let total: f64 = pw[1..].iter().sum();
+            let mut inside = 0.0;
+            for k in 1..nb {
+                if near_any(k) {
+                    inside += pw[k];
+                }
+            }
+            assert_eq!(fraction_in(&pw, bins).to_bits(), (inside / total).to_bits(), "lines {bins:?}");
         }
     }
 

@@ -1,0 +1,69 @@
+//! The estimator node's share of an offline re-analysis (`oilfilm identify BAG` on the
+//! sim_rig graph): 60 s of the simulated rig at 5 kHz conditioned once (1 000-scan blocks,
+//! 55.5 Hz low-pass), then the estimator core (25 000-sample windows every 12 500, standard
+//! errors with `signal_band_hz` 55.5, the sim_rig params) pushed every conditioned frame,
+//! best and median of several passes. A loop to profile (`perf record`) the estimator alone.
+//!
+//! `cargo run --release -p oilfilm-nodes --example profile_reanalysis [PASSES]`
+
+use std::time::Instant;
+
+use oilfilm_identification::excitation::ExcitationPlan;
+use oilfilm_identification::simulate::{self, SimulateOptions};
+use oilfilm_msgs::{DaqFrame, Header, BEARING_FRAME_ID};
+use oilfilm_nodes::conditioner::{ConditionerCore, ConditionerParams};
+use oilfilm_nodes::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_physics::config::RigConfig;
+
+fn main() -> anyhow::Result<()> {
+    let passes: usize = std::env::args().nth(1).map(|a| a.parse()).transpose()?.unwrap_or(10);
+    let (seconds, block) = (60.0, 500usize);
+    let rig = RigConfig::zhou2004()?;
+    let rate = rig.daq.sample_rate_hz;
+    let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), seconds, SimulateOptions::default(), &mut |_| {})?;
+    let cal = rig.daq.calibration();
+    let order = cal.scan_order();
+    let names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
+    let offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
+    let channels = names.len();
+    let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: 1_000, ..ConditionerParams::default() };
+    let mut cond = ConditionerCore::new(rig.clone(), &params)?;
+    let mut conditioned = Vec::new();
+    for (k, scans) in rec.scans.chunks(block).enumerate() {
+        let frame = DaqFrame {
+            header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
+            sequence: k as u64,
+            first_scan: (k * block) as u64,
+            sample_rate_hz: rate,
+            units: DaqFrame::UNITS_VOLTS,
+            channel_names: names.clone(),
+            channel_units: vec!["V".into(); channels],
+            channel_offsets_s: offsets.clone(),
+            scan_count: scans.len() as u32,
+            values: scans.iter().flat_map(|s| s.volts.iter().copied()).collect(),
+            rig: rig.name.clone(),
+        };
+        conditioned.extend(cond.push(&frame)?);
+    }
+    let ep = EstimatorParams { window: 25_000, hop: 12_500, signal_band_hz: 55.5, ..EstimatorParams::default() };
+    let mut times = Vec::new();
+    let mut estimates = 0;
+    for _ in 0..passes {
+        let mut est = EstimatorCore::new(rig.clone(), ep.clone())?;
+        let t0 = Instant::now();
+        estimates = 0;
+        for c in &conditioned {
+            estimates += est.push(c)?.len();
+        }
+        times.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    println!(
+        "{seconds} s at {rate} Hz, {} conditioned frames: estimator core {estimates} estimates in best {:.1} ms, median {:.1} ms ({passes} passes): {:.0}x real time",
+        conditioned.len(),
+        times[0],
+        times[times.len() / 2],
+        seconds * 1e3 / times[0]
+    );
+    Ok(())
+}
