@@ -379,10 +379,13 @@ pub fn read_bag_inputs(dir: &std::path::Path, threads: usize) -> Result<(Vec<oil
     Ok((frames, status))
 }
 
-/// A bag's DAQ frames and rig status through a fresh conditioner and estimator
-/// (`harness::reanalyse_stream`), the frames conditioned on this thread as worker threads
-/// read and decode the chunks after them. Returns what the estimator published and how many
-/// frames and status messages went in.
+/// A bag's DAQ frames and rig status through a fresh conditioner and estimator, with the
+/// estimates of `harness::reanalyse` bit for bit: the status first (its chunks are small and
+/// the estimator takes every status before the frames, as the replay graph does), then the
+/// frames, conditioned on this thread as worker threads read and decode the chunks after
+/// them, each handed to the estimator on a thread of its own
+/// (`harness::reanalyse_overlapped`). Returns the estimates (the `Recording` holds nothing
+/// else) and how many frames and status messages went in.
 pub fn reanalyse_bag(
     dir: &std::path::Path,
     rig: &RigConfig,
@@ -390,19 +393,21 @@ pub fn reanalyse_bag(
     estimator: &oilfilm_nodes::estimator::EstimatorParams,
     threads: usize,
 ) -> Result<(oilfilm_nodes::harness::Recording, usize, usize)> {
+    use oilfilm_msgs::RosMessage;
     let bag = oilfilm_bag::Bag::open(dir)?;
-    let (mut frames, mut status) = (0usize, 0usize);
-    let out = bag.read_topics(&is_input, &decode_input, threads, |inputs| {
-        let counted = inputs.inspect(|i| match i {
-            Input::Frame(_) => frames += 1,
-            Input::Status(_) => status += 1,
-        });
-        oilfilm_nodes::harness::reanalyse_stream(rig, conditioner, estimator, counted)
+    let is_status = |_: &str, type_name: &str| type_name == oilfilm_msgs::RigStatus::TYPE_NAME;
+    let is_frame = |_: &str, type_name: &str| type_name == oilfilm_msgs::DaqFrame::TYPE_NAME;
+    let status: Vec<oilfilm_msgs::RigStatus> = bag.read_topics(&is_status, &|m| m.decode(), threads, |s| s.collect())?;
+    let status_count = status.len();
+    let mut frames = 0usize;
+    let out = bag.read_topics(&is_frame, &|m| m.decode::<oilfilm_msgs::DaqFrame>(), threads, |inputs| {
+        let counted = inputs.inspect(|_| frames += 1);
+        oilfilm_nodes::harness::reanalyse_overlapped(rig, conditioner, estimator, status, counted)
     })??;
     if frames == 0 {
         bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
     }
-    Ok((out, frames, status))
+    Ok((out, frames, status_count))
 }
 
 /// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner

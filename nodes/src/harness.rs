@@ -159,3 +159,77 @@ impl<I: Iterator<Item = Input>> crate::ports::Receive<DaqFrame> for Inputs<I> {
         Ok(None)
     }
 }
+
+/// [`reanalyse`]'s estimates (bit for bit) with the rig status known before the frames
+/// (e.g. read from a bag's status chunks first): the conditioner runs on the calling thread
+/// as the frames arrive and hands each conditioned frame to the estimator on a thread of its
+/// own, so the two overlap instead of taking turns. The same cores take the same messages in
+/// the same order as in [`reanalyse`] (every status, then the conditioned frames in order),
+/// so the estimates are the same. The conditioned frames are not kept (`Recording` holds
+/// the estimates only): offline re-analysis wants the coefficients, and keeping a copy of
+/// every conditioned frame cost as much as passing it on.
+pub fn reanalyse_overlapped(
+    rig: &RigConfig,
+    conditioner: &ConditionerParams,
+    estimator: &EstimatorParams,
+    status: Vec<RigStatus>,
+    frames: impl IntoIterator<Item = DaqFrame>,
+) -> Result<Recording, NodeError> {
+    let mut cond = ConditionerCore::new(rig.clone(), conditioner)?;
+    // A few frames in flight: enough to ride over one window's estimate, little memory.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<ConditionedFrame>(16);
+    let (rig, estimator) = (rig.clone(), estimator.clone());
+    std::thread::scope(|s| {
+        let worker = s.spawn(move || -> Result<Vec<CoefficientEstimate>, NodeError> {
+            // Made on its thread: the core keeps thread-local FFT tables (not `Send`). If it
+            // cannot be made, the channel closes and the conditioner stops at its next frame.
+            let mut est = EstimatorCore::new(rig, estimator)?;
+            let mut conditioned = Channel(rx);
+            let mut status_in = Replay::new(status);
+            let mut estimates = Collect::default();
+            poll::estimator(&mut est, &mut EstimatorPorts { conditioned: &mut conditioned, status: &mut status_in, estimates: &mut estimates })?;
+            Ok(estimates.0)
+        });
+        let mut frames_in = Frames(frames.into_iter());
+        let mut out = ChannelOut(tx);
+        let conditioned = poll::conditioner(&mut cond, &mut ConditionerPorts { frames: &mut frames_in, conditioned: &mut out });
+        // Closing the channel ends the estimator's loop.
+        drop(out);
+        let estimates = match worker.join() {
+            Ok(r) => r,
+            Err(_) => Err(NodeError::Closed("the re-analysis estimator thread panicked".into())),
+        };
+        // The estimator's error first: the conditioner's would only say it stopped listening.
+        let estimates = estimates?;
+        conditioned?;
+        Ok(Recording { estimates, ..Recording::default() })
+    })
+}
+
+/// The estimator's end of [`reanalyse_overlapped`]'s channel: blocks for the next frame,
+/// `None` once the conditioner has closed it.
+struct Channel(std::sync::mpsc::Receiver<ConditionedFrame>);
+
+impl crate::ports::Receive<ConditionedFrame> for Channel {
+    fn receive(&mut self) -> Result<Option<ConditionedFrame>, NodeError> {
+        Ok(self.0.recv().ok())
+    }
+}
+
+/// The conditioner's end of [`reanalyse_overlapped`]'s channel.
+struct ChannelOut(std::sync::mpsc::SyncSender<ConditionedFrame>);
+
+impl crate::ports::Publish<ConditionedFrame> for ChannelOut {
+    fn publish(&mut self, message: ConditionedFrame) -> Result<(), NodeError> {
+        self.0.send(message).map_err(|_| NodeError::Closed("the re-analysis estimator stopped taking frames".into()))
+    }
+}
+
+/// Frames from an iterator, as a port (taken one at a time, as they are decoded).
+struct Frames<I>(I);
+
+impl<I: Iterator<Item = DaqFrame>> crate::ports::Receive<DaqFrame> for Frames<I> {
+    fn receive(&mut self) -> Result<Option<DaqFrame>, NodeError> {
+        Ok(self.0.next())
+    }
+}

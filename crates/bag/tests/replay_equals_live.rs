@@ -9,7 +9,7 @@ mod sim_rig;
 
 use oilfilm_bag::{Bag, OilfilmMessage, WriterOptions};
 use oilfilm_msgs::RosMessage;
-use oilfilm_nodes::harness::{reanalyse, reanalyse_stream, run_sim_rig, GraphParams, Input};
+use oilfilm_nodes::harness::{reanalyse, reanalyse_overlapped, reanalyse_stream, run_sim_rig, GraphParams, Input};
 use oilfilm_physics::config::RigConfig;
 
 #[test]
@@ -50,6 +50,19 @@ fn estimates_from_a_bag_equal_the_live_ones_bit_for_bit() {
         let streamed = bag.read_topics(&is_input, &decode, threads, |inputs| reanalyse_stream(&rig, &p.conditioner, &p.estimator, inputs)).unwrap().unwrap();
         assert_eq!(bytes(&streamed.estimates), bytes(&live.estimates), "streamed re-analysis ({threads} threads) differs from live");
         assert_eq!(streamed.conditioned, again.conditioned, "conditioned frames ({threads} threads)");
+
+        // The same as `oilfilm identify BAG` reads it (src/records.rs, `reanalyse_bag`): the
+        // status chunks first, then the frames streamed through the conditioner here and the
+        // estimator on a thread of its own.
+        let is_status = |_: &str, ty: &str| ty == oilfilm_msgs::RigStatus::TYPE_NAME;
+        let is_frame = |_: &str, ty: &str| ty == oilfilm_msgs::DaqFrame::TYPE_NAME;
+        let status: Vec<oilfilm_msgs::RigStatus> = bag.read_topics(&is_status, &|m| m.decode(), threads, |s| s.collect()).unwrap();
+        assert!(!status.is_empty());
+        let overlapped = bag
+            .read_topics(&is_frame, &|m| m.decode::<oilfilm_msgs::DaqFrame>(), threads, |frames| reanalyse_overlapped(&rig, &p.conditioner, &p.estimator, status, frames))
+            .unwrap()
+            .unwrap();
+        assert_eq!(bytes(&overlapped.estimates), bytes(&live.estimates), "overlapped re-analysis ({threads} threads) differs from live");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
