@@ -17,7 +17,10 @@
 //! Savitzky-Golay derivatives and eq. 2 at one common delay. A sample is out `L + 2M` scans
 //! (12 at the defaults) after its scan came in, instead of after the zero-phase edge; the
 //! frames still hold `block_scans` samples at fixed scan indices, so live and replayed
-//! graphs give the same bits here too. A sample's `first_sample` index (and the stamp) is
+//! graphs give the same bits here too. Those indices are multiples of `block_scans` (the
+//! samples before the first multiple are dropped when a stream starts), as the estimator's
+//! windows are multiples of its hop: with a window and hop that are multiples of
+//! `block_scans`, a window's last block is out `L + 2M` scans after its last sample. A sample's `first_sample` index (and the stamp) is
 //! the scan the de-skew and differentiator delays align it to; the low-pass's own phase lag
 //! is common to every column and is not removed (it does not change the coefficients). A
 //! reading out of its linear range invalidates only the samples it can reach (the filters'
@@ -172,6 +175,8 @@ struct CausalStream {
     chain: CausalChain,
     /// Samples out of the chain, not yet published.
     pending: CausalOutput,
+    /// Whether the samples before the first block (see `push`) are dropped.
+    aligned: bool,
     /// One frame's scans, the stream's channels only, in their order (the order of the
     /// frame's channels the chain uses: a change of it restarts the stream).
     rows: Vec<f64>,
@@ -258,6 +263,21 @@ impl ConditionerCore {
             }
             // Whole rows of the stream's channels by construction: this cannot fail.
             c.chain.push(&c.rows, &mut c.pending)?;
+            if !c.aligned {
+                // The first block starts at a multiple of `block_scans` of the DAQ's scan
+                // numbering, as the estimator's windows do (`[k hop, k hop + window)`): a
+                // window ending on a block's end is then out as soon as its last sample is.
+                let first = stream.origin_scan + c.pending.first_index;
+                let skip = ((self.block as u64 - first % self.block as u64) % self.block as u64) as usize;
+                if c.pending.len() >= skip {
+                    c.pending.consume(skip);
+                    c.aligned = true;
+                } else {
+                    // Not yet: keep the violations, drop the samples (they precede the first block).
+                    let n = c.pending.len();
+                    c.pending.consume(n);
+                }
+            }
             let mut out = Vec::new();
             while self.stream.as_ref().and_then(|s| s.causal.as_ref()).is_some_and(|c| c.pending.len() >= self.block) {
                 out.push(self.causal_block());
@@ -335,7 +355,7 @@ impl ConditionerCore {
                 }
                 let units = if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts };
                 let chain = CausalChain::new(&columns, channels.len(), units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config)?;
-                (chain.delays().delay_scans(), Some(Box::new(CausalStream { chain, pending: CausalOutput::default(), rows: Vec::new() })))
+                (chain.delays().delay_scans(), Some(Box::new(CausalStream { chain, pending: CausalOutput::default(), aligned: false, rows: Vec::new() })))
             }
         };
         // A restart before the previous stream published anything keeps its note: every gap
