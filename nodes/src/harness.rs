@@ -38,9 +38,9 @@ pub struct GraphParams {
 
 impl GraphParams {
     /// The `sim_rig` graph as `launch_configs/params/sim_rig.yaml` sets it up (the default
-    /// 23/37 Hz two-tone, 500-scan DAQ frames, the low-pass at 1.5 x 37 Hz, 1000-scan
-    /// conditioned frames), run for `duration_s` of rig time from a fixed epoch, with
-    /// estimator windows of `window` samples every `hop`.
+    /// 23/37 Hz two-tone, 500-scan DAQ frames, the causal conditioning chain with its low-pass
+    /// at 1.5 x 37 Hz, 1000-scan conditioned frames), run for `duration_s` of rig time from a
+    /// fixed epoch, with estimator windows of `window` samples every `hop`.
     pub fn sim_rig(duration_s: f64, window: i64, hop: i64) -> Self {
         let mut p = Self::default();
         p.daq.duration_s = duration_s;
@@ -48,6 +48,7 @@ impl GraphParams {
         p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
         p.conditioner.lowpass_cutoff_hz = 55.5;
         p.conditioner.block_scans = 1000;
+        p.conditioner.chain = crate::conditioner::Chain::Causal.name().into();
         p.estimator.window = window;
         p.estimator.hop = hop;
         p.estimator.signal_band_hz = p.conditioner.lowpass_cutoff_hz;
@@ -100,7 +101,9 @@ pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, 
 }
 
 /// Offline re-analysis: recorded DAQ frames and rig status through a fresh conditioner and
-/// estimator, as the `replay` graph runs them. Status messages are taken before the frames
+/// estimator, as the `replay` graph runs them. `conditioner.chain` must be the chain the live
+/// graph ran (its params file says; frames conditioned causally carry the flag
+/// `chain=causal`): with it the replay equals the live graph bit for bit. Status messages are taken before the frames
 /// (the estimator needs the speed first; the speed does not change during a run).
 pub fn reanalyse(
     rig: &RigConfig,
