@@ -61,7 +61,7 @@ const CASES: [Case; 6] = [
     // at 100 kHz) dominates a block's compute either way (2.0 against 2.5 ms), so shorter blocks
     // cost CPU but cut the ConditionedFrame from 650 to 130 kB, and frame->conditioned with it.
     Case { label: "100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
-    // The causal chain (ADR 0014): a sample is out 12 scans after its own, no edge.
+    // The causal chain (ADR 0014): a sample is out 11 scans after its own (L + 2M = 1 + 10 on these schedules), no edge.
     Case { label: "causal: 5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
     Case { label: "causal: 100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
 ];

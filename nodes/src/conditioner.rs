@@ -15,7 +15,7 @@
 //! ([`conditioning::causal`]): de-skew at a fixed common delay, a Butterworth low-pass of
 //! order `2 x lowpass_order` (its stop band falls as the zero-phase `|H|^2` does), the
 //! Savitzky-Golay derivatives and eq. 2 at one common delay. A sample is out `L + 2M` scans
-//! (12 at the defaults) after its scan came in, instead of after the zero-phase edge; the
+//! (11 on the Zhou card's schedule) after its scan came in, instead of after the zero-phase edge; the
 //! frames still hold `block_scans` samples at fixed scan indices, so live and replayed
 //! graphs give the same bits here too. Those indices are multiples of `block_scans` (the
 //! samples before the first multiple are dropped when a stream starts), as the estimator's

@@ -24,7 +24,7 @@
 //! | eq. 2 | `F = F_applied - m X''` at the common delay | 0 |
 //!
 //! So a sample of time index `m` (scans since the chain started) is out when scan
-//! `m + delay_scans()` is pushed ([`CausalDelays::delay_scans`]: `L + 2M`, 12 scans for the
+//! `m + delay_scans()` is pushed ([`CausalDelays::delay_scans`]: `L + 2M`, 11 scans for the
 //! 5 kHz defaults). Its time index means: the scan whose start time the de-skew and the
 //! differentiators align it to. The low-pass's own phase lag (its group delay, about
 //! 15 ms at DC for order 8 at 55.5 Hz) is **not** removed: it is common to every column and
