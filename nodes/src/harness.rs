@@ -38,9 +38,12 @@ pub struct GraphParams {
 
 impl GraphParams {
     /// The `sim_rig` graph as `launch_configs/params/sim_rig.yaml` sets it up (the default
-    /// 23/37 Hz two-tone, 500-scan DAQ frames, the causal conditioning chain with its low-pass
-    /// at 1.5 x 37 Hz, 1000-scan conditioned frames), run for `duration_s` of rig time from a
-    /// fixed epoch, with estimator windows of `window` samples every `hop`.
+    /// 23/37 Hz two-tone, 500-scan DAQ frames, the low-pass at 1.5 x 37 Hz, 1000-scan
+    /// conditioned frames), run for `duration_s` of rig time from a fixed epoch, with
+    /// estimator windows of `window` samples every `hop`. One difference: the conditioner keeps
+    /// the node's default chain, `zero_phase`, where the file says `causal` (ADR 0014), because
+    /// tests compare this graph with re-analyses whose params files do not name a chain; set
+    /// `conditioner.chain` to run the launch file's.
     pub fn sim_rig(duration_s: f64, window: i64, hop: i64) -> Self {
         let mut p = Self::default();
         p.daq.duration_s = duration_s;
@@ -48,7 +51,6 @@ impl GraphParams {
         p.daq.start_stamp_ns = 1_700_000_000_000_000_000;
         p.conditioner.lowpass_cutoff_hz = 55.5;
         p.conditioner.block_scans = 1000;
-        p.conditioner.chain = crate::conditioner::Chain::Causal.name().into();
         p.estimator.window = window;
         p.estimator.hop = hop;
         p.estimator.signal_band_hz = p.conditioner.lowpass_cutoff_hz;
