@@ -263,7 +263,7 @@ impl ConditionerCore {
             }
             // Whole rows of the stream's channels by construction: this cannot fail.
             c.chain.push(&c.rows, &mut c.pending)?;
-            if !c.aligned {
+            if !c.aligned && !c.pending.is_empty() {
                 // The first block starts at a multiple of `block_scans` of the DAQ's scan
                 // numbering, as the estimator's windows do (`[k hop, k hop + window)`): a
                 // window ending on a block's end is then out as soon as its last sample is.
