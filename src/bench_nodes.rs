@@ -9,9 +9,10 @@
 //! includes transport, conditioning and estimation, not the waiting for data that the
 //! block and window lengths impose by definition. Beside it, each row states that wait: the
 //! conditioner's zero-phase edge (`edge scans / rate`: a block is filtered only once the
-//! samples that far past its end are in) and acquisition-to-estimate, from the acquisition of
-//! a window's last sample to the estimate's reception (the edge, the rest of the last
-//! conditioner block, and frame-to-estimate).
+//! samples that far past its end are in) or, for the causal chain (ADR 0014), its fixed delay
+//! (a sample is out that many scans after its own), and acquisition-to-estimate, from the
+//! acquisition of a window's last sample to the estimate's reception (the edge or delay, the
+//! rest of the last conditioner block, and frame-to-estimate).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -23,7 +24,7 @@ use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::calibration_for;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
-use oilfilm_nodes::conditioner::ConditionerParams;
+use oilfilm_nodes::conditioner::{Chain, ConditionerParams};
 use oilfilm_nodes::dds::RosNode;
 use oilfilm_nodes::params::NodeArgs;
 use oilfilm_nodes::ports::{Publish, Receive};
@@ -42,22 +43,27 @@ struct Case {
     window: usize,
     /// The estimator's `signal_band_hz` (0: standard errors from every sample).
     signal_band_hz: f64,
+    /// The conditioner's `chain`.
+    chain: Chain,
 }
 
 /// The conditioner's low-pass cutoff in every row (1.5 x the 37 Hz line).
 const CUTOFF_HZ: f64 = 55.5;
 
-const CASES: [Case; 4] = [
-    Case { label: "5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ },
+const CASES: [Case; 6] = [
+    Case { label: "5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
     // Standard errors from every sample: the cost after a 200 000-sample window's end is
     // five 262 144-point FFTs.
-    Case { label: "100 kHz x 16 ch, SE from every sample", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: 0.0 },
+    Case { label: "100 kHz x 16 ch, SE from every sample", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: 0.0, chain: Chain::ZeroPhase },
     // Standard errors from every 10th sample (the signals are band-limited to 55.5 Hz).
-    Case { label: "100 kHz x 16 ch", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: CUTOFF_HZ },
+    Case { label: "100 kHz x 16 ch", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
     // The same with the conditioner's blocks five times shorter: its edge (12 091 scans each side
     // at 100 kHz) dominates a block's compute either way (2.0 against 2.5 ms), so shorter blocks
     // cost CPU but cut the ConditionedFrame from 650 to 130 kB, and frame->conditioned with it.
-    Case { label: "100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ },
+    Case { label: "100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
+    // The causal chain (ADR 0014): a sample is out 11 scans after its own (L + 2M = 1 + 10 on these schedules), no edge.
+    Case { label: "causal: 5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
+    Case { label: "causal: 100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
 ];
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -89,7 +95,7 @@ pub fn run(seconds: f64) -> Result<()> {
     println!("oilfilm bench nodes: conditioner and estimator binaries on loopback DDS (ros2-client), frames published at real-time pace, {seconds} s per row");
     println!("machine: {} cores; the publisher, the two nodes and this receiver share them", std::thread::available_parallelism().map_or(1, |n| n.get()));
     println!();
-    println!("| configuration | frames/s | frame->conditioned median / p99 / max (ms) | frame->estimate median / p99 / max (ms) | zero-phase edge wait (ms) | acquisition->estimate median / p99 (ms) | estimates | drops | CPU conditioner / estimator (% of a core) |");
+    println!("| configuration | frames/s | frame->conditioned median / p99 / max (ms) | frame->estimate median / p99 / max (ms) | zero-phase edge / causal delay wait (ms) | acquisition->estimate median / p99 (ms) | estimates | drops | CPU conditioner / estimator (% of a core) |");
     println!("|---|---|---|---|---|---|---|---|---|");
     for case in &CASES {
         let row = run_case(case, seconds, &bin_dir).with_context(|| case.label)?;
@@ -145,12 +151,23 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
         })
         .collect();
 
-    // The conditioner's edge, as it will compute it.
-    let cp = ConditionerParams { lowpass_cutoff_hz: CUTOFF_HZ, block_scans: case.conditioner_block as i64, ..ConditionerParams::default() };
+    // The conditioner's edge (zero-phase: the scans past a block it waits for; causal: the
+    // scans past a sample) and its first sample, as it will compute them.
+    let cp = ConditionerParams { lowpass_cutoff_hz: CUTOFF_HZ, block_scans: case.conditioner_block as i64, chain: case.chain.name().into(), ..ConditionerParams::default() };
     let kept: Vec<ChannelId> = order.clone();
     let probe = RawRecord { sample_rate_hz: case.rate_hz, start_time_s: 0.0, channels: kept.clone(), units: RawUnits::Volts, columns: vec![Vec::new(); kept.len()] };
     let calibration = calibration_for(&rig, &probe, &offsets[..kept.len()])?;
-    let edge = conditioning::edge_samples(&calibration, &cp.conditioning()?, case.rate_hz)?;
+    let (edge, s0) = match case.chain {
+        Chain::ZeroPhase => {
+            let edge = conditioning::edge_samples(&calibration, &cp.conditioning()?, case.rate_hz)?;
+            (edge, edge as u64)
+        }
+        Chain::Causal => {
+            // Its blocks start at multiples of the block length (nodes/src/conditioner.rs).
+            let d = conditioning::causal::delays(&calibration, &cp.conditioning()?, case.rate_hz)?;
+            (d.delay_scans(), (d.first_index() as u64).div_ceil(case.conditioner_block as u64) * case.conditioner_block as u64)
+        }
+    };
 
     let dir = std::env::temp_dir().join(format!("oilfilm-bench-nodes-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
@@ -167,7 +184,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
         }
         Command::new(bin_dir.join(exe)).args(&args).env("RUST_LOG", "warn").spawn().with_context(|| format!("starting {exe}"))
     };
-    let mut conditioner = spawn("oilfilm-conditioner", "conditioner", &[rig_arg.clone(), format!("lowpass_cutoff_hz:={CUTOFF_HZ}"), format!("block_scans:={}", case.conditioner_block)])?;
+    let mut conditioner = spawn("oilfilm-conditioner", "conditioner", &[rig_arg.clone(), format!("lowpass_cutoff_hz:={CUTOFF_HZ}"), format!("block_scans:={}", case.conditioner_block), format!("chain:={}", case.chain.name())])?;
     let mut estimator = spawn("oilfilm-estimator", "estimator", &[rig_arg, format!("window:={}", case.window), format!("hop:={}", case.window), "speed_rpm:=1500.0".into(), format!("signal_band_hz:={:?}", case.signal_band_hz)])?;
 
     let me = NodeArgs { name: "bench_nodes".into(), namespace: topics::NAMESPACE.into(), ..Default::default() };
@@ -227,7 +244,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
 
     // The frame holding raw scan `s`, and when it was published.
     let frame_of = |s: u64| -> Option<Instant> { published.get((s / case.daq_block as u64) as usize).copied() };
-    let s0 = edge as u64; // first conditioned sample (the stream starts at scan 0)
+    // `s0`: the first conditioned sample (the stream starts at scan 0).
     let mut cond_lat = Vec::new();
     for (c, t) in &conditioned {
         let trigger = c.first_sample + c.x_m.len() as u64 + edge as u64 - 1;
@@ -257,7 +274,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
         }
     }
     drops += conditioned.iter().filter(|(c, _)| c.flags.iter().any(|f| f.contains("restarted"))).count();
-    let expected_blocks = (frames.len() * case.daq_block).saturating_sub(2 * edge) / case.conditioner_block;
+    let expected_blocks = (frames.len() * case.daq_block).saturating_sub(s0 as usize + edge) / case.conditioner_block;
     drops += expected_blocks.saturating_sub(conditioned.len());
     let solved = estimates.iter().filter(|(e, _)| e.solved).count();
     let cpu = |a: Option<f64>, b: Option<f64>| match (a, b) {

@@ -10,13 +10,33 @@
 //! how they were cut into frames or when they arrived: live and replayed graphs give the
 //! same bits. Latency is one block plus `edge` scans.
 //!
+//! ## The causal chain (`chain: causal`, ADR 0014)
+//! The same steps run forward only, scan by scan, with their state carried across frames
+//! ([`conditioning::causal`]): de-skew at a fixed common delay, a Butterworth low-pass of
+//! order `2 x lowpass_order` (its stop band falls as the zero-phase `|H|^2` does), the
+//! Savitzky-Golay derivatives and eq. 2 at one common delay. A sample is out `L + 2M` scans
+//! (11 on the Zhou card's schedule) after its scan came in, instead of after the zero-phase edge; the
+//! frames still hold `block_scans` samples at fixed scan indices, so live and replayed
+//! graphs give the same bits here too. Those indices are multiples of `block_scans` (the
+//! samples before the first multiple are dropped when a stream starts), as the estimator's
+//! windows are multiples of its hop: with a window and hop that are multiples of
+//! `block_scans`, a window's last block is out `L + 2M` scans after its last sample. A sample's `first_sample` index (and the stamp) is
+//! the scan the de-skew and differentiator delays align it to; the low-pass's own phase lag
+//! is common to every column and is not removed (it does not change the coefficients). A
+//! reading out of its linear range invalidates only the samples it can reach (the filters'
+//! reach, [`conditioning::causal::CausalChain::influence`]), named in the flags of each frame
+//! it touches; the filters are fed the channel's last in-range value meanwhile. Frames carry
+//! the flag `chain=causal`.
+//!
 //! A gap (a frame whose first scan is not the next one), a change of schedule, rate or rig
 //! restarts the stream: the filters start again, `edge` scans after the gap, and the output
 //! frame says so in its flags. A block in which a probe left its linear range (paper step 2)
 //! or the chain refused the data is published with every sample invalid and the reason in
 //! its flags; nothing is silently turned into numbers.
 
+use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
 use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
+use oilfilm_physics::daq::CHANNEL_COUNT;
 use oilfilm_identification::pipeline::{calibration_for, mechanics_of};
 use oilfilm_msgs::{ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
@@ -44,6 +64,28 @@ pub struct ConditionerParams {
     pub deskew_taps: i64,
     /// Samples per conditioned frame.
     pub block_scans: i64,
+    /// `zero_phase` (forward-backward low-pass, centred filters: a block waits for the
+    /// filter's edge past its end) or `causal` (forward-only low-pass of order
+    /// `2 x lowpass_order`, a sample out a few scans after its scan; ADR 0014). Replays
+    /// must use the chain the live graph used; bags recorded before this parameter existed
+    /// were conditioned `zero_phase`, the default.
+    pub chain: String,
+}
+
+/// Which conditioning chain the node runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Chain {
+    ZeroPhase,
+    Causal,
+}
+
+impl Chain {
+    pub fn name(self) -> &'static str {
+        match self {
+            Chain::ZeroPhase => "zero_phase",
+            Chain::Causal => "causal",
+        }
+    }
 }
 
 impl Default for ConditionerParams {
@@ -57,6 +99,7 @@ impl Default for ConditionerParams {
             deskew: c.deskew,
             deskew_taps: c.deskew_taps as i64,
             block_scans: 1000,
+            chain: Chain::ZeroPhase.name().into(),
         }
     }
 }
@@ -74,11 +117,26 @@ impl ConditionerParams {
         })
     }
 
+    /// The chain named by `chain`.
+    pub fn chain(&self) -> Result<Chain, NodeError> {
+        match self.chain.as_str() {
+            "zero_phase" => Ok(Chain::ZeroPhase),
+            "causal" => Ok(Chain::Causal),
+            other => Err(NodeError::parameter("chain", format!("`{other}` is not a chain (zero_phase, causal)"))),
+        }
+    }
+
     pub fn validate(&self) -> Result<(), NodeError> {
         if !(1..=1_000_000).contains(&self.block_scans) {
             return Err(NodeError::parameter("block_scans", format!("must be in 1..=1000000, got {}", self.block_scans)));
         }
-        self.conditioning()?;
+        let c = self.conditioning()?;
+        if self.chain()? == Chain::Causal && conditioning::causal::causal_order(&c) > conditioning::lowpass::MAX_ORDER {
+            return Err(NodeError::parameter(
+                "lowpass_order",
+                format!("the causal chain runs order 2 x lowpass_order, at most {}: must be <= {}, got {}", conditioning::lowpass::MAX_ORDER, conditioning::lowpass::MAX_ORDER / 2, self.lowpass_order),
+            ));
+        }
         Ok(())
     }
 }
@@ -108,11 +166,28 @@ struct Stream {
     edge: usize,
     /// Why the stream (re)started, for the first frame's flags.
     start_note: Option<String>,
+    /// The causal chain's state (`chain: causal`); `columns` and `raw` stay empty then.
+    causal: Option<Box<CausalStream>>,
+}
+
+/// A stream through the causal chain.
+struct CausalStream {
+    chain: CausalChain,
+    /// Samples out of the chain, not yet published.
+    pending: CausalOutput,
+    /// Whether the samples before the first block (see `push`) are dropped.
+    aligned: bool,
+    /// One frame's scans, the stream's channels only, in their order (the order of the
+    /// frame's channels the chain uses: a change of it restarts the stream).
+    rows: Vec<f64>,
 }
 
 impl Stream {
     fn end_scan(&self) -> u64 {
-        self.first_scan + self.columns.first().map_or(0, Vec::len) as u64
+        match &self.causal {
+            Some(c) => self.origin_scan + c.chain.scans(),
+            None => self.first_scan + self.columns.first().map_or(0, Vec::len) as u64,
+        }
     }
 }
 
@@ -121,6 +196,7 @@ pub struct ConditionerCore {
     rig: RigConfig,
     mechanics: Mechanics,
     config: ConditioningConfig,
+    chain: Chain,
     block: usize,
     stream: Option<Stream>,
     work: Conditioned,
@@ -134,6 +210,7 @@ impl ConditionerCore {
             mechanics: mechanics_of(&rig),
             rig,
             config: params.conditioning()?,
+            chain: params.chain()?,
             block: params.block_scans as usize,
             stream: None,
             work: Conditioned::default(),
@@ -141,9 +218,15 @@ impl ConditionerCore {
         })
     }
 
-    /// Scans each conditioned block needs on either side (once a stream has started).
+    /// Scans each conditioned block needs on either side (once a stream has started); for
+    /// the causal chain, the scans a sample waits for after its own.
     pub fn edge_scans(&self) -> Option<usize> {
         self.stream.as_ref().map(|s| s.edge)
+    }
+
+    /// The chain this conditioner runs.
+    pub fn chain(&self) -> Chain {
+        self.chain
     }
 
     /// Takes one DAQ frame; returns the conditioned frames it completes. `Err` for a frame
@@ -172,6 +255,35 @@ impl ConditionerCore {
         }
         let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
         let width = frame.channel_names.len();
+        if let Some(c) = stream.causal.as_mut() {
+            c.rows.clear();
+            for k in 0..n_scans {
+                let row = &frame.values[k * width..(k + 1) * width];
+                c.rows.extend(kept.iter().map(|&(col, _)| row[col]));
+            }
+            // Whole rows of the stream's channels by construction: this cannot fail.
+            c.chain.push(&c.rows, &mut c.pending)?;
+            if !c.aligned && !c.pending.is_empty() {
+                // The first block starts at a multiple of `block_scans` of the DAQ's scan
+                // numbering, as the estimator's windows do (`[k hop, k hop + window)`): a
+                // window ending on a block's end is then out as soon as its last sample is.
+                let first = stream.origin_scan + c.pending.first_index;
+                let skip = ((self.block as u64 - first % self.block as u64) % self.block as u64) as usize;
+                if c.pending.len() >= skip {
+                    c.pending.consume(skip);
+                    c.aligned = true;
+                } else {
+                    // Not yet: keep the violations, drop the samples (they precede the first block).
+                    let n = c.pending.len();
+                    c.pending.consume(n);
+                }
+            }
+            let mut out = Vec::new();
+            while self.stream.as_ref().and_then(|s| s.causal.as_ref()).is_some_and(|c| c.pending.len() >= self.block) {
+                out.push(self.causal_block());
+            }
+            return Ok(out);
+        }
         for (col, (c, _)) in stream.columns.iter_mut().zip(&kept) {
             col.extend((0..n_scans).map(|k| frame.values[k * width + c]));
         }
@@ -227,7 +339,25 @@ impl ConditionerCore {
             columns: vec![Vec::new(); channels.len()],
         };
         let calibration = calibration_for(&self.rig, &probe, &offsets_s)?;
-        let edge = conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?;
+        let (edge, causal) = match self.chain {
+            Chain::ZeroPhase => (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None),
+            Chain::Causal => {
+                let mut columns = [usize::MAX; CHANNEL_COUNT];
+                for (k, c) in channels.iter().enumerate() {
+                    columns[c.index()] = k;
+                }
+                if let Some(missing) = ChannelId::ALL.iter().find(|c| columns[c.index()] == usize::MAX) {
+                    return Err(NodeError::BadMessage {
+                        topic: topics::DAQ_FRAMES.name.into(),
+                        sequence: frame.sequence,
+                        reason: format!("channel `{missing}` missing: conditioning needs all ten"),
+                    });
+                }
+                let units = if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts };
+                let chain = CausalChain::new(&columns, channels.len(), units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config)?;
+                (chain.delays().delay_scans(), Some(Box::new(CausalStream { chain, pending: CausalOutput::default(), aligned: false, rows: Vec::new() })))
+            }
+        };
         // A restart before the previous stream published anything keeps its note: every gap
         // is reported, even when gaps come closer together than a block.
         let note = match self.stream.as_mut().and_then(|s| s.start_note.take()) {
@@ -255,8 +385,62 @@ impl ConditionerCore {
             next_out: frame.first_scan + edge as u64,
             edge,
             start_note: Some(note),
+            causal,
         });
         Ok(())
+    }
+
+    /// Publishes the first `block` samples the causal chain has out (the caller checked
+    /// they are there).
+    fn causal_block(&mut self) -> ConditionedFrame {
+        let block = self.block;
+        let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
+        let Some(c) = s.causal.as_mut() else { return ConditionedFrame::default() };
+        let p = &mut c.pending;
+        let first = s.origin_scan + p.first_index;
+        let stamp = s.origin_stamp.after_samples(p.first_index as i64, s.rate_hz);
+        let mut frame = ConditionedFrame {
+            header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
+            sequence: self.sequence,
+            first_sample: first,
+            sample_rate_hz: s.rate_hz,
+            ..Default::default()
+        };
+        self.sequence += 1;
+        frame.flags.push(format!("lowpass_hz={}", self.config.lowpass_cutoff_hz));
+        if self.config.deskew {
+            frame.flags.push("deskewed".into());
+        }
+        frame.flags.push("chain=causal".into());
+        if let Some(note) = s.start_note.take() {
+            frame.flags.push(note);
+        }
+        let cut = |v: &[f64]| v[..block].to_vec();
+        frame.x_m = cut(&p.x_m);
+        frame.y_m = cut(&p.y_m);
+        frame.x_dot_m_s = cut(&p.vx_m_s);
+        frame.y_dot_m_s = cut(&p.vy_m_s);
+        frame.x_ddot_m_s2 = cut(&p.ax_m_s2);
+        frame.y_ddot_m_s2 = cut(&p.ay_m_s2);
+        frame.fx_n = cut(&p.fx_n);
+        frame.fy_n = cut(&p.fy_n);
+        frame.bearing_temperature_degc = p.temperature_c[..block].iter().sum::<f64>() / block as f64;
+        frame.valid = p.valid[..block].to_vec();
+        // The violations that reach this block, named with their scan in the stream; those
+        // that reach no later block are dropped.
+        let here = p.first_index..p.first_index + block as u64;
+        let chain = &c.chain;
+        for v in &p.violations {
+            let reach = chain.influence(v);
+            if reach.start < here.end && here.start < reach.end {
+                let mut named = v.clone();
+                named.index = (s.origin_scan + v.index as u64) as usize;
+                frame.flags.push(format!("rejected (Zhou et al. step 2): {named}"));
+            }
+        }
+        p.violations.retain(|v| chain.influence(v).end > here.end);
+        p.consume(block);
+        frame
     }
 
     /// Conditions the block at `next_out` (the caller checked the scans are there).

@@ -40,7 +40,10 @@ impl GraphParams {
     /// The `sim_rig` graph as `launch_configs/params/sim_rig.yaml` sets it up (the default
     /// 23/37 Hz two-tone, 500-scan DAQ frames, the low-pass at 1.5 x 37 Hz, 1000-scan
     /// conditioned frames), run for `duration_s` of rig time from a fixed epoch, with
-    /// estimator windows of `window` samples every `hop`.
+    /// estimator windows of `window` samples every `hop`. One difference: the conditioner keeps
+    /// the node's default chain, `zero_phase`, where the file says `causal` (ADR 0014), because
+    /// tests compare this graph with re-analyses whose params files do not name a chain; set
+    /// `conditioner.chain` to run the launch file's.
     pub fn sim_rig(duration_s: f64, window: i64, hop: i64) -> Self {
         let mut p = Self::default();
         p.daq.duration_s = duration_s;
@@ -100,7 +103,9 @@ pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, 
 }
 
 /// Offline re-analysis: recorded DAQ frames and rig status through a fresh conditioner and
-/// estimator, as the `replay` graph runs them. Status messages are taken before the frames
+/// estimator, as the `replay` graph runs them. `conditioner.chain` must be the chain the live
+/// graph ran (its params file says; frames conditioned causally carry the flag
+/// `chain=causal`): with it the replay equals the live graph bit for bit. Status messages are taken before the frames
 /// (the estimator needs the speed first; the speed does not change during a run).
 pub fn reanalyse(
     rig: &RigConfig,

@@ -172,4 +172,40 @@ mod tests {
         let a = parse_args("x", args(&["--ros-args", "-r", "__node:=est2", "-r", "__ns:=rig2"])).unwrap();
         assert_eq!(a.fully_qualified_name(), "/rig2/est2");
     }
+
+    #[test]
+    fn the_conditioners_chain_is_typed_and_checked() {
+        use crate::conditioner::{Chain, ConditionerParams};
+        let dir = std::env::temp_dir().join(format!("oilfilm-params-chain-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("c.yaml");
+        let node = parse_args("conditioner", args(&["--ros-args", "--params-file", file.to_str().unwrap()])).unwrap();
+        // Valid: both chains, and the default when the file does not say (bags recorded
+        // before the parameter existed were conditioned zero-phase).
+        for (text, chain) in [
+            ("conditioner:\n  ros__parameters:\n    chain: causal\n", Chain::Causal),
+            ("/oilfilm/conditioner:\n  ros__parameters:\n    chain: zero_phase\n    lowpass_order: 6\n", Chain::ZeroPhase),
+            ("conditioner:\n  ros__parameters:\n    block_scans: 500\n", Chain::ZeroPhase),
+        ] {
+            std::fs::write(&file, text).unwrap();
+            let (p, map) = load::<ConditionerParams>(&node).unwrap();
+            p.validate().unwrap();
+            assert_eq!(p.chain().unwrap(), chain, "{text}");
+            assert_eq!(map.get("chain").and_then(|v| v.as_str()), Some(chain.name()), "declared for the parameter services");
+        }
+        // Invalid: an unknown chain, a wrong type, an order the causal chain cannot double.
+        std::fs::write(&file, "conditioner:\n  ros__parameters:\n    chain: causual\n").unwrap();
+        let (p, _) = load::<ConditionerParams>(&node).unwrap();
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.contains("chain") && e.contains("causual") && e.contains("zero_phase, causal"), "{e}");
+        std::fs::write(&file, "conditioner:\n  ros__parameters:\n    chain: 3\n").unwrap();
+        let e = load::<ConditionerParams>(&node).unwrap_err().to_string();
+        assert!(e.contains("invalid type"), "{e}");
+        std::fs::write(&file, "conditioner:\n  ros__parameters:\n    chain: causal\n    lowpass_order: 7\n").unwrap();
+        let (p, _) = load::<ConditionerParams>(&node).unwrap();
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.contains("lowpass_order") && e.contains("<= 6"), "{e}");
+        let a = parse_args("conditioner", args(&["--ros-args", "-p", "chain:=causal"])).unwrap();
+        assert_eq!(load::<ConditionerParams>(&a).unwrap().0.chain().unwrap(), Chain::Causal);
+    }
 }

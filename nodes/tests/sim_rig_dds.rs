@@ -96,12 +96,23 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 #[test]
 fn sim_rig_on_dds_matches_the_film_and_the_in_memory_graph_bit_for_bit() {
+    on_dds_as_in_memory("zero_phase");
+}
+
+/// The same with the causal conditioning chain (ADR 0014; the launch configs' default).
+#[test]
+fn sim_rig_on_dds_with_the_causal_chain_matches_the_film_and_the_in_memory_graph_bit_for_bit() {
+    on_dds_as_in_memory("causal");
+}
+
+fn on_dds_as_in_memory(chain: &str) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let p = params(21.0);
+    let mut p = params(21.0);
+    p.conditioner.chain = chain.into();
     let rig = rig_at_40_db(&p.exciter.plan().unwrap());
     let (memory, truth) = run_sim_rig(&rig, &p).unwrap();
     assert_eq!(memory.estimates.len(), 2);
-    let dds = run_on_dds("two_tone", &rig, &p, memory.estimates.len());
+    let dds = run_on_dds(&format!("two_tone_{chain}"), &rig, &p, memory.estimates.len());
     assert_eq!(dds.len(), memory.estimates.len(), "estimates received over DDS");
     let kt = truth.coefficients.stiffness_n_m;
     let ct = truth.coefficients.damping_n_s_m;
@@ -111,7 +122,7 @@ fn sim_rig_on_dds_matches_the_film_and_the_in_memory_graph_bit_for_bit() {
             let (i, j) = (k / 2, k % 2);
             let ke = (d.stiffness_n_m[k] - kt[(i, j)]) / kt[(i, j)];
             let ce = (d.damping_n_s_m[k] - ct[(i, j)]) / ct[(i, j)];
-            println!("DDS window {}: coefficient {k}: stiffness {:+.3} %, damping {:+.3} %", d.window_start_sample, 100.0 * ke, 100.0 * ce);
+            println!("{chain}: DDS window {}: coefficient {k}: stiffness {:+.3} %, damping {:+.3} %", d.window_start_sample, 100.0 * ke, 100.0 * ce);
             assert!(ke.abs() < 0.01 && ce.abs() < 0.02);
         }
         assert_eq!(encode(d), encode(m), "window {}: the DDS graph differs from the in-memory graph", d.window_start_sample);

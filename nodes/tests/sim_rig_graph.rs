@@ -19,12 +19,32 @@ fn bytes(e: &[CoefficientEstimate]) -> Vec<Vec<u8>> {
 
 #[test]
 fn sim_rig_recovers_the_film_coefficients_and_replay_equals_live() {
-    let p = params(21.0);
+    recovers_and_replays("zero_phase");
+}
+
+/// The same with the causal conditioning chain (ADR 0014): the same tolerances, replay equal
+/// to live, frame boundaries irrelevant.
+#[test]
+fn sim_rig_with_the_causal_chain_recovers_the_film_coefficients_and_replay_equals_live() {
+    recovers_and_replays("causal");
+}
+
+fn recovers_and_replays(chain: &str) {
+    let mut p = params(21.0);
+    p.conditioner.chain = chain.into();
     let plan = p.exciter.plan().unwrap();
     let rig = rig_at_40_db(&plan);
     let (rec, truth) = run_sim_rig(&rig, &p).unwrap();
     assert!(!rec.commands.is_empty() && !rec.frames.is_empty() && !rec.conditioned.is_empty());
     assert_eq!(rec.estimates.len(), 2, "windows [25k, 75k) and [50k, 100k) of 105k scans");
+    assert_eq!(rec.conditioned.iter().all(|c| c.flags.iter().any(|f| f == "chain=causal")), chain == "causal", "{chain}: flags {:?}", rec.conditioned[0].flags);
+    println!("{chain}: first conditioned sample {}, {} frames", rec.conditioned[0].first_sample, rec.conditioned.len());
+    if chain == "causal" {
+        // Causal blocks sit at multiples of block_scans, as the estimator's windows sit at
+        // multiples of hop.
+        let block = p.conditioner.block_scans as u64;
+        assert!(rec.conditioned.iter().all(|c| c.first_sample % block == 0 && c.x_m.len() as u64 == block), "{:?}", rec.conditioned.iter().map(|c| c.first_sample).take(3).collect::<Vec<_>>());
+    }
     let kt = truth.coefficients.stiffness_n_m;
     let ct = truth.coefficients.damping_n_s_m;
     for e in &rec.estimates {
@@ -36,7 +56,7 @@ fn sim_rig_recovers_the_film_coefficients_and_replay_equals_live() {
             let ke = (e.stiffness_n_m[k] - kt[(i, j)]) / kt[(i, j)];
             let ce = (e.damping_n_s_m[k] - ct[(i, j)]) / ct[(i, j)];
             println!(
-                "window {}: k{name} {:.5e} (truth {:.5e}, {:+.3} %, SE {:.2e})  d{name} {:.5e} (truth {:.5e}, {:+.3} %)",
+                "{chain} window {}: k{name} {:.5e} (truth {:.5e}, {:+.3} %, SE {:.2e})  d{name} {:.5e} (truth {:.5e}, {:+.3} %)",
                 e.window_start_sample, e.stiffness_n_m[k], kt[(i, j)], 100.0 * ke, e.stiffness_se_n_m[k], e.damping_n_s_m[k], ct[(i, j)], 100.0 * ce
             );
             assert!(ke.abs() < 0.01, "k{name}: {:.3} % off", 100.0 * ke);
@@ -60,9 +80,16 @@ fn sim_rig_recovers_the_film_coefficients_and_replay_equals_live() {
     assert_eq!(bytes(&replay.estimates), bytes(&rec.estimates), "replayed estimates differ from live ones");
 
     // Frame boundaries do not matter: the same scans cut into 333-scan frames.
-    let recut = recut(&rec.frames, 333);
-    let replay = reanalyse(&rig, &p.conditioner, &p.estimator, &recut, &rec.status).unwrap();
-    assert_eq!(bytes(&replay.estimates), bytes(&rec.estimates), "estimates depend on how the scans were framed");
+    for size in [333, 1, 4_999] {
+        let recut = recut(&rec.frames, size);
+        let replay = reanalyse(&rig, &p.conditioner, &p.estimator, &recut, &rec.status).unwrap();
+        let span = |c: &[oilfilm_msgs::ConditionedFrame]| (c.first().map(|f| f.first_sample), c.last().map(|f| f.first_sample + f.x_m.len() as u64));
+        assert_eq!(replay.conditioned.len(), rec.conditioned.len(), "{chain}: {size}-scan frames: conditioned samples {:?}, live {:?}", span(&replay.conditioned), span(&rec.conditioned));
+        for (a, b) in replay.conditioned.iter().zip(&rec.conditioned) {
+            assert!(encode(a) == encode(b), "{chain}: conditioned frame {} (first sample {} / {}) depends on the framing ({size}-scan frames)", a.sequence, a.first_sample, b.first_sample);
+        }
+        assert_eq!(bytes(&replay.estimates), bytes(&rec.estimates), "{chain}: estimates depend on how the scans were framed ({size}-scan frames)");
+    }
 
     // The DAQ node's frames are the offline simulator's record, bit for bit.
     let offline = simulate::simulate(&rig, &plan, 21.0, SimulateOptions { keep_states: false }, &mut |_| {}).unwrap();
@@ -98,7 +125,14 @@ fn recut(frames: &[DaqFrame], size: usize) -> Vec<DaqFrame> {
 
 #[test]
 fn the_papers_single_sine_is_refused_not_answered() {
+    for chain in ["zero_phase", "causal"] {
+        single_sine(chain);
+    }
+}
+
+fn single_sine(chain: &str) {
     let mut p = params(16.0);
+    p.conditioner.chain = chain.into();
     p.exciter.plan = "sine".into();
     p.exciter.frequency_1_hz = 37.0;
     let rig = RigConfig::zhou2004().unwrap();
@@ -115,7 +149,14 @@ fn the_papers_single_sine_is_refused_not_answered() {
 
 #[test]
 fn a_lost_frame_restarts_the_stream_and_is_said() {
-    let p = params(13.0);
+    for chain in ["zero_phase", "causal"] {
+        lost_frame(chain);
+    }
+}
+
+fn lost_frame(chain: &str) {
+    let mut p = params(13.0);
+    p.conditioner.chain = chain.into();
     let rig = RigConfig::zhou2004().unwrap();
     let (rec, _) = run_sim_rig(&rig, &p).unwrap();
     let mut frames = rec.frames.clone();

@@ -69,6 +69,7 @@
 //! zero-phase low-pass.
 
 pub mod calibrate;
+pub mod causal;
 pub mod deskew;
 pub mod differentiate;
 pub mod film_force;
