@@ -410,6 +410,16 @@ pub fn reanalyse_bag(
     Ok((out, frames, status_count))
 }
 
+/// The conditioning chain of a bag's first recorded conditioned frame (`causal` if it
+/// carries the flag `chain=causal`, else `zero_phase`), or `None` if the bag holds none.
+fn recorded_chain(dir: &std::path::Path) -> Result<Option<&'static str>> {
+    use oilfilm_msgs::RosMessage;
+    let bag = oilfilm_bag::Bag::open(dir)?;
+    let is_conditioned = |_: &str, type_name: &str| type_name == oilfilm_msgs::ConditionedFrame::TYPE_NAME;
+    let first = bag.read_topics(&is_conditioned, &|m| m.decode::<oilfilm_msgs::ConditionedFrame>(), 1, |frames| frames.next())?;
+    Ok(first.map(|f| if f.flags.iter().any(|x| x == "chain=causal") { "causal" } else { "zero_phase" }))
+}
+
 /// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
 /// and estimator (the node cores, `oilfilm_nodes::harness::reanalyse`).
 fn identify_bag(args: &IdentifyArgs) -> Result<()> {
@@ -425,8 +435,24 @@ fn identify_bag(args: &IdentifyArgs) -> Result<()> {
         params_files: args.params.iter().cloned().collect(),
         ..Default::default()
     };
-    let (conditioner, _) = params::load::<ConditionerParams>(&node_args("conditioner"))?;
+    let (mut conditioner, _) = params::load::<ConditionerParams>(&node_args("conditioner"))?;
     let (mut estimator, _) = params::load::<EstimatorParams>(&node_args("estimator"))?;
+    // The chain the graph conditioned with, from its recorded conditioned frames (flag
+    // `chain=causal`, ADR 0014): without a params file it is the one to re-run; a params
+    // file that names another gets estimates that cannot equal the recorded ones, so say so.
+    if let Some(recorded) = recorded_chain(&args.file)? {
+        if args.params.is_none() {
+            if conditioner.chain != recorded {
+                eprintln!("{name}: the recorded conditioned frames were made by the `{recorded}` chain: re-analysing with it");
+            }
+            conditioner.chain = recorded.into();
+        } else if conditioner.chain != recorded {
+            eprintln!(
+                "warning: {name}: the recorded conditioned frames were made by the `{recorded}` chain, the params give `{}`: these estimates will not equal the recorded ones (set `chain: {recorded}` for the conditioner)",
+                conditioner.chain
+            );
+        }
+    }
     if let Some(w) = args.window {
         estimator.window = w as i64;
         estimator.hop = args.hop.unwrap_or(w) as i64;

@@ -208,3 +208,59 @@ fn diagnose_reads_a_bag_of_the_node_graph() {
     let notes = d["notes"].as_array().expect("notes");
     assert!(!notes.iter().any(|n| n.as_str().unwrap_or("").contains("rig file's was assumed")), "the bag's rig status states the speed: {notes:?}");
 }
+
+/// `oilfilm identify BAG` on a bag of the causal chain (what the launch files run): the
+/// chain is read from the recorded conditioned frames, and a params file that names another
+/// chain gets a warning that its estimates cannot equal the recorded ones.
+#[test]
+fn identify_a_causal_bag_follows_the_recorded_chain() {
+    use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
+    use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
+    use oilfilm_nodes::topics;
+
+    let mut p = GraphParams::sim_rig(12.0, 25_000, 25_000);
+    p.conditioner.chain = "causal".into();
+    let rig = oilfilm_physics::config::RigConfig::zhou2004().unwrap();
+    let (live, _) = run_sim_rig(&rig, &p).unwrap();
+    assert!(!live.estimates.is_empty());
+    assert!(live.conditioned.iter().all(|c| c.flags.iter().any(|f| f == "chain=causal")));
+
+    let dir = scratch("causal-graph-bag");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
+    let spec = |t: &topics::Topic| {
+        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()
+    };
+    let (frames, status, conditioned) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap(), w.add_topic(spec(&topics::CONDITIONED)).unwrap());
+    let ns = |h: &oilfilm_msgs::Header| (h.stamp.sec as u64) * 1_000_000_000 + h.stamp.nanosec as u64;
+    for s in &live.status[..1] {
+        w.write_message(status, ns(&s.header), s).unwrap();
+    }
+    for f in &live.frames {
+        w.write_message(frames, ns(&f.header), f).unwrap();
+    }
+    for c in &live.conditioned {
+        w.write_message(conditioned, ns(&c.header), c).unwrap();
+    }
+    w.close().unwrap();
+    let params = scratch("causal-graph-bag-params.yaml");
+    let body = "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n";
+    let estimates = |params_text: &str| {
+        std::fs::write(&params, params_text).unwrap();
+        let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap(), "--json"]);
+        assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+        let k: Vec<Vec<f64>> = doc["estimates"].as_array().unwrap().iter().map(|g| g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()).collect();
+        (k, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let live_k: Vec<Vec<f64>> = live.estimates.iter().map(|e| e.stiffness_n_m.to_vec()).collect();
+
+    // A params file naming the recorded chain: the live estimates, bit for bit, no warning.
+    let (k, stderr) = estimates(&body.replace("lowpass_cutoff_hz: 55.5\n", "lowpass_cutoff_hz: 55.5\n    chain: causal\n"));
+    assert_eq!(k, live_k);
+    assert!(!stderr.contains("warning"), "{stderr}");
+    // One that does not: other numbers, and the warning says why.
+    let (k, stderr) = estimates(body);
+    assert_ne!(k, live_k);
+    assert!(stderr.contains("warning") && stderr.contains("`causal` chain"), "{stderr}");
+}
