@@ -392,6 +392,24 @@ impl ConditionerCore {
 
     /// Publishes the first `block` samples the causal chain has out (the caller checked
     /// they are there).
+    /// A conditioned frame's header, numbering and the flags both chains set (an associated
+    /// function: the callers hold the stream borrowed).
+    fn next_frame(sequence: &mut u64, config: &ConditioningConfig, stamp: Stamp, first_sample: u64, rate_hz: f64) -> ConditionedFrame {
+        let mut frame = ConditionedFrame {
+            header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
+            sequence: *sequence,
+            first_sample,
+            sample_rate_hz: rate_hz,
+            ..Default::default()
+        };
+        *sequence += 1;
+        frame.flags.push(format!("lowpass_hz={}", config.lowpass_cutoff_hz));
+        if config.deskew {
+            frame.flags.push("deskewed".into());
+        }
+        frame
+    }
+
     fn causal_block(&mut self) -> ConditionedFrame {
         let block = self.block;
         let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
@@ -399,18 +417,7 @@ impl ConditionerCore {
         let p = &mut c.pending;
         let first = s.origin_scan + p.first_index;
         let stamp = s.origin_stamp.after_samples(p.first_index as i64, s.rate_hz);
-        let mut frame = ConditionedFrame {
-            header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
-            sequence: self.sequence,
-            first_sample: first,
-            sample_rate_hz: s.rate_hz,
-            ..Default::default()
-        };
-        self.sequence += 1;
-        frame.flags.push(format!("lowpass_hz={}", self.config.lowpass_cutoff_hz));
-        if self.config.deskew {
-            frame.flags.push("deskewed".into());
-        }
+        let mut frame = Self::next_frame(&mut self.sequence, &self.config, stamp, first, s.rate_hz);
         frame.flags.push("chain=causal".into());
         if let Some(note) = s.start_note.take() {
             frame.flags.push(note);
@@ -455,18 +462,7 @@ impl ConditionerCore {
             dst.extend_from_slice(&src[begin..end]);
         }
         let stamp = s.origin_stamp.after_samples((s.next_out - s.origin_scan) as i64, s.rate_hz);
-        let mut frame = ConditionedFrame {
-            header: Header { stamp: stamp.to_time(), frame_id: BEARING_FRAME_ID.into() },
-            sequence: self.sequence,
-            first_sample: s.next_out,
-            sample_rate_hz: s.rate_hz,
-            ..Default::default()
-        };
-        self.sequence += 1;
-        frame.flags.push(format!("lowpass_hz={}", self.config.lowpass_cutoff_hz));
-        if self.config.deskew {
-            frame.flags.push("deskewed".into());
-        }
+        let mut frame = Self::next_frame(&mut self.sequence, &self.config, stamp, s.next_out, s.rate_hz);
         if let Some(note) = s.start_note.take() {
             frame.flags.push(note);
         }

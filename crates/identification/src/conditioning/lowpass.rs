@@ -541,16 +541,22 @@ impl Butterworth {
         for s in groups.remainder() {
             forward(std::array::from_ref(s), left, &mut cols, n, right);
         }
-        // The last backward pass writes the result: its finiteness is the answer.
+        self.backward_all(&mut cols, n, right)
+    }
+
+    /// Every group of sections backward over the right reflection and the columns, group
+    /// after group; the last pass writes the result, so its finiteness is the answer.
+    #[inline(always)]
+    fn backward_all<const L: usize>(&self, cols: &mut [&mut [f64]; L], n: usize, right: &mut [[f64; L]]) -> bool {
         let mut finite = true;
         let mut groups = self.sections.chunks_exact(FUSED);
         for g in &mut groups {
             if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
-                finite = backward(g, &mut cols, n, right);
+                finite = backward(g, cols, n, right);
             }
         }
         for s in groups.remainder() {
-            finite = backward(std::array::from_ref(s), &mut cols, n, right);
+            finite = backward(std::array::from_ref(s), cols, n, right);
         }
         finite
     }
@@ -759,17 +765,7 @@ impl Butterworth {
         }
 
         // Backward, group after group, as in the two-step version.
-        let mut finite = true;
-        let mut groups = self.sections.chunks_exact(FUSED);
-        for g in &mut groups {
-            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
-                finite = backward(g, &mut cols, n, right);
-            }
-        }
-        for s in groups.remainder() {
-            finite = backward(std::array::from_ref(s), &mut cols, n, right);
-        }
-        Ok(finite)
+        Ok(self.backward_all(&mut cols, n, right))
     }
 
     /// Zero-phase filtering, allocating the output.
