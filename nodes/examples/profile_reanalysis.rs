@@ -11,7 +11,7 @@ use std::time::Instant;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{DaqFrame, Header, BEARING_FRAME_ID};
-use oilfilm_nodes::conditioner::{ConditionerCore, ConditionerParams};
+use oilfilm_nodes::conditioner::{Chain, ConditionerCore, ConditionerParams};
 use oilfilm_nodes::estimator::{EstimatorCore, EstimatorParams};
 use oilfilm_physics::config::RigConfig;
 
@@ -26,11 +26,11 @@ fn main() -> anyhow::Result<()> {
     let names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
     let offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
     let channels = names.len();
-    let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: 1_000, ..ConditionerParams::default() };
-    let mut cond = ConditionerCore::new(rig.clone(), &params)?;
-    let mut conditioned = Vec::new();
-    for (k, scans) in rec.scans.chunks(block).enumerate() {
-        let frame = DaqFrame {
+    let frames: Vec<DaqFrame> = rec
+        .scans
+        .chunks(block)
+        .enumerate()
+        .map(|(k, scans)| DaqFrame {
             header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
             sequence: k as u64,
             first_scan: (k * block) as u64,
@@ -42,8 +42,34 @@ fn main() -> anyhow::Result<()> {
             scan_count: scans.len() as u32,
             values: scans.iter().flat_map(|s| s.volts.iter().copied()).collect(),
             rig: rig.name.clone(),
-        };
-        conditioned.extend(cond.push(&frame)?);
+        })
+        .collect();
+    // The conditioner's share, both chains, timed the same way as the estimator below.
+    let mut conditioned = Vec::new();
+    for chain in [Chain::ZeroPhase, Chain::Causal] {
+        let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: 1_000, chain: chain.name().into(), ..ConditionerParams::default() };
+        let mut times = Vec::new();
+        for _ in 0..passes {
+            let mut cond = ConditionerCore::new(rig.clone(), &params)?;
+            let t0 = Instant::now();
+            let mut out = Vec::new();
+            for frame in &frames {
+                out.extend(cond.push(frame)?);
+            }
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+            if chain == Chain::ZeroPhase {
+                conditioned = out;
+            }
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "{seconds} s at {rate} Hz, {} DAQ frames of {block} scans: conditioner core ({}) best {:.1} ms, median {:.1} ms ({passes} passes): {:.0}x real time",
+            frames.len(),
+            chain.name(),
+            times[0],
+            times[times.len() / 2],
+            seconds * 1e3 / times[0]
+        );
     }
     let ep = EstimatorParams { window: 25_000, hop: 12_500, signal_band_hz: 55.5, ..EstimatorParams::default() };
     let mut times = Vec::new();
