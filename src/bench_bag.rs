@@ -190,7 +190,13 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
         crate::records::reader_threads(),
         crate::records::reader_threads_beside_analysis(),
     );
-    println!("the conditioner + estimator alone, on frames already in memory: {:.1} ms ({:.0}x real time)", re.analyse_s * 1e3, seconds / re.analyse_s);
+    println!(
+        "the conditioner + estimator alone, on frames already in memory, one thread: {:.1} ms ({:.0}x real time); the conditioner core alone {:.1} ms, the estimator core alone {:.1} ms",
+        re.analyse_s * 1e3,
+        seconds / re.analyse_s,
+        re.condition_s * 1e3,
+        re.estimate_s * 1e3
+    );
     println!("every message of the whole-graph zstd bag read and checked (`Bag::messages`, one thread): {:.1} ms", re.all_messages_s * 1e3);
     println!();
     println!("| bag | on disk | read + decode the frames and status | read, decode and analyse, overlapped (total) | total as a multiple of real time |");
@@ -210,6 +216,32 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
 }
 
 const REANALYSIS_PASSES: usize = 3;
+
+/// The conditioner core over `frames`, then the estimator core over its output (the status
+/// first, as the graph gives it): each stage's wall time on its own, on this thread.
+fn stages(rig: &RigConfig, params: &GraphParams, frames: &[oilfilm_msgs::DaqFrame], status: &[oilfilm_msgs::RigStatus]) -> Result<(f64, f64)> {
+    use oilfilm_nodes::conditioner::ConditionerCore;
+    use oilfilm_nodes::estimator::EstimatorCore;
+    let mut conditioner = ConditionerCore::new(rig.clone(), &params.conditioner)?;
+    let mut estimator = EstimatorCore::new(rig.clone(), params.estimator.clone())?;
+    let started = Instant::now();
+    let mut conditioned = Vec::new();
+    for f in frames {
+        conditioned.extend(conditioner.push(f)?);
+    }
+    let condition_s = started.elapsed().as_secs_f64();
+    let started = Instant::now();
+    for s in status {
+        estimator.rig_status(s);
+    }
+    let mut estimates = 0;
+    for c in &conditioned {
+        estimates += estimator.push(c)?.len();
+    }
+    let estimate_s = started.elapsed().as_secs_f64();
+    anyhow::ensure!(estimates > 0, "the estimator core made no estimate from {} conditioned frames", conditioned.len());
+    Ok((condition_s, estimate_s))
+}
 
 /// The re-analysis row of a bag the launch files record: the same graph with the causal
 /// conditioning chain (`launch_configs/params/sim_rig.yaml`, ADR 0014), simulated again.
@@ -236,6 +268,10 @@ fn causal_row(tmp: &Path, rig: &RigConfig, seconds: f64) -> Result<ReanalysisRow
 
 struct Reanalysis {
     analyse_s: f64,
+    /// The conditioner core alone over the frames, and the estimator core alone over its
+    /// output (status first), each timed on its own: the two shares of `analyse_s`.
+    condition_s: f64,
+    estimate_s: f64,
     all_messages_s: f64,
     estimates: usize,
     solved: usize,
@@ -329,6 +365,7 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
     }
     let threads = crate::records::reader_threads();
     let (mut analyse_s, mut all_messages_s) = (f64::INFINITY, f64::INFINITY);
+    let (mut condition_s, mut estimate_s) = (f64::INFINITY, f64::INFINITY);
     let mut last = None;
     // Passes interleaved over the bags, so the machine's other load falls on all alike.
     for _ in 0..REANALYSIS_PASSES {
@@ -342,6 +379,8 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
                 let out = reanalyse(rig, &params.conditioner, &params.estimator, &frames, &status)?;
                 analyse_s = analyse_s.min(started.elapsed().as_secs_f64());
                 last = Some(out);
+                let (c, e) = stages(rig, params, &frames, &status)?;
+                (condition_s, estimate_s) = (condition_s.min(c), estimate_s.min(e));
                 let started = Instant::now();
                 let n = oilfilm_bag::Bag::open(&dir)?.messages()?.len();
                 anyhow::ensure!(n == all.len(), "{}: {n} messages read back, {} written", dir.display(), all.len());
@@ -357,6 +396,8 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
     let out = last.context("no re-analysis pass ran")?;
     let re = Reanalysis {
         analyse_s,
+        condition_s,
+        estimate_s,
         all_messages_s,
         estimates: out.estimates.len(),
         solved: out.estimates.iter().filter(|e| e.solved).count(),

@@ -285,7 +285,7 @@ impl ConditionerCore {
             return Ok(out);
         }
         for (col, (c, _)) in stream.columns.iter_mut().zip(&kept) {
-            col.extend((0..n_scans).map(|k| frame.values[k * width + c]));
+            col.extend(frame.values[*c..].iter().step_by(width).take(n_scans));
         }
         let mut out = Vec::new();
         while let Some(stream) = self.stream.as_ref() {
