@@ -28,6 +28,12 @@ pub const CHUNK_ROWS: usize = 512;
 /// not the offset) with eight independent partial sums (a single running sum is a chain of
 /// dependent additions the compiler may not reorder, and was the slowest part of a window).
 pub fn mean(c: &[f64]) -> f64 {
+    mean_inline(c)
+}
+
+/// [`mean`], inlined into its callers (so that it is compiled with their target features).
+#[inline(always)]
+fn mean_inline(c: &[f64]) -> f64 {
     let Some(&shift) = c.first() else { return f64::NAN };
     let mut acc = [0.0f64; 8];
     let mut chunks = c.chunks_exact(8);
@@ -183,14 +189,7 @@ impl SummaryBuilder {
         }
         self.buf.resize(rows * q, 0.0);
         let block = &mut self.buf[..rows * q];
-        for (j, c) in cols.iter().enumerate() {
-            let src = &c[..rows];
-            let m = mean(src);
-            self.chunk_mean[j] = m;
-            for (dst, v) in block[j * rows..(j + 1) * rows].iter_mut().zip(src) {
-                *dst = v - m;
-            }
-        }
+        centre_into(block, cols, rows, &mut self.chunk_mean);
         let out = &mut self.out;
         out.r.absorb(block, rows);
         let (na, nc) = (out.n as f64, rows as f64);
@@ -205,6 +204,40 @@ impl SummaryBuilder {
             out.mean[j] += (self.chunk_mean[j] - out.mean[j]) * nc / (na + nc);
         }
         out.n += rows;
+    }
+}
+
+/// Column `j`'s mean into `means[j]` and its rows `0..rows` minus that mean into
+/// `block[j rows..(j + 1) rows]` (column-major), for every column.
+fn centre_into(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has the feature the function is compiled for (checked above).
+            unsafe { centre_into_avx2(block, cols, rows, means) };
+            return;
+        }
+    }
+    centre_into_kernel(block, cols, rows, means);
+}
+
+/// [`centre_into`] compiled for AVX2: the same subtractions and partial sums in the same order
+/// (no fused multiply-add), so the same bits in wider registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn centre_into_avx2(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64]) {
+    centre_into_kernel(block, cols, rows, means);
+}
+
+#[inline(always)]
+fn centre_into_kernel(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64]) {
+    for ((c, dst), m_out) in cols.iter().zip(block.chunks_exact_mut(rows)).zip(means.iter_mut()) {
+        let src = &c[..rows];
+        let m = mean_inline(src);
+        *m_out = m;
+        for (d, v) in dst.iter_mut().zip(src) {
+            *d = v - m;
+        }
     }
 }
 
