@@ -100,10 +100,17 @@ impl EstimatorParams {
 }
 
 /// Conditioned samples awaiting their windows.
+///
+/// Samples before the current window are dropped by moving `head`, the count of dead elements
+/// at the front of every column; the columns are compacted only once the dead part is at
+/// least as long as the live one (with half-overlapping windows every second window instead
+/// of every window, and then half as much to move), so the buffer stays below twice its live
+/// length.
 #[derive(Default)]
 struct Buffer {
-    /// Sample index of element 0.
+    /// Sample index of element `head`, the first live one.
     first: u64,
+    head: usize,
     x: Vec<f64>,
     y: Vec<f64>,
     vx: Vec<f64>,
@@ -117,17 +124,32 @@ struct Buffer {
 }
 
 impl Buffer {
+    /// Live samples.
+    fn len(&self) -> usize {
+        self.x.len() - self.head
+    }
+
     fn end(&self) -> u64 {
-        self.first + self.x.len() as u64
+        self.first + self.len() as u64
+    }
+
+    /// The live part of a column.
+    fn live<'a, T>(&self, c: &'a [T]) -> &'a [T] {
+        &c[self.head..]
     }
 
     fn drop_before(&mut self, sample: u64) {
-        let k = (sample.saturating_sub(self.first) as usize).min(self.x.len());
-        for c in [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy, &mut self.ax, &mut self.ay, &mut self.fx, &mut self.fy, &mut self.temperature] {
-            c.drain(..k);
-        }
-        self.valid.drain(..k);
+        let k = (sample.saturating_sub(self.first) as usize).min(self.len());
+        self.head += k;
         self.first += k as u64;
+        if self.head > 0 && self.head >= self.len() {
+            let dead = self.head;
+            for c in [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy, &mut self.ax, &mut self.ay, &mut self.fx, &mut self.fy, &mut self.temperature] {
+                c.drain(..dead);
+            }
+            self.valid.drain(..dead);
+            self.head = 0;
+        }
     }
 }
 
@@ -284,7 +306,7 @@ impl EstimatorCore {
         }
         let b = &self.buffer;
         let from = (start - b.first) as usize;
-        let to = b.x.len().min(from + config.window);
+        let to = b.len().min(from + config.window);
         if let Some((_, wf, rf)) = self.feed.as_mut() {
             feed(wf, rf, &window_signals(b, from..to, config.model));
         }
@@ -299,8 +321,8 @@ impl EstimatorCore {
             _ => (WindowFeed::new(config), ReportFeed::default()),
         };
         let b = &self.buffer;
-        let temperature = b.temperature.iter().take(w).sum::<f64>() / w as f64;
-        let invalid: Vec<usize> = b.valid.iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
+        let temperature = b.live(&b.temperature).iter().take(w).sum::<f64>() / w as f64;
+        let invalid: Vec<usize> = b.live(&b.valid).iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
         let start = self.next_start;
         let (origin_sample, origin_stamp) = self.origin.unwrap_or((start, Stamp(0)));
         let t0 = origin_stamp.after_samples((start - origin_sample) as i64, self.rate_hz);
@@ -350,14 +372,14 @@ fn window_signals(b: &Buffer, range: std::ops::Range<usize>, model: ModelOrder) 
     let r = range;
     let acc = model == ModelOrder::Kcm;
     Signals {
-        x_m: &b.x[r.clone()],
-        y_m: &b.y[r.clone()],
-        vx_m_s: &b.vx[r.clone()],
-        vy_m_s: &b.vy[r.clone()],
-        ax_m_s2: acc.then(|| &b.ax[r.clone()]),
-        ay_m_s2: acc.then(|| &b.ay[r.clone()]),
-        fx_n: &b.fx[r.clone()],
-        fy_n: &b.fy[r],
+        x_m: &b.live(&b.x)[r.clone()],
+        y_m: &b.live(&b.y)[r.clone()],
+        vx_m_s: &b.live(&b.vx)[r.clone()],
+        vy_m_s: &b.live(&b.vy)[r.clone()],
+        ax_m_s2: acc.then(|| &b.live(&b.ax)[r.clone()]),
+        ay_m_s2: acc.then(|| &b.live(&b.ay)[r.clone()]),
+        fx_n: &b.live(&b.fx)[r.clone()],
+        fy_n: &b.live(&b.fy)[r],
     }
 }
 
