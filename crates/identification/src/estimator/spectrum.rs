@@ -599,6 +599,54 @@ fn line_snr(pw: &[f64], bins: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Sums over bins `1..` of one spectrum: all of them, those within a line's main lobe (the
+/// mask), those outside.
+#[derive(Debug, Clone, Copy)]
+struct BandSums {
+    total: f64,
+    inside: f64,
+    outside: f64,
+}
+
+/// [`BandSums`] of four spectra of one length with their masks, in one pass: each of the
+/// twelve sums adds its bins in order, as [`fraction_in`] and [`line_snr`] do one at a time.
+fn band_sums(pw: [&[f64]; 4], mask: [&[bool]; 4]) -> [BandSums; 4] {
+    let nb = pw.iter().map(|p| p.len()).chain(mask.iter().map(|m| m.len())).min().unwrap_or(0);
+    let mut total = [0.0f64; 4];
+    let mut inside = [0.0f64; 4];
+    let mut outside = [0.0f64; 4];
+    for k in 1..nb {
+        for s in 0..4 {
+            let v = pw[s][k];
+            total[s] += v;
+            if mask[s][k] {
+                inside[s] += v;
+            } else {
+                outside[s] += v;
+            }
+        }
+    }
+    std::array::from_fn(|s| BandSums { total: total[s], inside: inside[s], outside: outside[s] })
+}
+
+/// [`fraction_in`] from the spectrum's [`BandSums`].
+fn fraction_of(s: BandSums) -> f64 {
+    if !(s.total > 0.0) {
+        return f64::NAN;
+    }
+    s.inside / s.total
+}
+
+/// [`line_snr`] given the power outside every line (`outside`, from [`BandSums`]).
+fn lobe_snr(pw: &[f64], bins: &[f64], outside: f64) -> Vec<f64> {
+    bins.iter()
+        .map(|&b| {
+            let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
+            if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+        })
+        .collect()
+}
+
 /// Merge sorted frequencies closer than `tol`.
 pub fn merge_lines(mut all: Vec<f64>, tol: f64) -> Vec<f64> {
     all.sort_by(|a, b| a.total_cmp(b));
@@ -622,12 +670,29 @@ pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64
 fn lines_of(px: &[f64], py: &[f64], pvx: &[f64], pvy: &[f64], df: f64) -> LineAnalysis {
     let bx = find_lines(px);
     let by = find_lines(py);
-    let line_fraction = [fraction_in(px, &bx), fraction_in(py, &by)];
-    let velocity_noise_fraction = [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)];
-    let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
-        line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+    let (line_fraction, velocity_noise_fraction, line_snr) = if [py.len(), pvx.len(), pvy.len()].iter().all(|&l| l == px.len()) {
+        // The sums of the four spectra side by side: independent chains of additions, each
+        // still over its bins in order (the same bits as one function per sum, tested).
+        let (mx, my) = (near_lines(px.len(), &bx), near_lines(px.len(), &by));
+        let [sx, sy, svx, svy] = band_sums([px, py, pvx, pvy], [&mx, &my, &mx, &my]);
+        let snr = |pd: &[f64], pv: &[f64], b: &[f64], od: f64, ov: f64| -> Vec<f64> {
+            lobe_snr(pd, b, od).into_iter().zip(lobe_snr(pv, b, ov)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+        };
+        (
+            [fraction_of(sx), fraction_of(sy)],
+            [1.0 - fraction_of(svx), 1.0 - fraction_of(svy)],
+            [snr(px, pvx, &bx, sx.outside, svx.outside), snr(py, pvy, &by, sy.outside, svy.outside)],
+        )
+    } else {
+        let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
+            line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+        };
+        (
+            [fraction_in(px, &bx), fraction_in(py, &by)],
+            [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)],
+            [snr(px, pvx, &bx), snr(py, pvy, &by)],
+        )
     };
-    let line_snr = [snr(px, pvx, &bx), snr(py, pvy, &by)];
     let lx: Vec<f64> = bx.iter().map(|b| b * df).collect();
     let ly: Vec<f64> = by.iter().map(|b| b * df).collect();
     let merged = merge_lines(lx.iter().chain(ly.iter()).cloned().collect(), MAIN_LOBE_BINS as f64 * df);
@@ -710,6 +775,14 @@ mod tests {
                 }
             }
             assert_eq!(fraction_in(&pw, bins).to_bits(), (inside / total).to_bits(), "lines {bins:?}");
+            // The four-at-once sums are the one-at-a-time ones.
+            let pw2: Vec<f64> = pw.iter().rev().copied().collect();
+            let (m1, m2) = (near_lines(nb, bins), near_lines(nb, &[100.0]));
+            let sums = band_sums([&pw, &pw2, &pw2, &pw], [&m1, &m1, &m2, &m2]);
+            for (s, (p, b)) in sums.iter().zip([(&pw, bins), (&pw2, bins), (&pw2, &[100.0][..]), (&pw, &[100.0][..])]) {
+                assert_eq!(fraction_of(*s).to_bits(), fraction_in(p, b).to_bits(), "lines {b:?}");
+                assert_eq!(format!("{:?}", lobe_snr(p, b, s.outside)), format!("{:?}", line_snr(p, b)), "lines {b:?}");
+            }
         }
     }
 
