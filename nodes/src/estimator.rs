@@ -9,6 +9,8 @@
 //! Speed: the `speed_rpm` parameter if set, else the latest `rig/status`, else the rig
 //! file's, and the estimate's flags say which.
 
+use std::collections::VecDeque;
+
 use nalgebra::Matrix2;
 use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver, WindowFeed};
 use oilfilm_identification::pipeline::{window_report_fed, ReportFeed, WindowReport};
@@ -19,6 +21,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::NodeError;
 use crate::stamp::Stamp;
 use crate::topics;
+
+/// Windows fed at once: the one at `next_start` and, with overlapping windows, the next (more
+/// would hold more memory for no less work).
+const MAX_FEEDS: usize = 2;
 
 /// The estimator node's parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -165,10 +171,11 @@ pub struct EstimatorCore {
     status_speed_rpm: Option<f64>,
     sequence: u64,
     restart_note: Option<String>,
-    /// The analysis of the window at `next_start` (its first sample, the estimator's feed and
-    /// the report's), fed as conditioned frames arrive so that little of it is left when the
-    /// window completes.
-    feed: Option<(u64, WindowFeed, ReportFeed)>,
+    /// The analyses of the window at `next_start` and of the next one if it has begun (first
+    /// sample, the estimator's feed and the report's; at most [`MAX_FEEDS`], in window order),
+    /// fed as conditioned frames arrive so that little is left when a window completes and
+    /// each frame's samples are taken by both overlapping windows while they are in cache.
+    feeds: VecDeque<(u64, WindowFeed, ReportFeed)>,
     /// Highest low-pass cutoff the conditioned frames declared (`lowpass_hz=` flag) since the
     /// windows last restarted.
     frame_cutoff_hz: Option<f64>,
@@ -187,7 +194,7 @@ impl EstimatorCore {
             status_speed_rpm: None,
             sequence: 0,
             restart_note: None,
-            feed: None,
+            feeds: VecDeque::new(),
             frame_cutoff_hz: None,
         })
     }
@@ -202,7 +209,7 @@ impl EstimatorCore {
         let hop = params.hop as u64;
         self.params = params;
         self.next_start = self.buffer.end().div_ceil(hop) * hop;
-        self.feed = None;
+        self.feeds.clear();
         Ok(())
     }
 
@@ -246,7 +253,7 @@ impl EstimatorCore {
                 ));
             }
             self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
-            self.feed = None;
+            self.feeds.clear();
             self.frame_cutoff_hz = None;
             self.rate_hz = frame.sample_rate_hz;
             self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
@@ -291,23 +298,28 @@ impl EstimatorCore {
         Ok(out)
     }
 
-    /// Feeds the samples buffered for the window at `next_start` to its analysis (started
-    /// here if there is none for that window and configuration yet): the line search, QR
-    /// chunks, decimated samples and report sums sit at fixed offsets in the window, so the
-    /// estimate is the same bits however the frames cut it.
+    /// Feeds the samples buffered for the windows at `next_start` and after (up to
+    /// [`MAX_FEEDS`] windows that have begun) to their analyses, started here if there is none
+    /// for a window and configuration yet: the line search, QR chunks, decimated samples and
+    /// report sums sit at fixed offsets in each window, so an estimate is the same bits however
+    /// the frames cut it and whenever its feed started.
     fn feed_window(&mut self, config: &EstimatorConfig) {
-        let start = self.next_start;
-        if self.buffer.end() <= start || self.buffer.first > start {
-            return;
-        }
-        let fresh = !matches!(&self.feed, Some((s, f, _)) if *s == start && f.fits(config));
-        if fresh {
-            self.feed = Some((start, WindowFeed::new(config), ReportFeed::default()));
-        }
+        let hop = config.hop as u64;
+        let next = self.next_start;
+        self.feeds.retain(|(s, f, _)| *s >= next && f.fits(config));
         let b = &self.buffer;
-        let from = (start - b.first) as usize;
-        let to = b.len().min(from + config.window);
-        if let Some((_, wf, rf)) = self.feed.as_mut() {
+        for i in 0..MAX_FEEDS {
+            let start = next + i as u64 * hop;
+            if b.end() <= start || b.first > start {
+                break;
+            }
+            if self.feeds.get(i).is_none_or(|(s, _, _)| *s != start) {
+                self.feeds.truncate(i);
+                self.feeds.push_back((start, WindowFeed::new(config), ReportFeed::default()));
+            }
+            let from = (start - b.first) as usize;
+            let to = b.len().min(from + config.window);
+            let (_, wf, rf) = &mut self.feeds[i];
             feed(wf, rf, &window_signals(b, from..to, config.model));
         }
     }
@@ -316,7 +328,7 @@ impl EstimatorCore {
     fn estimate(&mut self, config: &EstimatorConfig) -> Result<CoefficientEstimate, NodeError> {
         let w = config.window;
         // The window's analysis as fed so far (a new one if none was fed for this window).
-        let (mut wf, mut rf) = match self.feed.take() {
+        let (mut wf, mut rf) = match self.feeds.pop_front() {
             Some((s, wf, rf)) if s == self.next_start && wf.fits(config) => (wf, rf),
             _ => (WindowFeed::new(config), ReportFeed::default()),
         };
