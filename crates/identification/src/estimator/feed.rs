@@ -124,17 +124,17 @@ fn first_non_finite(c: &[f64]) -> Option<usize> {
     None
 }
 
-/// True when every value is finite: `v - v` is 0 for a finite value and NaN otherwise, and a
-/// sum of zeros stays zero while a NaN stays NaN.
+/// True when every value is finite: `v * 0` is (signed) zero for a finite value and NaN
+/// otherwise, and a sum of zeros stays zero while a NaN stays NaN.
 fn all_finite(c: &[f64]) -> bool {
     let mut acc = [0.0f64; 8];
     let mut chunks = c.chunks_exact(8);
     for ch in &mut chunks {
         for l in 0..8 {
-            acc[l] += ch[l] - ch[l];
+            acc[l] += ch[l] * 0.0;
         }
     }
-    let tail = chunks.remainder().iter().fold(0.0, |a, v| a + (v - v));
+    let tail = chunks.remainder().iter().fold(0.0, |a, v| a + v * 0.0);
     acc.iter().sum::<f64>() + tail == 0.0
 }
 
