@@ -9,6 +9,8 @@
 //! Speed: the `speed_rpm` parameter if set, else the latest `rig/status`, else the rig
 //! file's, and the estimate's flags say which.
 
+use std::collections::VecDeque;
+
 use nalgebra::Matrix2;
 use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver, WindowFeed};
 use oilfilm_identification::pipeline::{window_report_fed, ReportFeed, WindowReport};
@@ -19,6 +21,10 @@ use serde::{Deserialize, Serialize};
 use crate::error::NodeError;
 use crate::stamp::Stamp;
 use crate::topics;
+
+/// Windows fed at once: the one at `next_start` and, with overlapping windows, the next (more
+/// would hold more memory for no less work).
+const MAX_FEEDS: usize = 2;
 
 /// The estimator node's parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -100,10 +106,17 @@ impl EstimatorParams {
 }
 
 /// Conditioned samples awaiting their windows.
+///
+/// Samples before the current window are dropped by moving `head`, the count of dead elements
+/// at the front of every column; the columns are compacted only once the dead part is at
+/// least as long as the live one (with half-overlapping windows every second window instead
+/// of every window, and then half as much to move), so the buffer stays below twice its live
+/// length.
 #[derive(Default)]
 struct Buffer {
-    /// Sample index of element 0.
+    /// Sample index of element `head`, the first live one.
     first: u64,
+    head: usize,
     x: Vec<f64>,
     y: Vec<f64>,
     vx: Vec<f64>,
@@ -117,17 +130,32 @@ struct Buffer {
 }
 
 impl Buffer {
+    /// Live samples.
+    fn len(&self) -> usize {
+        self.x.len() - self.head
+    }
+
     fn end(&self) -> u64 {
-        self.first + self.x.len() as u64
+        self.first + self.len() as u64
+    }
+
+    /// The live part of a column.
+    fn live<'a, T>(&self, c: &'a [T]) -> &'a [T] {
+        &c[self.head..]
     }
 
     fn drop_before(&mut self, sample: u64) {
-        let k = (sample.saturating_sub(self.first) as usize).min(self.x.len());
-        for c in [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy, &mut self.ax, &mut self.ay, &mut self.fx, &mut self.fy, &mut self.temperature] {
-            c.drain(..k);
-        }
-        self.valid.drain(..k);
+        let k = (sample.saturating_sub(self.first) as usize).min(self.len());
+        self.head += k;
         self.first += k as u64;
+        if self.head > 0 && self.head >= self.len() {
+            let dead = self.head;
+            for c in [&mut self.x, &mut self.y, &mut self.vx, &mut self.vy, &mut self.ax, &mut self.ay, &mut self.fx, &mut self.fy, &mut self.temperature] {
+                c.drain(..dead);
+            }
+            self.valid.drain(..dead);
+            self.head = 0;
+        }
     }
 }
 
@@ -143,10 +171,11 @@ pub struct EstimatorCore {
     status_speed_rpm: Option<f64>,
     sequence: u64,
     restart_note: Option<String>,
-    /// The analysis of the window at `next_start` (its first sample, the estimator's feed and
-    /// the report's), fed as conditioned frames arrive so that little of it is left when the
-    /// window completes.
-    feed: Option<(u64, WindowFeed, ReportFeed)>,
+    /// The analyses of the window at `next_start` and of the next one if it has begun (first
+    /// sample, the estimator's feed and the report's; at most [`MAX_FEEDS`], in window order),
+    /// fed as conditioned frames arrive so that little is left when a window completes and
+    /// each frame's samples are taken by both overlapping windows while they are in cache.
+    feeds: VecDeque<(u64, WindowFeed, ReportFeed)>,
     /// Highest low-pass cutoff the conditioned frames declared (`lowpass_hz=` flag) since the
     /// windows last restarted.
     frame_cutoff_hz: Option<f64>,
@@ -165,7 +194,7 @@ impl EstimatorCore {
             status_speed_rpm: None,
             sequence: 0,
             restart_note: None,
-            feed: None,
+            feeds: VecDeque::new(),
             frame_cutoff_hz: None,
         })
     }
@@ -180,7 +209,7 @@ impl EstimatorCore {
         let hop = params.hop as u64;
         self.params = params;
         self.next_start = self.buffer.end().div_ceil(hop) * hop;
-        self.feed = None;
+        self.feeds.clear();
         Ok(())
     }
 
@@ -224,7 +253,7 @@ impl EstimatorCore {
                 ));
             }
             self.buffer = Buffer { first: frame.first_sample, ..Buffer::default() };
-            self.feed = None;
+            self.feeds.clear();
             self.frame_cutoff_hz = None;
             self.rate_hz = frame.sample_rate_hz;
             self.origin = Some((frame.first_sample, Stamp::from_time(&frame.header.stamp)));
@@ -269,23 +298,28 @@ impl EstimatorCore {
         Ok(out)
     }
 
-    /// Feeds the samples buffered for the window at `next_start` to its analysis (started
-    /// here if there is none for that window and configuration yet): the line search, QR
-    /// chunks, decimated samples and report sums sit at fixed offsets in the window, so the
-    /// estimate is the same bits however the frames cut it.
+    /// Feeds the samples buffered for the windows at `next_start` and after (up to
+    /// [`MAX_FEEDS`] windows that have begun) to their analyses, started here if there is none
+    /// for a window and configuration yet: the line search, QR chunks, decimated samples and
+    /// report sums sit at fixed offsets in each window, so an estimate is the same bits however
+    /// the frames cut it and whenever its feed started.
     fn feed_window(&mut self, config: &EstimatorConfig) {
-        let start = self.next_start;
-        if self.buffer.end() <= start || self.buffer.first > start {
-            return;
-        }
-        let fresh = !matches!(&self.feed, Some((s, f, _)) if *s == start && f.fits(config));
-        if fresh {
-            self.feed = Some((start, WindowFeed::new(config), ReportFeed::default()));
-        }
+        let hop = config.hop as u64;
+        let next = self.next_start;
+        self.feeds.retain(|(s, f, _)| *s >= next && f.fits(config));
         let b = &self.buffer;
-        let from = (start - b.first) as usize;
-        let to = b.x.len().min(from + config.window);
-        if let Some((_, wf, rf)) = self.feed.as_mut() {
+        for i in 0..MAX_FEEDS {
+            let start = next + i as u64 * hop;
+            if b.end() <= start || b.first > start {
+                break;
+            }
+            if self.feeds.get(i).is_none_or(|(s, _, _)| *s != start) {
+                self.feeds.truncate(i);
+                self.feeds.push_back((start, WindowFeed::new(config), ReportFeed::default()));
+            }
+            let from = (start - b.first) as usize;
+            let to = b.len().min(from + config.window);
+            let (_, wf, rf) = &mut self.feeds[i];
             feed(wf, rf, &window_signals(b, from..to, config.model));
         }
     }
@@ -294,13 +328,13 @@ impl EstimatorCore {
     fn estimate(&mut self, config: &EstimatorConfig) -> Result<CoefficientEstimate, NodeError> {
         let w = config.window;
         // The window's analysis as fed so far (a new one if none was fed for this window).
-        let (mut wf, mut rf) = match self.feed.take() {
+        let (mut wf, mut rf) = match self.feeds.pop_front() {
             Some((s, wf, rf)) if s == self.next_start && wf.fits(config) => (wf, rf),
             _ => (WindowFeed::new(config), ReportFeed::default()),
         };
         let b = &self.buffer;
-        let temperature = b.temperature.iter().take(w).sum::<f64>() / w as f64;
-        let invalid: Vec<usize> = b.valid.iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
+        let temperature = b.live(&b.temperature).iter().take(w).sum::<f64>() / w as f64;
+        let invalid: Vec<usize> = b.live(&b.valid).iter().take(w).enumerate().filter(|(_, v)| !**v).map(|(i, _)| i).collect();
         let start = self.next_start;
         let (origin_sample, origin_stamp) = self.origin.unwrap_or((start, Stamp(0)));
         let t0 = origin_stamp.after_samples((start - origin_sample) as i64, self.rate_hz);
@@ -350,14 +384,14 @@ fn window_signals(b: &Buffer, range: std::ops::Range<usize>, model: ModelOrder) 
     let r = range;
     let acc = model == ModelOrder::Kcm;
     Signals {
-        x_m: &b.x[r.clone()],
-        y_m: &b.y[r.clone()],
-        vx_m_s: &b.vx[r.clone()],
-        vy_m_s: &b.vy[r.clone()],
-        ax_m_s2: acc.then(|| &b.ax[r.clone()]),
-        ay_m_s2: acc.then(|| &b.ay[r.clone()]),
-        fx_n: &b.fx[r.clone()],
-        fy_n: &b.fy[r],
+        x_m: &b.live(&b.x)[r.clone()],
+        y_m: &b.live(&b.y)[r.clone()],
+        vx_m_s: &b.live(&b.vx)[r.clone()],
+        vy_m_s: &b.live(&b.vy)[r.clone()],
+        ax_m_s2: acc.then(|| &b.live(&b.ax)[r.clone()]),
+        ay_m_s2: acc.then(|| &b.live(&b.ay)[r.clone()]),
+        fx_n: &b.live(&b.fx)[r.clone()],
+        fy_n: &b.live(&b.fy)[r],
     }
 }
 

@@ -253,52 +253,147 @@ fn segment_starts(n: usize, seg: usize) -> Vec<usize> {
 }
 
 /// Welch sums of two real signals computed together (`z = a + i b`), one segment at a time.
+/// The segment's complex buffer is the thread's scratch ([`SEGMENT`]): only the sums are
+/// state.
 #[derive(Clone)]
 struct WelchPair {
     pa: Vec<f64>,
     pb: Vec<f64>,
-    z: Vec<Complex<f64>>,
+}
+
+thread_local! {
+    /// The complex buffer a segment is tapered into and transformed in: written in full before
+    /// every transform, so one per thread serves every [`WelchPair`] (it was one per pair,
+    /// 256 KiB allocated and zeroed twice per window at 16 384-point segments).
+    static SEGMENT: std::cell::RefCell<Vec<Complex<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 impl WelchPair {
     fn new(seg: usize) -> Self {
         let nb = seg / 2 + 1;
-        Self { pa: vec![0.0; nb], pb: vec![0.0; nb], z: vec![Complex::new(0.0, 0.0); seg] }
+        Self { pa: vec![0.0; nb], pb: vec![0.0; nb] }
     }
 
     /// Adds the periodograms of one segment (`a`, `b` at least a segment long; the first
     /// segment's worth is used).
     fn add_segment(&mut self, a: &[f64], b: &[f64], tables: &Tables) {
-        let taper = &tables.taper;
-        let seg = taper.len();
-        let nb = seg / 2 + 1;
-        let z = &mut self.z;
-        // Taper-weighted means: removing them leaves the tapered segment with exactly zero DC
-        // (a plain mean would leave a small constant that leaks into the lowest bins).
-        let wsum = tables.taper_sum;
-        let ma = weighted_sum(&a[..seg], taper) / wsum;
-        let mb = weighted_sum(&b[..seg], taper) / wsum;
-        for (((zk, av), bv), w) in z.iter_mut().zip(&a[..seg]).zip(&b[..seg]).zip(taper) {
-            *zk = Complex::new((av - ma) * w, (bv - mb) * w);
+        let seg = tables.taper.len();
+        if seg < 2 || a.len() < seg || b.len() < seg || self.pa.len() != seg / 2 + 1 || self.pb.len() != seg / 2 + 1 {
+            return;
         }
-        fft::forward(z);
-        // X_k = (Z_k + conj Z_{N-k}) / 2, Y_k = (Z_k - conj Z_{N-k}) / (2i); Z_N is Z_0.
-        let (pa, pb) = (&mut self.pa[..nb], &mut self.pb[..nb]);
-        let mut add = |k: usize, zk: Complex<f64>, zn: Complex<f64>| {
-            let (xr, xi) = (0.5 * (zk.re + zn.re), 0.5 * (zk.im - zn.im));
-            let (yr, yi) = (0.5 * (zk.im + zn.im), -0.5 * (zk.re - zn.re));
-            pa[k] += xr * xr + xi * xi;
-            pb[k] += yr * yr + yi * yi;
-        };
-        add(0, z[0], z[0]);
-        for (k, (zk, zn)) in z[1..nb].iter().zip(z[seg - nb + 1..].iter().rev()).enumerate() {
-            add(k + 1, *zk, *zn);
-        }
+        SEGMENT.with(|cell| {
+            let z = &mut *cell.borrow_mut();
+            z.resize(seg, Complex::new(0.0, 0.0));
+            let z = &mut z[..seg];
+            taper_into(z, &a[..seg], &b[..seg], tables);
+            fft::forward(z);
+            accumulate(&mut self.pa, &mut self.pb, z);
+        });
     }
 }
 
+/// `z = (a - m_a) w + i (b - m_b) w` with `m` the taper-weighted means (removing them leaves
+/// the tapered segment with exactly zero DC: a plain mean would leave a small constant that
+/// leaks into the lowest bins). All slices one segment long.
+fn taper_into(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tables) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has the feature the function is compiled for (checked above).
+            unsafe { taper_into_avx2(z, a, b, tables) };
+            return;
+        }
+    }
+    taper_into_kernel(z, a, b, tables);
+}
+
+/// [`taper_into`] compiled for AVX2: the same multiplications and additions in the same order
+/// (no fused multiply-add), so the same bits as the baseline kernel, in wider registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn taper_into_avx2(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tables) {
+    taper_into_kernel(z, a, b, tables);
+}
+
+#[inline(always)]
+fn taper_into_kernel(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tables) {
+    let taper = &tables.taper[..];
+    let wsum = tables.taper_sum;
+    let (sa, sb) = weighted_sums(a, b, taper);
+    let (ma, mb) = (sa / wsum, sb / wsum);
+    for (((zk, av), bv), w) in z.iter_mut().zip(a).zip(b).zip(taper) {
+        *zk = Complex::new((av - ma) * w, (bv - mb) * w);
+    }
+}
+
+/// Adds `|X_k|^2` to `pa[k]` and `|Y_k|^2` to `pb[k]`, `k = 0..=N/2`, for the spectra `X`, `Y`
+/// of the real and imaginary parts of the signal whose transform is `z`:
+/// `X_k = (Z_k + conj Z_{N-k}) / 2`, `Y_k = (Z_k - conj Z_{N-k}) / (2i)`; `Z_N` is `Z_0`.
+fn accumulate(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has the feature the function is compiled for (checked above).
+            unsafe { accumulate_avx2(pa, pb, z) };
+            return;
+        }
+    }
+    accumulate_kernel(pa, pb, z);
+}
+
+/// [`accumulate`] compiled for AVX2 (same operations, same order: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn accumulate_avx2(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
+    accumulate_kernel(pa, pb, z);
+}
+
+#[inline(always)]
+fn accumulate_kernel(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
+    let seg = z.len();
+    let nb = seg / 2 + 1;
+    if seg < 2 || pa.len() < nb || pb.len() < nb {
+        return;
+    }
+    #[inline(always)]
+    fn add(pa: &mut f64, pb: &mut f64, zk: Complex<f64>, zn: Complex<f64>) {
+        let (xr, xi) = (0.5 * (zk.re + zn.re), 0.5 * (zk.im - zn.im));
+        let (yr, yi) = (0.5 * (zk.im + zn.im), -0.5 * (zk.re - zn.re));
+        *pa += xr * xr + xi * xi;
+        *pb += yr * yr + yi * yi;
+    }
+    add(&mut pa[0], &mut pb[0], z[0], z[0]);
+    for (((a, b), zk), zn) in pa[1..nb].iter_mut().zip(&mut pb[1..nb]).zip(&z[1..nb]).zip(z[seg - nb + 1..].iter().rev()) {
+        add(a, b, *zk, *zn);
+    }
+}
+
+/// `(Σ a_k w_k, Σ b_k w_k)`, each exactly [`weighted_sum`] (the same partial sums in the same
+/// order), in one pass over the taper.
+#[inline(always)]
+fn weighted_sums(a: &[f64], b: &[f64], w: &[f64]) -> (f64, f64) {
+    let n = a.len().min(b.len()).min(w.len());
+    let (a, b, w) = (&a[..n], &b[..n], &w[..n]);
+    let mut acc_a = [0.0f64; 4];
+    let mut acc_b = [0.0f64; 4];
+    let mut ac = a.chunks_exact(4);
+    let mut bc = b.chunks_exact(4);
+    let mut wc = w.chunks_exact(4);
+    for ((x, y), t) in (&mut ac).zip(&mut bc).zip(&mut wc) {
+        for l in 0..4 {
+            acc_a[l] += x[l] * t[l];
+            acc_b[l] += y[l] * t[l];
+        }
+    }
+    let tail_a: f64 = ac.remainder().iter().zip(wc.remainder()).map(|(x, t)| x * t).sum();
+    let tail_b: f64 = bc.remainder().iter().zip(wc.remainder()).map(|(y, t)| y * t).sum();
+    ((acc_a[0] + acc_a[2]) + (acc_a[1] + acc_a[3]) + tail_a, (acc_b[0] + acc_b[2]) + (acc_b[1] + acc_b[3]) + tail_b)
+}
+
 /// `Σ v_k w_k` with four independent partial sums (one running sum is a chain of dependent
-/// additions: it cost as much as the FFT of the segment).
+/// additions: it cost as much as the FFT of the segment). The definition [`weighted_sums`]
+/// must equal, bit for bit (tested).
+#[cfg(test)]
 fn weighted_sum(v: &[f64], w: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];
     let mut vc = v.chunks_exact(4);
@@ -504,6 +599,54 @@ fn line_snr(pw: &[f64], bins: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Sums over bins `1..` of one spectrum: all of them, those within a line's main lobe (the
+/// mask), those outside.
+#[derive(Debug, Clone, Copy)]
+struct BandSums {
+    total: f64,
+    inside: f64,
+    outside: f64,
+}
+
+/// [`BandSums`] of four spectra of one length with their masks, in one pass: each of the
+/// twelve sums adds its bins in order, as [`fraction_in`] and [`line_snr`] do one at a time.
+fn band_sums(pw: [&[f64]; 4], mask: [&[bool]; 4]) -> [BandSums; 4] {
+    let nb = pw.iter().map(|p| p.len()).chain(mask.iter().map(|m| m.len())).min().unwrap_or(0);
+    let mut total = [0.0f64; 4];
+    let mut inside = [0.0f64; 4];
+    let mut outside = [0.0f64; 4];
+    for k in 1..nb {
+        for s in 0..4 {
+            let v = pw[s][k];
+            total[s] += v;
+            if mask[s][k] {
+                inside[s] += v;
+            } else {
+                outside[s] += v;
+            }
+        }
+    }
+    std::array::from_fn(|s| BandSums { total: total[s], inside: inside[s], outside: outside[s] })
+}
+
+/// [`fraction_in`] from the spectrum's [`BandSums`].
+fn fraction_of(s: BandSums) -> f64 {
+    if !(s.total > 0.0) {
+        return f64::NAN;
+    }
+    s.inside / s.total
+}
+
+/// [`line_snr`] given the power outside every line (`outside`, from [`BandSums`]).
+fn lobe_snr(pw: &[f64], bins: &[f64], outside: f64) -> Vec<f64> {
+    bins.iter()
+        .map(|&b| {
+            let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
+            if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+        })
+        .collect()
+}
+
 /// Merge sorted frequencies closer than `tol`.
 pub fn merge_lines(mut all: Vec<f64>, tol: f64) -> Vec<f64> {
     all.sort_by(|a, b| a.total_cmp(b));
@@ -527,12 +670,29 @@ pub fn analyse(x: &[f64], y: &[f64], vx: &[f64], vy: &[f64], sample_rate_hz: f64
 fn lines_of(px: &[f64], py: &[f64], pvx: &[f64], pvy: &[f64], df: f64) -> LineAnalysis {
     let bx = find_lines(px);
     let by = find_lines(py);
-    let line_fraction = [fraction_in(px, &bx), fraction_in(py, &by)];
-    let velocity_noise_fraction = [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)];
-    let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
-        line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+    let (line_fraction, velocity_noise_fraction, line_snr) = if [py.len(), pvx.len(), pvy.len()].iter().all(|&l| l == px.len()) {
+        // The sums of the four spectra side by side: independent chains of additions, each
+        // still over its bins in order (the same bits as one function per sum, tested).
+        let (mx, my) = (near_lines(px.len(), &bx), near_lines(px.len(), &by));
+        let [sx, sy, svx, svy] = band_sums([px, py, pvx, pvy], [&mx, &my, &mx, &my]);
+        let snr = |pd: &[f64], pv: &[f64], b: &[f64], od: f64, ov: f64| -> Vec<f64> {
+            lobe_snr(pd, b, od).into_iter().zip(lobe_snr(pv, b, ov)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+        };
+        (
+            [fraction_of(sx), fraction_of(sy)],
+            [1.0 - fraction_of(svx), 1.0 - fraction_of(svy)],
+            [snr(px, pvx, &bx, sx.outside, svx.outside), snr(py, pvy, &by, sy.outside, svy.outside)],
+        )
+    } else {
+        let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
+            line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
+        };
+        (
+            [fraction_in(px, &bx), fraction_in(py, &by)],
+            [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)],
+            [snr(px, pvx, &bx), snr(py, pvy, &by)],
+        )
     };
-    let line_snr = [snr(px, pvx, &bx), snr(py, pvy, &by)];
     let lx: Vec<f64> = bx.iter().map(|b| b * df).collect();
     let ly: Vec<f64> = by.iter().map(|b| b * df).collect();
     let merged = merge_lines(lx.iter().chain(ly.iter()).cloned().collect(), MAIN_LOBE_BINS as f64 * df);
@@ -558,6 +718,18 @@ pub fn noise_fraction(a: &[f64], b: &[f64], lines: &LineAnalysis, sample_rate_hz
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fused taper-weighted sums are the single ones, bit for bit, at every tail length.
+    #[test]
+    fn weighted_sums_are_weighted_sum() {
+        for n in [0usize, 1, 3, 4, 7, 64, 16_387] {
+            let a: Vec<f64> = (0..n).map(|k| 1e-5 * (k as f64 * 0.37).sin() + 2e-5).collect();
+            let b: Vec<f64> = (0..n).map(|k| 3.0 * (k as f64 * 1.1).cos() - 1e3).collect();
+            let w: Vec<f64> = (0..n).map(|k| 0.5 - 0.5 * (k as f64 * 0.01).cos()).collect();
+            let (sa, sb) = weighted_sums(&a, &b, &w);
+            assert_eq!((sa.to_bits(), sb.to_bits()), (weighted_sum(&a, &w).to_bits(), weighted_sum(&b, &w).to_bits()), "n {n}");
+        }
+    }
 
     #[test]
     fn fft_matches_dft() {
@@ -603,6 +775,14 @@ mod tests {
                 }
             }
             assert_eq!(fraction_in(&pw, bins).to_bits(), (inside / total).to_bits(), "lines {bins:?}");
+            // The four-at-once sums are the one-at-a-time ones.
+            let pw2: Vec<f64> = pw.iter().rev().copied().collect();
+            let (m1, m2) = (near_lines(nb, bins), near_lines(nb, &[100.0]));
+            let sums = band_sums([&pw, &pw2, &pw2, &pw], [&m1, &m1, &m2, &m2]);
+            for (s, (p, b)) in sums.iter().zip([(&pw, bins), (&pw2, bins), (&pw2, &[100.0][..]), (&pw, &[100.0][..])]) {
+                assert_eq!(fraction_of(*s).to_bits(), fraction_in(p, b).to_bits(), "lines {b:?}");
+                assert_eq!(format!("{:?}", lobe_snr(p, b, s.outside)), format!("{:?}", line_snr(p, b)), "lines {b:?}");
+            }
         }
     }
 
