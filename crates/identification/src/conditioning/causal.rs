@@ -390,7 +390,7 @@ impl CausalChain {
     /// [`Isa::detect`] said so, or it is the baseline).
     fn push_with(&mut self, isa: Isa, values: &[f64], out: &mut CausalOutput) {
         match isa {
-            Isa::Baseline => self.push_block(values, out),
+            Isa::Baseline => self.push_block::<false>(values, out),
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
             #[cfg(target_arch = "x86_64")]
@@ -403,13 +403,13 @@ impl CausalChain {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn push_block_avx2(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block(values, out);
+        self.push_block::<false>(values, out);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     fn push_block_avx512(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block(values, out);
+        self.push_block::<true>(values, out);
     }
 
     /// The whole call stage by stage: calibrate every scan into channel columns, de-skew the
@@ -417,9 +417,10 @@ impl CausalChain {
     /// side by side), the differentiators over the block, eq. 2. Each sample goes through the
     /// same operations in the same order as it did scan by scan (the test module keeps that
     /// scan-by-scan chain as the reference), so the bits do not depend on the cutting.
-    /// `values` holds whole scans, at least one.
+    /// `values` holds whole scans, at least one. `AVX512`: compiled into
+    /// [`Self::push_block_avx512`] (the CPU has AVX-512F), the low-pass written for it.
     #[inline(always)]
-    fn push_block(&mut self, values: &[f64], out: &mut CausalOutput) {
+    fn push_block<const AVX512: bool>(&mut self, values: &[f64], out: &mut CausalOutput) {
         let width = self.width;
         let scans = values.len() / width;
         let n0 = self.scans;
@@ -516,16 +517,27 @@ impl CausalChain {
             }
             let inputs = [&rx[..], &ry[..], &frame_x[..count], &frame_y[..count], &fx[..], &fy[..]];
             let [o0, o1, o2, o3, o4, o5, o_f3, o_t] = &mut buf.filtered;
-            let mut skip = 0;
-            if p0 == 0 {
-                // The first sample starts every section in its DC steady state.
-                let y = lowpass_scan(&self.sections, &mut self.iir, inputs.map(|c| c[0]), true);
+            // The first two samples one by one: the first starts every section in its DC
+            // steady state, and the AVX-512 cascade needs two samples of history behind it.
+            let skip = (SHARED_FROM.saturating_sub(p0) as usize).min(count);
+            for i in 0..skip {
+                let y = lowpass_scan(&self.sections, &mut self.iir, inputs.map(|c| c[i]), p0 + i as u64 == 0);
                 for (o, v) in [&mut *o0, &mut *o1, &mut *o2, &mut *o3, &mut *o4, &mut *o5].into_iter().zip(y) {
-                    o[fe] = v;
+                    o[fe + i] = v;
                 }
-                skip = 1;
             }
-            iir_block(&self.sections, &mut self.iir, inputs.map(|c| &c[skip..]), [&mut o0[fe + skip..], &mut o1[fe + skip..], &mut o2[fe + skip..], &mut o3[fe + skip..], &mut o4[fe + skip..], &mut o5[fe + skip..]]);
+            let (inputs, outputs) = (inputs.map(|c| &c[skip..]), [&mut o0[fe + skip..], &mut o1[fe + skip..], &mut o2[fe + skip..], &mut o3[fe + skip..], &mut o4[fe + skip..], &mut o5[fe + skip..]]);
+            #[cfg(target_arch = "x86_64")]
+            if AVX512 && skip < count {
+                // SAFETY: `AVX512` is true only in `push_block_avx512`, which runs only when
+                // the CPU has AVX-512F (`Isa::detect`). `skip < count`: the samples before
+                // `SHARED_FROM` have gone through.
+                unsafe { avx512::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
+            } else {
+                iir_block(&self.sections, &mut self.iir, inputs, outputs);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            iir_block(&self.sections, &mut self.iir, inputs, outputs);
             o_f3[fe..].copy_from_slice(&f3[..count]);
             o_t[fe..].copy_from_slice(&temperature[..count]);
 
@@ -820,6 +832,122 @@ fn iir_block_const<const S: usize>(sections: &[lowpass::Section; S], states: &mu
     for k in 0..S {
         let lanes = |p: &[f64; PADDED]| -> [f64; LANES] { std::array::from_fn(|l| p[l]) };
         states[k] = SectionState { x1: lanes(&x1[k]), x2: lanes(&x2[k]), y1: lanes(&y1[k]), y2: lanes(&y2[k]) };
+    }
+}
+
+/// Samples through the low-pass after which each section's input history equals the
+/// previous section's output history (see [`avx512::iir_block`]).
+const SHARED_FROM: u64 = 2;
+
+/// The low-pass written with the AVX-512 intrinsics: the six lanes in one register, and only
+/// `2 + 2 S` registers of state, so that the state of every section stays in registers.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{iir_block as generic, lowpass, SectionState, LANES, PADDED};
+    use std::arch::x86_64::{__m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd};
+
+    /// Samples per tile: the lanes are moved into rows first and back after, so that the
+    /// loop carrying the recursion holds only the arithmetic.
+    const TILE: usize = 32;
+
+    /// [`super::iir_block`] for the CPUs with AVX-512F, the same operations in the same order
+    /// (`b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`, left to right, separate multiplies and adds).
+    /// Section `k`'s input is section `k - 1`'s output, so its input history (`x1`, `x2`) is
+    /// section `k - 1`'s output history (`y1`, `y2`), the same values, once
+    /// [`super::SHARED_FROM`] samples have gone through (the steady-state start sets `x2` and
+    /// `y2` from the DC gain, not from a step): only the cascade's input history and each
+    /// section's output history are kept.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+        debug_assert!(
+            states.windows(2).all(|w| w[1].x1.map(f64::to_bits) == w[0].y1.map(f64::to_bits) && w[1].x2.map(f64::to_bits) == w[0].y2.map(f64::to_bits)),
+            "the low-pass's sections share their histories only after {} samples",
+            super::SHARED_FROM
+        );
+        macro_rules! fixed {
+            ($s:literal) => {
+                if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
+                    return cascade::<$s>(sections, states, inp, out);
+                }
+            };
+        }
+        fixed!(1);
+        fixed!(2);
+        fixed!(3);
+        fixed!(4);
+        fixed!(5);
+        fixed!(6);
+        generic(sections, states, inp, out);
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn cascade<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+        let n = out[0].len();
+        let inp = inp.map(|c| &c[..n]);
+        let mut out = out.map(|c| &mut c[..n]);
+        let load = |a: &[f64; LANES]| {
+            let mut p = [0.0; PADDED];
+            p[..LANES].copy_from_slice(a);
+            // SAFETY: `p` holds the eight doubles read.
+            unsafe { _mm512_loadu_pd(p.as_ptr()) }
+        };
+        let coef: [[__m512d; 5]; S] = std::array::from_fn(|k| {
+            let (b, a) = (sections[k].b, sections[k].a);
+            [b[0], b[1], b[2], a[0], a[1]].map(|c| _mm512_set1_pd(c))
+        });
+        let (mut in1, mut in2) = (load(&states[0].x1), load(&states[0].x2));
+        let mut y1: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y1));
+        let mut y2: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y2));
+        let mut rows = [[0.0; PADDED]; TILE];
+        let mut start = 0;
+        while start < n {
+            let t = TILE.min(n - start);
+            let rows = &mut rows[..t];
+            for (l, c) in inp.iter().enumerate() {
+                for (r, &v) in rows.iter_mut().zip(&c[start..start + t]) {
+                    r[l] = v;
+                }
+            }
+            for r in rows.iter_mut() {
+                // SAFETY: `r` holds the eight doubles read.
+                let x0 = unsafe { _mm512_loadu_pd(r.as_ptr()) };
+                let (mut x, mut x1, mut x2) = (x0, in1, in2);
+                for k in 0..S {
+                    let [b0, b1, b2, a1, a2] = coef[k];
+                    let acc = _mm512_add_pd(_mm512_mul_pd(b0, x), _mm512_mul_pd(b1, x1));
+                    let acc = _mm512_add_pd(acc, _mm512_mul_pd(b2, x2));
+                    let acc = _mm512_sub_pd(acc, _mm512_mul_pd(a1, y1[k]));
+                    let y = _mm512_sub_pd(acc, _mm512_mul_pd(a2, y2[k]));
+                    // The next section's input history is this one's output history.
+                    x1 = y1[k];
+                    x2 = y2[k];
+                    y2[k] = y1[k];
+                    y1[k] = y;
+                    x = y;
+                }
+                in2 = in1;
+                in1 = x0;
+                // SAFETY: `r` has room for the eight doubles written.
+                unsafe { _mm512_storeu_pd(r.as_mut_ptr(), x) };
+            }
+            for (l, c) in out.iter_mut().enumerate() {
+                for (o, r) in c[start..start + t].iter_mut().zip(rows.iter()) {
+                    *o = r[l];
+                }
+            }
+            start += t;
+        }
+        let lanes = |v: __m512d| -> [f64; LANES] {
+            let mut p = [0.0; PADDED];
+            // SAFETY: `p` has room for the eight doubles written.
+            unsafe { _mm512_storeu_pd(p.as_mut_ptr(), v) };
+            std::array::from_fn(|l| p[l])
+        };
+        for k in 0..S {
+            let (x1, x2) = if k == 0 { (lanes(in1), lanes(in2)) } else { (lanes(y1[k - 1]), lanes(y2[k - 1])) };
+            states[k] = SectionState { x1, x2, y1: lanes(y1[k]), y2: lanes(y2[k]) };
+        }
     }
 }
 
