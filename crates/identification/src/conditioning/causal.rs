@@ -252,6 +252,9 @@ impl Buffers {
     }
 }
 
+/// Scans a pass of the block path takes at most (a longer call is cut into passes).
+const MAX_BLOCK: usize = 2_048;
+
 /// Which compiled copy of the block path runs (the same operations in the same order in
 /// each, so the same bits).
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -380,23 +383,25 @@ impl CausalChain {
         if !values.len().is_multiple_of(self.width) {
             return Err(IdentificationError::BadInput { what: "scan values".into(), reason: format!("{} values are not whole scans of {} readings", values.len(), self.width) });
         }
-        if !values.is_empty() {
-            self.push_with(self.isa, values, out);
-        }
+        self.push_with(self.isa, values, out);
         Ok(())
     }
 
     /// [`Self::push`] through the block path compiled for `isa` (which the CPU must have:
     /// [`Isa::detect`] said so, or it is the baseline).
+    /// At most [`MAX_BLOCK`] scans a pass: the scratch columns stay small (and in cache)
+    /// however long a call is; the output does not depend on the cutting.
     fn push_with(&mut self, isa: Isa, values: &[f64], out: &mut CausalOutput) {
-        match isa {
-            Isa::Baseline => self.push_block::<false>(values, out),
-            // SAFETY: the only requirement of a `target_feature` function is that the CPU has
-            // the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { self.push_block_avx2(values, out) },
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { self.push_block_avx512(values, out) },
+        for block in values.chunks(MAX_BLOCK * self.width) {
+            match isa {
+                Isa::Baseline => self.push_block::<false>(block, out),
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2 => unsafe { self.push_block_avx2(block, out) },
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 => unsafe { self.push_block_avx512(block, out) },
+            }
         }
     }
 
