@@ -47,9 +47,17 @@
 //! last in-range value instead, so the state stays finite and bounded and the chain goes
 //! on once the probe is back.
 //!
-//! ## Bit for bit
-//! Each scan goes through the same operations in the same order whatever block it came in,
-//! so the output does not depend on how the input was cut (tested with several block sizes).
+//! ## Bit for bit, block by block
+//! A call runs stage by stage over its whole block (calibration into channel columns, the
+//! de-skew stencils over the columns, the kinematics and applied force, the low-pass with its
+//! six lanes side by side in registers, the differentiators over the columns, eq. 2), with
+//! what the next call needs carried over: the last scans the stencils reach back to, the
+//! low-pass's state, the last `2M` low-passed samples and velocities. Each sample still goes
+//! through the same operations in the same order as it did when the chain ran scan by scan
+//! (no fused multiply-add, each sum in the same order), whatever block it came in, so the
+//! output does not depend on how the input was cut, nor on which compiled copy runs (AVX-512,
+//! AVX2 or the baseline, chosen at run time). The unit tests keep the scan-by-scan chain as
+//! the reference and compare bits for many cuttings, with out-of-range readings in them.
 
 use std::ops::Range;
 
@@ -203,28 +211,75 @@ impl CausalOutput {
     }
 }
 
-/// A ring of `N`-wide rows, indexed by an ever-growing counter.
-#[derive(Clone, Debug)]
-struct Ring<const N: usize> {
-    rows: Vec<[f64; N]>,
-    mask: usize,
+/// The block path's columns: what one call leaves for the next (the last scans the de-skew
+/// stencils reach back to, the last `2 M` low-passed samples and velocities the
+/// differentiators reach back to), and scratch columns reused from call to call.
+#[derive(Clone, Debug, Default)]
+struct Buffers {
+    /// SI readings (in-range, or held) by channel index, scans `raw_first ..`.
+    raw: [Vec<f64>; CHANNEL_COUNT],
+    raw_first: u64,
+    /// This call's de-skewed samples by channel index.
+    deskewed: [Vec<f64>; CHANNEL_COUNT],
+    /// This call's `r_x, r_y, F_x, F_y` (kinematics and applied force, not low-passed).
+    kinematics: [Vec<f64>; 4],
+    /// Low-passed `x, y, X, Y, F_x, F_y`, then the unfiltered `f3`, temperature, low-pass
+    /// indices `filtered_first ..`.
+    filtered: [Vec<f64>; 8],
+    filtered_first: u64,
+    /// `x', y', X', Y'`, indices `velocity_first ..`.
+    velocity: [Vec<f64>; 4],
+    velocity_first: u64,
+    /// This call's `x'', y'', X'', Y''`.
+    acceleration: [Vec<f64>; 4],
+    /// Scans of this call with an out-of-range reading, ascending.
+    hits: Vec<u64>,
+    /// Whether this call's outputs are finite.
+    finite: Vec<bool>,
 }
 
-impl<const N: usize> Ring<N> {
-    /// Holds at least the last `span` rows.
-    fn new(span: usize) -> Self {
-        let len = span.max(1).next_power_of_two();
-        Self { rows: vec![[0.0; N]; len], mask: len - 1 }
+impl Buffers {
+    /// Forgets all but the last `keep` entries of `cols` (whose first entry has index
+    /// `*first`).
+    fn keep_last<const N: usize>(cols: &mut [Vec<f64>; N], first: &mut u64, keep: usize) {
+        let len = cols[0].len();
+        if len > keep {
+            for c in cols.iter_mut() {
+                c.drain(..len - keep);
+            }
+            *first += (len - keep) as u64;
+        }
     }
+}
 
-    #[inline(always)]
-    fn at(&self, i: u64) -> &[f64; N] {
-        &self.rows[(i as usize) & self.mask]
-    }
+/// Scans a pass of the block path takes at most (a longer call is cut into passes).
+const MAX_BLOCK: usize = 2_048;
 
-    #[inline(always)]
-    fn set(&mut self, i: u64, row: [f64; N]) {
-        self.rows[(i as usize) & self.mask] = row;
+/// Which compiled copy of the block path runs (the same operations in the same order in
+/// each, so the same bits).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+enum Isa {
+    /// The target's baseline.
+    Baseline,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Isa {
+    /// The widest the CPU has.
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                return Isa::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Baseline
     }
 }
 
@@ -240,12 +295,6 @@ pub struct CausalChain {
     /// `c_1 .. c_M`, per second.
     sg: Vec<f64>,
     delays: CausalDelays,
-    /// SI readings (in-range, or held) by channel index.
-    raw: Ring<CHANNEL_COUNT>,
-    /// Low-passed `x, y, X, Y, F_x, F_y`, then the unfiltered `f3`, temperature.
-    filtered: Ring<8>,
-    /// `x', y', X', Y'`.
-    velocity: Ring<4>,
     iir: Vec<SectionState>,
     /// Scans pushed.
     scans: u64,
@@ -253,6 +302,9 @@ pub struct CausalChain {
     lowpassed: u64,
     /// Outputs with a time index `<=` this are invalid (a violation reaches them).
     invalid_through: Option<u64>,
+    /// History carried between calls, and scratch.
+    buf: Buffers,
+    isa: Isa,
 }
 
 impl CausalChain {
@@ -290,7 +342,6 @@ impl CausalChain {
             let mid = 0.5 * (a + b);
             fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], start, weights, last_good: if mid.is_finite() { mid } else { 0.0 } });
         }
-        let m = sg.half_length();
         Ok(Self {
             units,
             width,
@@ -299,14 +350,13 @@ impl CausalChain {
             mass_kg: mechanics.housing_mass_kg,
             sections: lp.sections().to_vec(),
             sg: sg.coefficients().to_vec(),
-            raw: Ring::new(delays.lookahead + delays.lookback + 1),
-            filtered: Ring::new(4 * m + 1),
-            velocity: Ring::new(2 * m + 1),
             iir: vec![SectionState::default(); lp.sections().len()],
             delays,
             scans: 0,
             lowpassed: 0,
             invalid_through: None,
+            buf: Buffers::default(),
+            isa: Isa::detect(),
         })
     }
 
@@ -333,129 +383,924 @@ impl CausalChain {
         if !values.len().is_multiple_of(self.width) {
             return Err(IdentificationError::BadInput { what: "scan values".into(), reason: format!("{} values are not whole scans of {} readings", values.len(), self.width) });
         }
-        for row in values.chunks_exact(self.width) {
-            self.push_scan(row, out);
-        }
+        self.push_with(self.isa, values, out);
         Ok(())
     }
 
-    fn push_scan(&mut self, row: &[f64], out: &mut CausalOutput) {
-        let n = self.scans;
-        self.scans += 1;
-        // Calibration and range check.
-        let mut si = [0.0; CHANNEL_COUNT];
-        for (k, f) in self.fronts.iter_mut().enumerate() {
-            let r = row[f.column];
-            let (volts, value) = match self.units {
-                RawUnits::Volts => (r, (r - f.offset_v) * f.gain),
-                RawUnits::Si => (f.offset_v + f.sensitivity * r, r),
-            };
-            if volts > f.lo_v && volts < f.hi_v && value.is_finite() {
-                f.last_good = value;
-            } else {
-                let d = self.delays;
-                let through = n + (d.lookback + d.settling + d.derivative) as u64;
-                self.invalid_through = Some(self.invalid_through.map_or(through, |t| t.max(through)));
-                match out.violations.iter_mut().rev().find(|v| v.channel == f.channel) {
-                    Some(v) if v.index as u64 + v.count as u64 == n => v.count += 1,
-                    _ => out.violations.push(RangeViolation { channel: f.channel, index: n as usize, value_si: value, range_si: f.range_si, count: 1 }),
-                }
-            }
-            si[k] = f.last_good;
-        }
-        self.raw.set(n, si);
-        let d = self.delays;
-        if n < (d.lookahead + d.lookback) as u64 {
-            return;
-        }
-        // De-skew: time index m = n - L.
-        let m = n - d.lookahead as u64;
-        let mut s = [0.0; CHANNEL_COUNT];
-        for (k, f) in self.fronts.iter().enumerate() {
-            let base = m as i64 + f.start as i64;
-            let mut acc = 0.0;
-            for (j, &w) in f.weights.iter().enumerate() {
-                acc += w * self.raw.at((base + j as i64) as u64)[k];
-            }
-            s[k] = acc;
-        }
-        let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = s;
-        let [fx, fy] = self.applied.at(f1, f2, f3);
-        let lanes = [0.5 * (a_x + b_x), 0.5 * (a_y + b_y), frame_x, frame_y, fx, fy];
-        let p = self.lowpassed;
-        self.lowpassed += 1;
-        let y = self.lowpass(lanes, p == 0);
-        self.filtered.set(p, [y[0], y[1], y[2], y[3], y[4], y[5], f3, temperature]);
-        // Velocity at p - M, acceleration (and every output) at p - 2M.
-        let mh = self.sg.len() as u64;
-        if p < 2 * mh {
-            return;
-        }
-        let q = p - mh;
-        let mut v = [0.0; 4];
-        for (k, &c) in self.sg.iter().enumerate() {
-            let (ahead, behind) = (self.filtered.at(q + k as u64 + 1), self.filtered.at(q - k as u64 - 1));
-            for l in 0..4 {
-                v[l] += c * (ahead[l] - behind[l]);
+    /// [`Self::push`] through the block path compiled for `isa` (which the CPU must have:
+    /// [`Isa::detect`] said so, or it is the baseline).
+    /// At most [`MAX_BLOCK`] scans a pass: the scratch columns stay small (and in cache)
+    /// however long a call is; the output does not depend on the cutting.
+    fn push_with(&mut self, isa: Isa, values: &[f64], out: &mut CausalOutput) {
+        for block in values.chunks(MAX_BLOCK * self.width) {
+            match isa {
+                Isa::Baseline => self.push_block::<false>(block, out),
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2 => unsafe { self.push_block_avx2(block, out) },
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 => unsafe { self.push_block_avx512(block, out) },
             }
         }
-        self.velocity.set(q, v);
-        // Time index of the low-passed sample `r`: the first de-skewed one is `lookback`.
-        let r = p - 2 * mh;
-        let time = r + d.lookback as u64;
-        if r < (d.settling + d.derivative) as u64 {
-            return;
-        }
-        let mut a = [0.0; 4];
-        for (k, &c) in self.sg.iter().enumerate() {
-            let (ahead, behind) = (self.velocity.at(r + k as u64 + 1), self.velocity.at(r - k as u64 - 1));
-            for l in 0..4 {
-                a[l] += c * (ahead[l] - behind[l]);
-            }
-        }
-        let here = *self.filtered.at(r);
-        let vel = *self.velocity.at(r);
-        if out.is_empty() {
-            out.first_index = time;
-        }
-        out.x_m.push(here[0]);
-        out.y_m.push(here[1]);
-        out.vx_m_s.push(vel[0]);
-        out.vy_m_s.push(vel[1]);
-        out.ax_m_s2.push(a[0]);
-        out.ay_m_s2.push(a[1]);
-        let fx = here[4] - self.mass_kg * a[2];
-        let fy = here[5] - self.mass_kg * a[3];
-        out.fx_n.push(fx);
-        out.fy_n.push(fy);
-        out.static_load_n.push(here[6]);
-        out.temperature_c.push(here[7]);
-        let finite = [here[0], here[1], vel[0], vel[1], a[0], a[1], fx, fy].iter().all(|v| v.is_finite());
-        out.valid.push(finite && self.invalid_through.is_none_or(|t| time > t));
     }
 
-    /// One sample of every lane through the cascade; `first`: start every section in the DC
-    /// steady state of this input.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn push_block_avx2(&mut self, values: &[f64], out: &mut CausalOutput) {
+        self.push_block::<false>(values, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn push_block_avx512(&mut self, values: &[f64], out: &mut CausalOutput) {
+        self.push_block::<true>(values, out);
+    }
+
+    /// The whole call stage by stage: calibrate every scan into channel columns, de-skew the
+    /// columns, the kinematics and applied force, the low-pass over the block (its six lanes
+    /// side by side), the differentiators over the block, eq. 2. Each sample goes through the
+    /// same operations in the same order as it did scan by scan (the test module keeps that
+    /// scan-by-scan chain as the reference), so the bits do not depend on the cutting.
+    /// `values` holds whole scans, at least one. `AVX512`: compiled into
+    /// [`Self::push_block_avx512`] (the CPU has AVX-512F), the low-pass written for it.
     #[inline(always)]
-    fn lowpass(&mut self, mut x: [f64; LANES], first: bool) -> [f64; LANES] {
-        for (s, st) in self.sections.iter().zip(self.iir.iter_mut()) {
-            let [b0, b1, b2] = s.b;
-            let [a1, a2] = s.a;
-            if first {
-                let g = (b0 + b1 + b2) / (1.0 + a1 + a2);
-                let y = x.map(|v| g * v);
-                *st = SectionState { x1: x, x2: x, y1: y, y2: y };
+    fn push_block<const AVX512: bool>(&mut self, values: &[f64], out: &mut CausalOutput) {
+        let width = self.width;
+        let scans = values.len() / width;
+        let n0 = self.scans;
+        self.scans += scans as u64;
+        let d = self.delays;
+        let (ahead, back, two_m) = (d.lookahead as u64, d.lookback as u64, d.derivative as u64);
+        let half = two_m / 2;
+        let buf = &mut self.buf;
+
+        // Calibration and range check, channel by channel into the raw columns. The raw
+        // columns hold the scans since `raw_first`, so scan `n0` goes at their current end.
+        let e0 = (n0 - buf.raw_first) as usize;
+        for col in buf.raw.iter_mut() {
+            col.resize(e0 + scans, 0.0);
+        }
+        {
+            // The readings into the channel columns, row after row (each row read once,
+            // each column written in order), then converted in place column by column.
+            let dst = buf.raw.each_mut().map(|c| &mut c[e0..e0 + scans]);
+            let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| self.fronts[k].column);
+            for (i, row) in values.chunks_exact(width).enumerate() {
+                for k in 0..CHANNEL_COUNT {
+                    dst[k][i] = row[columns[k]];
+                }
             }
-            let mut y = [0.0; LANES];
-            for l in 0..LANES {
-                y[l] = b0 * x[l] + b1 * st.x1[l] + b2 * st.x2[l] - a1 * st.y1[l] - a2 * st.y2[l];
+        }
+        let mut in_range = true;
+        for (f, col) in self.fronts.iter().zip(buf.raw.iter_mut()) {
+            in_range &= f.calibrate(self.units, &mut col[e0..]);
+        }
+        buf.hits.clear();
+        if in_range {
+            for (f, col) in self.fronts.iter_mut().zip(&buf.raw) {
+                f.last_good = col[e0 + scans - 1];
             }
-            st.x2 = st.x1;
-            st.x1 = x;
-            st.y2 = st.y1;
-            st.y1 = y;
+        } else {
+            // A reading out of range somewhere: again, scan by scan, holding the last good
+            // value and recording the violations in the order met.
+            for (i, row) in values.chunks_exact(width).enumerate() {
+                let n = n0 + i as u64;
+                for (f, col) in self.fronts.iter_mut().zip(buf.raw.iter_mut()) {
+                    let (value, ok) = f.read(self.units, row[f.column]);
+                    if ok {
+                        f.last_good = value;
+                    } else {
+                        if buf.hits.last() != Some(&n) {
+                            buf.hits.push(n);
+                        }
+                        match out.violations.iter_mut().rev().find(|v| v.channel == f.channel) {
+                            Some(v) if v.index as u64 + v.count as u64 == n => v.count += 1,
+                            _ => out.violations.push(RangeViolation { channel: f.channel, index: n as usize, value_si: value, range_si: f.range_si, count: 1 }),
+                        }
+                    }
+                    col[e0 + i] = f.last_good;
+                }
+            }
+        }
+
+        // De-skew: scan `n` gives time index `m = n - L`, once the stencils' reach back is in.
+        let (first_n, end_n) = (n0.max(ahead + back), n0 + scans as u64);
+        if first_n < end_n {
+            let count = (end_n - first_n) as usize;
+            let m0 = first_n - ahead;
+            for ((f, raw), y) in self.fronts.iter().zip(&buf.raw).zip(buf.deskewed.iter_mut()) {
+                // `m0 + start >= m0 - lookback >= raw_first` (the raw columns keep the last
+                // `L + lookback` scans) and `m0 + start + taps - 1 + count - 1 <= end_n - 1`.
+                let from = (m0 as i64 + f.start as i64 - buf.raw_first as i64) as usize;
+                y.resize(count, 0.0);
+                fir(&f.weights, &raw[from..], y);
+            }
+            // Kinematics (`r` = the mean of ends A and B) and the applied force.
+            let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &buf.deskewed;
+            for c in buf.kinematics.iter_mut() {
+                c.clear();
+                c.resize(count, 0.0);
+            }
+            let [rx, ry, fx, fy] = &mut buf.kinematics;
+            let (rx, ry, fx, fy) = (&mut rx[..count], &mut ry[..count], &mut fx[..count], &mut fy[..count]);
+            let (a_x, a_y, b_x, b_y, f1, f2, f3) = (&a_x[..count], &a_y[..count], &b_x[..count], &b_y[..count], &f1[..count], &f2[..count], &f3[..count]);
+            for i in 0..count {
+                rx[i] = 0.5 * (a_x[i] + b_x[i]);
+                ry[i] = 0.5 * (a_y[i] + b_y[i]);
+                let [x, y] = self.applied.at(f1[i], f2[i], f3[i]);
+                fx[i] = x;
+                fy[i] = y;
+            }
+
+            // Low-pass: index `p = m - lookback`.
+            let p0 = self.lowpassed;
+            self.lowpassed += count as u64;
+            let fe = (p0 - buf.filtered_first) as usize;
+            for c in buf.filtered.iter_mut() {
+                c.resize(fe + count, 0.0);
+            }
+            let inputs = [&rx[..], &ry[..], &frame_x[..count], &frame_y[..count], &fx[..], &fy[..]];
+            let [o0, o1, o2, o3, o4, o5, o_f3, o_t] = &mut buf.filtered;
+            // The first two samples one by one: the first starts every section in its DC
+            // steady state, and the AVX-512 cascade needs two samples of history behind it.
+            let skip = (SHARED_FROM.saturating_sub(p0) as usize).min(count);
+            for i in 0..skip {
+                let y = lowpass_scan(&self.sections, &mut self.iir, inputs.map(|c| c[i]), p0 + i as u64 == 0);
+                for (o, v) in [&mut *o0, &mut *o1, &mut *o2, &mut *o3, &mut *o4, &mut *o5].into_iter().zip(y) {
+                    o[fe + i] = v;
+                }
+            }
+            let (inputs, outputs) = (inputs.map(|c| &c[skip..]), [&mut o0[fe + skip..], &mut o1[fe + skip..], &mut o2[fe + skip..], &mut o3[fe + skip..], &mut o4[fe + skip..], &mut o5[fe + skip..]]);
+            #[cfg(target_arch = "x86_64")]
+            if AVX512 && skip < count {
+                // SAFETY: `AVX512` is true only in `push_block_avx512`, which runs only when
+                // the CPU has AVX-512F (`Isa::detect`). `skip < count`: the samples before
+                // `SHARED_FROM` have gone through.
+                unsafe { avx512::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
+            } else {
+                iir_block(&self.sections, &mut self.iir, inputs, outputs);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            iir_block(&self.sections, &mut self.iir, inputs, outputs);
+            o_f3[fe..].copy_from_slice(&f3[..count]);
+            o_t[fe..].copy_from_slice(&temperature[..count]);
+
+            // Velocity at `q = p - M` for every `p >= 2M`.
+            let p_end = p0 + count as u64;
+            let pv = p0.max(two_m);
+            if pv < p_end {
+                let nv = (p_end - pv) as usize;
+                let q0 = pv - half;
+                // The velocity columns end just before `q0` (or are empty and start there).
+                buf.velocity_first = q0 - buf.velocity[0].len() as u64;
+                let ve = buf.velocity[0].len();
+                let from = (q0 - half - buf.filtered_first) as usize;
+                for (v, x) in buf.velocity.iter_mut().zip(&buf.filtered) {
+                    v.resize(ve + nv, 0.0);
+                    savitzky_golay(&self.sg, &x[from..], &mut v[ve..]);
+                }
+                // Acceleration and every output at `r = p - 2M`, once the low-pass has settled.
+                let r0 = (pv - two_m).max(d.settling as u64 + two_m);
+                let r_end = p_end - two_m;
+                if r0 < r_end {
+                    let no = (r_end - r0) as usize;
+                    let from = (r0 - half - buf.velocity_first) as usize;
+                    for (a, v) in buf.acceleration.iter_mut().zip(&buf.velocity) {
+                        a.clear();
+                        a.resize(no, 0.0);
+                        savitzky_golay(&self.sg, &v[from..], a);
+                    }
+                    self.emit(r0, no, out);
+                }
+            }
+        }
+        let buf = &mut self.buf;
+        let reach = back + (d.settling as u64) + two_m;
+        if let Some(&n) = buf.hits.last() {
+            // `n + reach` grows with `n`: the last violation reaches furthest.
+            self.invalid_through = Some(self.invalid_through.map_or(n + reach, |t| t.max(n + reach)));
+        }
+        Buffers::keep_last(&mut buf.raw, &mut buf.raw_first, (ahead + back) as usize);
+        Buffers::keep_last(&mut buf.filtered, &mut buf.filtered_first, two_m as usize);
+        Buffers::keep_last(&mut buf.velocity, &mut buf.velocity_first, two_m as usize);
+    }
+
+    /// Appends the `count` outputs from index `r0` of the low-pass (time index `r0 +
+    /// lookback`): this call's accelerations are in the acceleration columns.
+    #[inline(always)]
+    fn emit(&mut self, r0: u64, count: usize, out: &mut CausalOutput) {
+        let buf = &self.buf;
+        let d = self.delays;
+        let (fo, vo) = ((r0 - buf.filtered_first) as usize, (r0 - buf.velocity_first) as usize);
+        let time0 = r0 + d.lookback as u64;
+        if out.is_empty() {
+            out.first_index = time0;
+        }
+        let start = out.len();
+        let [x, y, _, _, fx, fy, f3, temperature] = &buf.filtered;
+        let [ax, ay, hx, hy] = &buf.acceleration;
+        out.x_m.extend_from_slice(&x[fo..fo + count]);
+        out.y_m.extend_from_slice(&y[fo..fo + count]);
+        out.vx_m_s.extend_from_slice(&buf.velocity[0][vo..vo + count]);
+        out.vy_m_s.extend_from_slice(&buf.velocity[1][vo..vo + count]);
+        out.ax_m_s2.extend_from_slice(&ax[..count]);
+        out.ay_m_s2.extend_from_slice(&ay[..count]);
+        let m = self.mass_kg;
+        out.fx_n.extend(fx[fo..fo + count].iter().zip(&hx[..count]).map(|(f, a)| f - m * a));
+        out.fy_n.extend(fy[fo..fo + count].iter().zip(&hy[..count]).map(|(f, a)| f - m * a));
+        out.static_load_n.extend_from_slice(&f3[fo..fo + count]);
+        out.temperature_c.extend_from_slice(&temperature[fo..fo + count]);
+        // Valid: finite, and no violation met by the scan that completed the sample
+        // (`time + L + 2M`) reaches it.
+        let cols = [&out.x_m, &out.y_m, &out.vx_m_s, &out.vy_m_s, &out.ax_m_s2, &out.ay_m_s2, &out.fx_n, &out.fy_n].map(|c| &c[start..start + count]);
+        let mut finite = std::mem::take(&mut self.buf.finite);
+        finite.clear();
+        finite.resize(count, true);
+        for c in cols {
+            for (f, v) in finite.iter_mut().zip(c) {
+                *f &= v.is_finite();
+            }
+        }
+        let reach = (d.lookback + d.settling + d.derivative) as u64;
+        let delay = d.delay_scans() as u64;
+        let mut through = self.invalid_through;
+        let mut hits = self.buf.hits.iter().peekable();
+        let mut i = 0;
+        out.valid.reserve(count);
+        while i < count {
+            // The violations met up to the scan completing sample `i`; `through` then holds
+            // until the scan of the next violation.
+            let scan = time0 + i as u64 + delay;
+            while let Some(&&n) = hits.peek() {
+                if n > scan {
+                    break;
+                }
+                through = Some(through.map_or(n + reach, |t| t.max(n + reach)));
+                hits.next();
+            }
+            let end = hits.peek().map_or(count, |&&n| ((n - delay - time0) as usize).min(count));
+            out.valid.extend(finite[i..end].iter().zip(time0 + i as u64..).map(|(&f, time)| f && through.is_none_or(|t| time > t)));
+            i = end;
+        }
+        self.buf.finite = finite;
+    }
+}
+
+impl Front {
+    /// A reading's SI value and whether it is in range (finite, inside the linear range).
+    #[inline(always)]
+    fn read(&self, units: RawUnits, r: f64) -> (f64, bool) {
+        let (volts, value) = match units {
+            RawUnits::Volts => (r, (r - self.offset_v) * self.gain),
+            RawUnits::Si => (self.offset_v + self.sensitivity * r, r),
+        };
+        (value, (volts > self.lo_v) & (volts < self.hi_v) & value.is_finite())
+    }
+
+    /// The channel's readings in `col` converted to SI in place, `CHUNK` at a time; `false`
+    /// if any is out of range (the caller then redoes the block holding values).
+    #[inline(always)]
+    fn calibrate(&self, units: RawUnits, col: &mut [f64]) -> bool {
+        match units {
+            RawUnits::Volts => self.calibrate_in_place::<true>(col),
+            RawUnits::Si => self.calibrate_in_place::<false>(col),
+        }
+    }
+
+    #[inline(always)]
+    fn calibrate_in_place<const VOLTS: bool>(&self, col: &mut [f64]) -> bool {
+        let units = if VOLTS { RawUnits::Volts } else { RawUnits::Si };
+        // A count rather than a short-circuit `all`, so that the loop vectorises.
+        let mut bad = 0u64;
+        for c in col.iter_mut() {
+            let (v, ok) = self.read(units, *c);
+            *c = v;
+            bad += u64::from(!ok);
+        }
+        bad == 0
+    }
+}
+
+/// Outputs per chunk of the FIR loops below: their sums are independent, so a chunk of
+/// several registers' worth keeps the adders busy instead of waiting on one sum.
+const CHUNK: usize = 32;
+
+/// `y[i] = sum_j w[j] x[i + j]`, each sum from `0.0` in tap order, as the scan-by-scan
+/// chain summed it. `CHUNK` outputs at a time with their sums in registers.
+#[inline(always)]
+fn fir(w: &[f64], x: &[f64], y: &mut [f64]) {
+    let n = y.len();
+    let x = &x[..n + w.len() - 1];
+    let mut chunks = y.chunks_exact_mut(CHUNK);
+    let mut i = 0;
+    for out in &mut chunks {
+        let mut acc = [0.0; CHUNK];
+        for (j, &wj) in w.iter().enumerate() {
+            let v = &x[i + j..][..CHUNK];
+            for l in 0..CHUNK {
+                acc[l] += wj * v[l];
+            }
+        }
+        out.copy_from_slice(&acc);
+        i += CHUNK;
+    }
+    for (o, i) in chunks.into_remainder().iter_mut().zip(i..) {
+        let mut acc = 0.0;
+        for (j, &wj) in w.iter().enumerate() {
+            acc += wj * x[i + j];
+        }
+        *o = acc;
+    }
+}
+
+/// The centred Savitzky-Golay derivative: `y[i] = sum_k c_k (x[i + M + k + 1] - x[i + M -
+/// k - 1])` from `0.0`, `k` in order; `x` starts `M` before the first output's centre.
+#[inline(always)]
+fn savitzky_golay(c: &[f64], x: &[f64], y: &mut [f64]) {
+    let (m, n) = (c.len(), y.len());
+    let x = &x[..n + 2 * m];
+    let mut chunks = y.chunks_exact_mut(CHUNK);
+    let mut i = 0;
+    for out in &mut chunks {
+        let mut acc = [0.0; CHUNK];
+        for (k, &ck) in c.iter().enumerate() {
+            let (ahead, behind) = (&x[i + m + k + 1..][..CHUNK], &x[i + m - k - 1..][..CHUNK]);
+            for l in 0..CHUNK {
+                acc[l] += ck * (ahead[l] - behind[l]);
+            }
+        }
+        out.copy_from_slice(&acc);
+        i += CHUNK;
+    }
+    for (o, i) in chunks.into_remainder().iter_mut().zip(i..) {
+        let mut acc = 0.0;
+        for (k, &ck) in c.iter().enumerate() {
+            acc += ck * (x[i + m + k + 1] - x[i + m - k - 1]);
+        }
+        *o = acc;
+    }
+}
+
+/// One sample of every lane through the cascade, direct form I; `first`: start every
+/// section in the DC steady state of its input.
+#[inline(always)]
+fn lowpass_scan(sections: &[lowpass::Section], states: &mut [SectionState], mut x: [f64; LANES], first: bool) -> [f64; LANES] {
+    for (s, st) in sections.iter().zip(states.iter_mut()) {
+        let [b0, b1, b2] = s.b;
+        let [a1, a2] = s.a;
+        if first {
+            let g = (b0 + b1 + b2) / (1.0 + a1 + a2);
+            let y = x.map(|v| g * v);
+            *st = SectionState { x1: x, x2: x, y1: y, y2: y };
+        }
+        let mut y = [0.0; LANES];
+        for l in 0..LANES {
+            y[l] = b0 * x[l] + b1 * st.x1[l] + b2 * st.x2[l] - a1 * st.y1[l] - a2 * st.y2[l];
+        }
+        st.x2 = st.x1;
+        st.x1 = x;
+        st.y2 = st.y1;
+        st.y1 = y;
+        x = y;
+    }
+    x
+}
+
+/// The cascade over a block: `out[l][i]` from `inp[l][i]`, sample after sample, the
+/// sections' state in registers (for the orders the causal chain can have).
+#[inline(always)]
+fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+    macro_rules! fixed {
+        ($s:literal) => {
+            if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
+                return iir_block_const::<$s>(sections, states, inp, out);
+            }
+        };
+    }
+    fixed!(1);
+    fixed!(2);
+    fixed!(3);
+    fixed!(4);
+    fixed!(5);
+    fixed!(6);
+    // Not reached (the design has at most six sections); the same operations anyway.
+    let n = out[0].len();
+    for i in 0..n {
+        let y = lowpass_scan(sections, states, inp.map(|c| c[i]), false);
+        for l in 0..LANES {
+            out[l][i] = y[l];
+        }
+    }
+}
+
+/// Lanes in the registers: the six padded to eight (one AVX-512 register, two AVX2 ones);
+/// the padding lanes stay zero.
+const PADDED: usize = 8;
+
+#[inline(always)]
+fn iir_block_const<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+    let n = out[0].len();
+    let inp = inp.map(|c| &c[..n]);
+    let out = out.map(|c| &mut c[..n]);
+    let pad = |a: &[f64; LANES]| {
+        let mut p = [0.0; PADDED];
+        p[..LANES].copy_from_slice(a);
+        p
+    };
+    let coef: [[f64; 5]; S] = std::array::from_fn(|k| [sections[k].b[0], sections[k].b[1], sections[k].b[2], sections[k].a[0], sections[k].a[1]]);
+    let mut x1: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].x1));
+    let mut x2: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].x2));
+    let mut y1: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].y1));
+    let mut y2: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].y2));
+    for i in 0..n {
+        let mut x = [0.0; PADDED];
+        for l in 0..LANES {
+            x[l] = inp[l][i];
+        }
+        for k in 0..S {
+            let [b0, b1, b2, a1, a2] = coef[k];
+            let mut y = [0.0; PADDED];
+            for l in 0..PADDED {
+                y[l] = b0 * x[l] + b1 * x1[k][l] + b2 * x2[k][l] - a1 * y1[k][l] - a2 * y2[k][l];
+            }
+            x2[k] = x1[k];
+            x1[k] = x;
+            y2[k] = y1[k];
+            y1[k] = y;
             x = y;
         }
-        x
+        for l in 0..LANES {
+            out[l][i] = x[l];
+        }
+    }
+    for k in 0..S {
+        let lanes = |p: &[f64; PADDED]| -> [f64; LANES] { std::array::from_fn(|l| p[l]) };
+        states[k] = SectionState { x1: lanes(&x1[k]), x2: lanes(&x2[k]), y1: lanes(&y1[k]), y2: lanes(&y2[k]) };
+    }
+}
+
+/// Samples through the low-pass after which each section's input history equals the
+/// previous section's output history (see [`avx512::iir_block`]).
+const SHARED_FROM: u64 = 2;
+
+/// The low-pass written with the AVX-512 intrinsics: the six lanes in one register, and only
+/// `2 + 2 S` registers of state, so that the state of every section stays in registers.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{iir_block as generic, lowpass, SectionState, LANES, PADDED};
+    use std::arch::x86_64::{__m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd};
+
+    /// Samples per tile: the lanes are moved into rows first and back after, so that the
+    /// loop carrying the recursion holds only the arithmetic.
+    const TILE: usize = 32;
+
+    /// [`super::iir_block`] for the CPUs with AVX-512F, the same operations in the same order
+    /// (`b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`, left to right, separate multiplies and adds).
+    /// Section `k`'s input is section `k - 1`'s output, so its input history (`x1`, `x2`) is
+    /// section `k - 1`'s output history (`y1`, `y2`), the same values, once
+    /// [`super::SHARED_FROM`] samples have gone through (the steady-state start sets `x2` and
+    /// `y2` from the DC gain, not from a step): only the cascade's input history and each
+    /// section's output history are kept.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+        debug_assert!(
+            states.windows(2).all(|w| w[1].x1.map(f64::to_bits) == w[0].y1.map(f64::to_bits) && w[1].x2.map(f64::to_bits) == w[0].y2.map(f64::to_bits)),
+            "the low-pass's sections share their histories only after {} samples",
+            super::SHARED_FROM
+        );
+        macro_rules! fixed {
+            ($s:literal) => {
+                if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
+                    return cascade::<$s>(sections, states, inp, out);
+                }
+            };
+        }
+        fixed!(1);
+        fixed!(2);
+        fixed!(3);
+        fixed!(4);
+        fixed!(5);
+        fixed!(6);
+        generic(sections, states, inp, out);
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn cascade<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+        let n = out[0].len();
+        let inp = inp.map(|c| &c[..n]);
+        let mut out = out.map(|c| &mut c[..n]);
+        let load = |a: &[f64; LANES]| {
+            let mut p = [0.0; PADDED];
+            p[..LANES].copy_from_slice(a);
+            // SAFETY: `p` holds the eight doubles read.
+            unsafe { _mm512_loadu_pd(p.as_ptr()) }
+        };
+        let coef: [[__m512d; 5]; S] = std::array::from_fn(|k| {
+            let (b, a) = (sections[k].b, sections[k].a);
+            [b[0], b[1], b[2], a[0], a[1]].map(|c| _mm512_set1_pd(c))
+        });
+        let (mut in1, mut in2) = (load(&states[0].x1), load(&states[0].x2));
+        let mut y1: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y1));
+        let mut y2: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y2));
+        let mut rows = [[0.0; PADDED]; TILE];
+        let mut start = 0;
+        while start < n {
+            let t = TILE.min(n - start);
+            let rows = &mut rows[..t];
+            for (l, c) in inp.iter().enumerate() {
+                for (r, &v) in rows.iter_mut().zip(&c[start..start + t]) {
+                    r[l] = v;
+                }
+            }
+            for r in rows.iter_mut() {
+                // SAFETY: `r` holds the eight doubles read.
+                let x0 = unsafe { _mm512_loadu_pd(r.as_ptr()) };
+                let (mut x, mut x1, mut x2) = (x0, in1, in2);
+                for k in 0..S {
+                    let [b0, b1, b2, a1, a2] = coef[k];
+                    let acc = _mm512_add_pd(_mm512_mul_pd(b0, x), _mm512_mul_pd(b1, x1));
+                    let acc = _mm512_add_pd(acc, _mm512_mul_pd(b2, x2));
+                    let acc = _mm512_sub_pd(acc, _mm512_mul_pd(a1, y1[k]));
+                    let y = _mm512_sub_pd(acc, _mm512_mul_pd(a2, y2[k]));
+                    // The next section's input history is this one's output history.
+                    x1 = y1[k];
+                    x2 = y2[k];
+                    y2[k] = y1[k];
+                    y1[k] = y;
+                    x = y;
+                }
+                in2 = in1;
+                in1 = x0;
+                // SAFETY: `r` has room for the eight doubles written.
+                unsafe { _mm512_storeu_pd(r.as_mut_ptr(), x) };
+            }
+            for (l, c) in out.iter_mut().enumerate() {
+                for (o, r) in c[start..start + t].iter_mut().zip(rows.iter()) {
+                    *o = r[l];
+                }
+            }
+            start += t;
+        }
+        let lanes = |v: __m512d| -> [f64; LANES] {
+            let mut p = [0.0; PADDED];
+            // SAFETY: `p` has room for the eight doubles written.
+            unsafe { _mm512_storeu_pd(p.as_mut_ptr(), v) };
+            std::array::from_fn(|l| p[l])
+        };
+        for k in 0..S {
+            let (x1, x2) = if k == 0 { (lanes(in1), lanes(in2)) } else { (lanes(y1[k - 1]), lanes(y2[k - 1])) };
+            states[k] = SectionState { x1, x2, y1: lanes(y1[k]), y2: lanes(y2[k]) };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The block path against the chain as it ran before it (every stage scan by scan
+    //! through ring buffers, kept here verbatim as the reference): the same bits for every
+    //! cutting of the input, with out-of-range readings in it, on every compiled path.
+
+    use super::*;
+    use crate::pipeline;
+    use oilfilm_physics::config::RigConfig;
+
+    /// A ring of `N`-wide rows, indexed by an ever-growing counter.
+    struct Ring<const N: usize> {
+        rows: Vec<[f64; N]>,
+        mask: usize,
+    }
+
+    impl<const N: usize> Ring<N> {
+        /// Holds at least the last `span` rows.
+        fn new(span: usize) -> Self {
+            let len = span.max(1).next_power_of_two();
+            Self { rows: vec![[0.0; N]; len], mask: len - 1 }
+        }
+
+        fn at(&self, i: u64) -> &[f64; N] {
+            &self.rows[(i as usize) & self.mask]
+        }
+
+        fn set(&mut self, i: u64, row: [f64; N]) {
+            self.rows[(i as usize) & self.mask] = row;
+        }
+    }
+
+    /// The scan-by-scan chain: a fresh [`CausalChain`]'s design and state, and the rings.
+    struct ScanByScan {
+        c: CausalChain,
+        raw: Ring<CHANNEL_COUNT>,
+        filtered: Ring<8>,
+        velocity: Ring<4>,
+    }
+
+    impl ScanByScan {
+        fn new(fresh: &CausalChain) -> Self {
+            let (d, m) = (fresh.delays, fresh.sg.len());
+            Self { c: fresh.clone(), raw: Ring::new(d.lookahead + d.lookback + 1), filtered: Ring::new(4 * m + 1), velocity: Ring::new(2 * m + 1) }
+        }
+
+        fn push(&mut self, values: &[f64], out: &mut CausalOutput) {
+            for row in values.chunks_exact(self.c.width) {
+                self.push_scan(row, out);
+            }
+        }
+
+        fn push_scan(&mut self, row: &[f64], out: &mut CausalOutput) {
+            let n = self.c.scans;
+            self.c.scans += 1;
+            // Calibration and range check.
+            let mut si = [0.0; CHANNEL_COUNT];
+            for (k, f) in self.c.fronts.iter_mut().enumerate() {
+                let r = row[f.column];
+                let (volts, value) = match self.c.units {
+                    RawUnits::Volts => (r, (r - f.offset_v) * f.gain),
+                    RawUnits::Si => (f.offset_v + f.sensitivity * r, r),
+                };
+                if volts > f.lo_v && volts < f.hi_v && value.is_finite() {
+                    f.last_good = value;
+                } else {
+                    let d = self.c.delays;
+                    let through = n + (d.lookback + d.settling + d.derivative) as u64;
+                    self.c.invalid_through = Some(self.c.invalid_through.map_or(through, |t| t.max(through)));
+                    match out.violations.iter_mut().rev().find(|v| v.channel == f.channel) {
+                        Some(v) if v.index as u64 + v.count as u64 == n => v.count += 1,
+                        _ => out.violations.push(RangeViolation { channel: f.channel, index: n as usize, value_si: value, range_si: f.range_si, count: 1 }),
+                    }
+                }
+                si[k] = f.last_good;
+            }
+            self.raw.set(n, si);
+            let d = self.c.delays;
+            if n < (d.lookahead + d.lookback) as u64 {
+                return;
+            }
+            // De-skew: time index m = n - L.
+            let m = n - d.lookahead as u64;
+            let mut s = [0.0; CHANNEL_COUNT];
+            for (k, f) in self.c.fronts.iter().enumerate() {
+                let base = m as i64 + f.start as i64;
+                let mut acc = 0.0;
+                for (j, &w) in f.weights.iter().enumerate() {
+                    acc += w * self.raw.at((base + j as i64) as u64)[k];
+                }
+                s[k] = acc;
+            }
+            let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = s;
+            let [fx, fy] = self.c.applied.at(f1, f2, f3);
+            let lanes = [0.5 * (a_x + b_x), 0.5 * (a_y + b_y), frame_x, frame_y, fx, fy];
+            let p = self.c.lowpassed;
+            self.c.lowpassed += 1;
+            let y = lowpass_scan(&self.c.sections, &mut self.c.iir, lanes, p == 0);
+            self.filtered.set(p, [y[0], y[1], y[2], y[3], y[4], y[5], f3, temperature]);
+            // Velocity at p - M, acceleration (and every output) at p - 2M.
+            let mh = self.c.sg.len() as u64;
+            if p < 2 * mh {
+                return;
+            }
+            let q = p - mh;
+            let mut v = [0.0; 4];
+            for (k, &c) in self.c.sg.iter().enumerate() {
+                let (ahead, behind) = (self.filtered.at(q + k as u64 + 1), self.filtered.at(q - k as u64 - 1));
+                for l in 0..4 {
+                    v[l] += c * (ahead[l] - behind[l]);
+                }
+            }
+            self.velocity.set(q, v);
+            // Time index of the low-passed sample `r`: the first de-skewed one is `lookback`.
+            let r = p - 2 * mh;
+            let time = r + d.lookback as u64;
+            if r < (d.settling + d.derivative) as u64 {
+                return;
+            }
+            let mut a = [0.0; 4];
+            for (k, &c) in self.c.sg.iter().enumerate() {
+                let (ahead, behind) = (self.velocity.at(r + k as u64 + 1), self.velocity.at(r - k as u64 - 1));
+                for l in 0..4 {
+                    a[l] += c * (ahead[l] - behind[l]);
+                }
+            }
+            let here = *self.filtered.at(r);
+            let vel = *self.velocity.at(r);
+            if out.is_empty() {
+                out.first_index = time;
+            }
+            out.x_m.push(here[0]);
+            out.y_m.push(here[1]);
+            out.vx_m_s.push(vel[0]);
+            out.vy_m_s.push(vel[1]);
+            out.ax_m_s2.push(a[0]);
+            out.ay_m_s2.push(a[1]);
+            let fx = here[4] - self.c.mass_kg * a[2];
+            let fy = here[5] - self.c.mass_kg * a[3];
+            out.fx_n.push(fx);
+            out.fy_n.push(fy);
+            out.static_load_n.push(here[6]);
+            out.temperature_c.push(here[7]);
+            let finite = [here[0], here[1], vel[0], vel[1], a[0], a[1], fx, fy].iter().all(|v| v.is_finite());
+            out.valid.push(finite && self.c.invalid_through.is_none_or(|t| time > t));
+        }
+    }
+
+    /// Where two outputs first differ in any bit, or `None`.
+    fn first_difference(a: &CausalOutput, b: &CausalOutput) -> Option<String> {
+        if a.first_index != b.first_index {
+            return Some(format!("first_index {} against {}", a.first_index, b.first_index));
+        }
+        let columns = |o: &CausalOutput| [&o.x_m, &o.y_m, &o.vx_m_s, &o.vy_m_s, &o.ax_m_s2, &o.ay_m_s2, &o.fx_n, &o.fy_n, &o.temperature_c, &o.static_load_n].map(|c| c.clone());
+        let names = ["x_m", "y_m", "vx_m_s", "vy_m_s", "ax_m_s2", "ay_m_s2", "fx_n", "fy_n", "temperature_c", "static_load_n"];
+        for ((name, x), y) in names.iter().zip(columns(a)).zip(columns(b)) {
+            if x.len() != y.len() {
+                return Some(format!("{name}: {} samples against {}", x.len(), y.len()));
+            }
+            if let Some(i) = x.iter().zip(&y).position(|(p, q)| p.to_bits() != q.to_bits()) {
+                return Some(format!("{name}[{i}]: {:e} against {:e}", x[i], y[i]));
+            }
+        }
+        if a.valid != b.valid {
+            return Some(format!("valid differs first at {:?}", a.valid.iter().zip(&b.valid).position(|(p, q)| p != q)));
+        }
+        let key = |v: &RangeViolation| (v.channel, v.index, v.count, v.value_si.to_bits(), v.range_si.map(f64::to_bits));
+        if a.violations.iter().map(key).ne(b.violations.iter().map(key)) {
+            return Some(format!("violations {:?} against {:?}", a.violations, b.violations));
+        }
+        None
+    }
+
+    /// xorshift64: deterministic noise without a dependency.
+    struct Noise(u64);
+
+    impl Noise {
+        /// Uniform in `[0, 1)`.
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Scans of the rig's channels (scan order, then `extra` unused columns) moving inside
+    /// their linear ranges, with out-of-range, NaN and infinite readings put in: at the
+    /// very start, single ones, two channels at once, and a 40-scan run.
+    fn record(cal: &Calibration, units: RawUnits, scans: usize, extra: usize, seed: u64) -> (Vec<f64>, [usize; CHANNEL_COUNT], usize) {
+        let order = cal.scan_order();
+        let width = order.len() + extra;
+        let mut columns = [0; CHANNEL_COUNT];
+        for (k, c) in order.iter().enumerate() {
+            columns[c.index()] = k;
+        }
+        let mut noise = Noise(seed);
+        let fs = cal.sample_rate_hz();
+        let mut values = vec![0.0; scans * width];
+        for (k, &ch) in order.iter().enumerate() {
+            let c = cal.channel(ch).unwrap();
+            let [lo, hi] = c.linear_range_v;
+            let (mid, amp) = (0.5 * (lo + hi), 0.25 * (hi - lo));
+            let (f1, f2) = (17.0 + 3.0 * k as f64, 41.0 + 5.0 * k as f64);
+            for i in 0..scans {
+                let t = i as f64 / fs;
+                let v = mid + amp * (0.6 * (std::f64::consts::TAU * f1 * t).sin() + 0.3 * (std::f64::consts::TAU * f2 * t + 0.4).cos() + 0.1 * (2.0 * noise.next() - 1.0));
+                values[i * width + k] = v;
+            }
+        }
+        for i in 0..scans {
+            for k in order.len()..width {
+                values[i * width + k] = 1e300 * noise.next();
+            }
+        }
+        let at = |scan: usize, ch: ChannelId| scan * width + columns[ch.index()];
+        let high = |ch: ChannelId| cal.channel(ch).unwrap().linear_range_v[1] + 1.0;
+        let mut bad = vec![(0, ChannelId::F1, high(ChannelId::F1)), (scans / 5, ChannelId::ProbeAX, f64::NAN), (scans / 3, ChannelId::F3, f64::INFINITY), (scans / 3, ChannelId::ProbeBY, -1e9)];
+        bad.extend((0..40).map(|i| (scans / 2 + i, ChannelId::FrameY, high(ChannelId::FrameY))));
+        bad.push((scans - 30, ChannelId::Temperature, f64::NEG_INFINITY));
+        for (scan, ch, v) in bad {
+            values[at(scan, ch)] = v;
+        }
+        if units == RawUnits::Si {
+            for (k, &ch) in order.iter().enumerate() {
+                let c = cal.channel(ch).unwrap();
+                for i in 0..scans {
+                    let v = &mut values[i * width + k];
+                    *v = (*v - c.offset_v) / c.sensitivity_v_per_unit;
+                }
+            }
+        }
+        (values, columns, width)
+    }
+
+    /// The compiled paths this CPU can run.
+    fn paths() -> Vec<Isa> {
+        let mut p = vec![Isa::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                p.push(Isa::Avx2);
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                p.push(Isa::Avx512);
+            }
+        }
+        p
+    }
+
+    /// Block sizes (scans) for one cutting of `scans`: `fixed` if given, else varied.
+    fn cutting(scans: usize, fixed: Option<usize>, noise: &mut Noise) -> Vec<usize> {
+        let mut sizes = Vec::new();
+        let mut left = scans;
+        while left > 0 {
+            let s = fixed.unwrap_or_else(|| 1 + (noise.next() * 700.0) as usize).min(left);
+            sizes.push(s);
+            left -= s;
+        }
+        sizes
+    }
+
+    fn run_blocks(chain: &mut CausalChain, isa: Isa, values: &[f64], sizes: &[usize]) -> CausalOutput {
+        let mut out = CausalOutput::default();
+        let mut at = 0;
+        for &s in sizes {
+            let block = &values[at * chain.width..(at + s) * chain.width];
+            chain.push_with(isa, block, &mut out);
+            at += s;
+        }
+        out
+    }
+
+    #[test]
+    fn the_block_path_equals_the_scan_by_scan_chain_bit_for_bit() {
+        let rig = RigConfig::zhou2004().unwrap();
+        let cal = rig.daq.calibration();
+        let mech = pipeline::mechanics_of(&rig);
+        let base = ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() };
+        // The launch files' chain, then other orders (every fixed section count), no de-skew,
+        // other stencils and differentiators, and a higher cutoff (a short settling).
+        let configs = [
+            (base.clone(), RawUnits::Volts, 12_000, 0),
+            (ConditioningConfig { lowpass_order: 1, lowpass_cutoff_hz: 200.0, ..base.clone() }, RawUnits::Si, 6_000, 3),
+            (ConditioningConfig { lowpass_order: 2, lowpass_cutoff_hz: 150.0, deskew: false, ..base.clone() }, RawUnits::Volts, 6_000, 1),
+            (ConditioningConfig { lowpass_order: 3, lowpass_cutoff_hz: 150.0, differentiator_half_length: 3, deskew_taps: 6, ..base.clone() }, RawUnits::Volts, 6_000, 0),
+            (ConditioningConfig { lowpass_order: 5, lowpass_cutoff_hz: 300.0, differentiator_half_length: 8, ..base.clone() }, RawUnits::Si, 6_000, 6),
+            (ConditioningConfig { lowpass_order: 6, lowpass_cutoff_hz: 400.0, deskew_taps: 2, ..base.clone() }, RawUnits::Volts, 6_000, 2),
+        ];
+        let mut noise = Noise(0x9E37_79B9_7F4A_7C15);
+        for (n, (config, units, scans, extra)) in configs.iter().enumerate() {
+            let (values, columns, width) = record(&cal, *units, *scans, *extra, 1 + n as u64);
+            let fresh = CausalChain::new(&columns, width, *units, cal.sample_rate_hz(), &cal, &mech, config).unwrap();
+            let mut reference = ScanByScan::new(&fresh);
+            let mut expected = CausalOutput::default();
+            reference.push(&values, &mut expected);
+            // The record must exercise what is compared: samples out, violations of every
+            // kind met, and both valid and invalid samples.
+            let d = fresh.delays();
+            assert_eq!(expected.len(), scans - d.first_index() - d.delay_scans(), "config {n}");
+            assert!(expected.violations.len() >= 6 && expected.violations.iter().any(|v| v.count == 40), "config {n}: {:?}", expected.violations);
+            assert!(expected.valid.iter().any(|&v| v) && expected.valid.iter().any(|&v| !v), "config {n}");
+            for isa in paths() {
+                let mut cuttings: Vec<Vec<usize>> = [1, 7, 500, 1_024, 4_999, *scans].iter().map(|&b| cutting(*scans, Some(b), &mut noise)).collect();
+                cuttings.push(cutting(*scans, None, &mut noise));
+                cuttings.push(cutting(*scans, None, &mut noise));
+                for sizes in &cuttings {
+                    let got = run_blocks(&mut fresh.clone(), isa, &values, sizes);
+                    if let Some(diff) = first_difference(&got, &expected) {
+                        panic!("config {n}, {isa:?}, blocks {:?}...: {diff}", &sizes[..sizes.len().min(5)]);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_comparison_sees_one_tap_changed_by_one_ulp() {
+        // What the test above compares would catch a single coefficient of any stage off by
+        // the least bit: a de-skew tap, a low-pass coefficient, a differentiator tap.
+        let rig = RigConfig::zhou2004().unwrap();
+        let cal = rig.daq.calibration();
+        let config = ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() };
+        let (values, columns, width) = record(&cal, RawUnits::Volts, 8_000, 0, 7);
+        let fresh = CausalChain::new(&columns, width, RawUnits::Volts, cal.sample_rate_hz(), &cal, &pipeline::mechanics_of(&rig), &config).unwrap();
+        let sizes = cutting(8_000, Some(500), &mut Noise(3));
+        let got = run_blocks(&mut fresh.clone(), Isa::detect(), &values, &sizes);
+        type Coefficient = fn(&mut CausalChain) -> &mut f64;
+        let coefficients: [(&str, Coefficient); 3] = [
+            ("de-skew tap", |c| &mut c.fronts[2].weights[1]),
+            ("low-pass b1", |c| &mut c.sections[1].b[1]),
+            ("differentiator c2", |c| &mut c.sg[1]),
+        ];
+        for (what, coefficient) in coefficients {
+            let mut changed = fresh.clone();
+            let v = coefficient(&mut changed);
+            *v = f64::from_bits(v.to_bits() + 1);
+            let mut reference = ScanByScan::new(&changed);
+            let mut expected = CausalOutput::default();
+            reference.push(&values, &mut expected);
+            assert!(first_difference(&got, &expected).is_some(), "{what} one ulp off went unnoticed");
+        }
+        // And unchanged, the same.
+        let mut expected = CausalOutput::default();
+        ScanByScan::new(&fresh).push(&values, &mut expected);
+        assert_eq!(first_difference(&got, &expected), None);
     }
 }
