@@ -209,6 +209,11 @@ impl SavitzkyGolayDerivative {
         self.half_length
     }
 
+    /// The sample rate the weights were designed for (Hz).
+    pub fn sample_rate_hz(&self) -> f64 {
+        self.sample_rate_hz
+    }
+
     /// `c_1 .. c_M` in 1/s: `out[n] = sum_k c_k (x[n+k] - x[n-k])`.
     pub fn coefficients(&self) -> &[f64] {
         &self.interior

@@ -157,17 +157,34 @@ impl ConditioningConfig {
     /// Checks every field against the record's sample rate; errors name the field
     /// (`conditioning.lowpass_cutoff_hz`, ...).
     pub fn validate(&self, sample_rate_hz: f64) -> Result<(), IdentificationError> {
+        self.designs(sample_rate_hz, None).map(|_| ())
+    }
+
+    /// [`ConditioningConfig::validate`], returning the low-pass and the differentiator it
+    /// designed on the way. `reuse` is a differentiator designed before: taken as it is if it
+    /// has this half-length and sample rate (designing one solves `2M + 1` small
+    /// least-squares problems, a cost that showed in the conditioner node's short blocks).
+    fn designs(
+        &self,
+        sample_rate_hz: f64,
+        reuse: Option<differentiate::SavitzkyGolayDerivative>,
+    ) -> Result<(lowpass::Butterworth, differentiate::SavitzkyGolayDerivative), IdentificationError> {
         if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
             return Err(IdentificationError::invalid(
                 "sample_rate_hz",
                 format!("must be finite and > 0, got {sample_rate_hz}"),
             ));
         }
-        lowpass::Butterworth::design(self.lowpass_order, self.lowpass_cutoff_hz, sample_rate_hz)?;
-        differentiate::SavitzkyGolayDerivative::new(
-            self.differentiator_half_length,
-            sample_rate_hz,
-        )?;
+        let lp = lowpass::Butterworth::design(self.lowpass_order, self.lowpass_cutoff_hz, sample_rate_hz)?;
+        let sg = match reuse {
+            Some(sg)
+                if sg.half_length() == self.differentiator_half_length
+                    && sg.sample_rate_hz().to_bits() == sample_rate_hz.to_bits() =>
+            {
+                sg
+            }
+            _ => differentiate::SavitzkyGolayDerivative::new(self.differentiator_half_length, sample_rate_hz)?,
+        };
         if !(2..=deskew::MAX_TAPS).contains(&self.deskew_taps) {
             return Err(IdentificationError::invalid(
                 "conditioning.deskew_taps",
@@ -178,7 +195,7 @@ impl ConditioningConfig {
                 ),
             ));
         }
-        Ok(())
+        Ok((lp, sg))
     }
 }
 
@@ -416,6 +433,29 @@ pub struct Conditioned {
     pub valid: Range<usize>,
     /// Empty when every channel stayed in its linear range.
     pub range_violations: Vec<RangeViolation>,
+    /// What [`condition_into`] keeps for the next call besides the buffers.
+    work: Work,
+}
+
+/// [`condition_into`]'s memory between calls that is not part of the result: the
+/// differentiator last designed (its weights depend only on `M` and the sample rate). Any two
+/// compare equal, and it prints as nothing, so a `Conditioned` compares and prints as its
+/// data.
+#[derive(Clone, Default)]
+struct Work {
+    differentiator: Option<differentiate::SavitzkyGolayDerivative>,
+}
+
+impl PartialEq for Work {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for Work {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("..")
+    }
 }
 
 impl Conditioned {
@@ -823,6 +863,7 @@ pub fn condition_into(
     out: &mut Conditioned,
 ) -> Result<(), IdentificationError> {
     let mut pool = out.take_columns();
+    let mut work = std::mem::take(&mut out.work);
     let mut violations = std::mem::take(&mut out.range_violations);
     violations.clear();
     *out = Conditioned::default();
@@ -844,7 +885,7 @@ pub fn condition_into(
     };
 
     raw.validate_shape()?;
-    config.validate(raw.sample_rate_hz)?;
+    let (lp, sg) = config.designs(raw.sample_rate_hz, work.differentiator.take())?;
     mechanics.validate()?;
     let fs = raw.sample_rate_hz;
 
@@ -862,8 +903,6 @@ pub fn condition_into(
         });
     }
 
-    let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, fs)?;
-    let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
     let mut delays = Vec::with_capacity(CHANNEL_COUNT);
     let mut deskew_trim = 0;
     for &ch in &ChannelId::ALL {
@@ -1001,6 +1040,7 @@ pub fn condition_into(
         *t = t0 + i as f64 / fs;
     }
     debug_assert_eq!(used, COLUMNS);
+    work.differentiator = Some(sg);
     *out = Conditioned {
         t_s,
         x_m,
@@ -1022,6 +1062,7 @@ pub fn condition_into(
         static_load_n: f3,
         valid,
         range_violations: violations,
+        work,
     };
     Ok(())
 }
@@ -1081,6 +1122,31 @@ mod tests {
             })
             .collect();
         RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
+    }
+
+    /// `condition_into` keeps the differentiator it designed for the next call: a call with
+    /// another half-length or sample rate must not use it. Conditioning into one `Conditioned`
+    /// with M = 5, then 7, then 5 at another rate, gives what fresh calls give.
+    #[test]
+    fn reused_differentiator_only_when_half_length_and_rate_match() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let mechanics = Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
+        let raw = volts_record(3000, &calibration, 7);
+        let mut other_rate = raw.clone();
+        other_rate.sample_rate_hz = 4000.0;
+        let m5 = ConditioningConfig::default();
+        let m7 = ConditioningConfig { differentiator_half_length: 7, ..ConditioningConfig::default() };
+        let mut work = Conditioned::default();
+        for (raw, config) in [(&raw, &m5), (&raw, &m7), (&other_rate, &m5), (&raw, &m5)] {
+            condition_into(raw, &calibration, &mechanics, config, &mut work).unwrap();
+            let fresh = condition(raw, &calibration, &mechanics, config).unwrap();
+            assert!(work == fresh, "M {} at {} Hz", config.differentiator_half_length, raw.sample_rate_hz);
+            assert_eq!(work.work.differentiator.as_ref().map(|d| (d.half_length(), d.sample_rate_hz())), Some((config.differentiator_half_length, raw.sample_rate_hz)));
+        }
+        // The velocity differs between M = 5 and 7, so the comparison above can fail.
+        let a = condition(&raw, &calibration, &mechanics, &m5).unwrap();
+        let b = condition(&raw, &calibration, &mechanics, &m7).unwrap();
+        assert!(a.vx_m_s != b.vx_m_s);
     }
 
     /// The fused front end (calibration, range check, de-skew, the linear combinations and
