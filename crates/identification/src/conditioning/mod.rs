@@ -571,9 +571,13 @@ fn front_end(
 ) -> Result<Option<bool>, IdentificationError> {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature, which was checked on the line above.
+            return unsafe { front_end_avx512(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
             return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
         }
     }
@@ -586,6 +590,25 @@ fn front_end(
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
 fn front_end_avx2(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    lp: &lowpass::Butterworth,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+    scratch: &mut Vec<f64>,
+) -> Result<Option<bool>, IdentificationError> {
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+}
+
+/// [`front_end`] compiled for AVX-512: the low-pass's eight lanes in one register each,
+/// with room for the two sections' state (see `lowpass::Butterworth::filtfilt_lanes_avx512`).
+/// The same operations in the same order, so the same result bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+fn front_end_avx512(
     raw: &RawRecord,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
