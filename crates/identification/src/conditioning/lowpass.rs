@@ -258,6 +258,13 @@ fn transpose8<const L: usize>(
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
+        if L == 8 && std::arch::is_x86_feature_detected!("avx512f") {
+            let t = frames.len() / 8;
+            let mut c: [&mut [f64]; L] = cols.each_mut().map(|c| &mut c[start..start + t]);
+            // SAFETY: the CPU has AVX-512F (checked above).
+            unsafe { transpose8_avx512(c.as_mut_slice(), frames, dir) };
+            return true;
+        }
         if L == 8 && std::arch::is_x86_feature_detected!("avx2") {
             let t = frames.len() / 8;
             let mut c: [&mut [f64]; L] = cols.each_mut().map(|c| &mut c[start..start + t]);
@@ -315,6 +322,76 @@ fn transpose8_avx2(cols: &mut [&mut [f64]], frames: &mut [f64], dir: Direction) 
                     for (j, c) in tr(r).into_iter().enumerate() {
                         _mm256_storeu_pd(cols[l0 + j].as_mut_ptr().add(i), c);
                     }
+                }
+            }
+        }
+    }
+    for i in body..t {
+        for (l, c) in cols.iter_mut().enumerate() {
+            if dir == Direction::ToFrames {
+                frames[8 * i + l] = c[i];
+            } else {
+                c[i] = frames[8 * i + l];
+            }
+        }
+    }
+}
+
+/// [`transpose8`] by 8 x 8 register transposes (AVX-512): per eight samples of the eight
+/// columns, eight vector loads, 24 shuffles and eight vector stores, where the 4 x 4 blocks
+/// of [`transpose8_avx2`] take sixteen, 32 and sixteen. An 8 x 8 transpose is its own
+/// inverse, so one kernel serves both directions. Samples beyond the last multiple of eight
+/// move one by one.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn transpose8_avx512(cols: &mut [&mut [f64]], frames: &mut [f64], dir: Direction) {
+    use std::arch::x86_64::{
+        __m512d, _mm512_loadu_pd, _mm512_shuffle_f64x2, _mm512_storeu_pd, _mm512_unpackhi_pd,
+        _mm512_unpacklo_pd,
+    };
+    let t = frames.len() / 8;
+    if cols.len() != 8 || cols.iter().any(|c| c.len() != t) {
+        return;
+    }
+    // r[j] = eight consecutive values of row j -> the k-th value of every row, k = 0..8.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn tr(r: [__m512d; 8]) -> [__m512d; 8] {
+        // 128-bit lane k of lo[j] holds rows 2j, 2j + 1 at value 2k; of hi[j], at 2k + 1.
+        let lo: [__m512d; 4] = std::array::from_fn(|j| _mm512_unpacklo_pd(r[2 * j], r[2 * j + 1]));
+        let hi: [__m512d; 4] = std::array::from_fn(|j| _mm512_unpackhi_pd(r[2 * j], r[2 * j + 1]));
+        // Lanes (0, 2 | 0, 2) and (1, 3 | 1, 3) of two vectors, twice: the lanes of value 2k
+        // (or 2k + 1) of rows 0-1, 2-3, 4-5, 6-7 end up side by side.
+        let pick = |v: [__m512d; 4]| -> [__m512d; 4] {
+            let e0 = _mm512_shuffle_f64x2::<0x88>(v[0], v[1]);
+            let e1 = _mm512_shuffle_f64x2::<0xDD>(v[0], v[1]);
+            let f0 = _mm512_shuffle_f64x2::<0x88>(v[2], v[3]);
+            let f1 = _mm512_shuffle_f64x2::<0xDD>(v[2], v[3]);
+            [
+                _mm512_shuffle_f64x2::<0x88>(e0, f0), // value 0 (or 1)
+                _mm512_shuffle_f64x2::<0x88>(e1, f1), // value 2 (or 3)
+                _mm512_shuffle_f64x2::<0xDD>(e0, f0), // value 4 (or 5)
+                _mm512_shuffle_f64x2::<0xDD>(e1, f1), // value 6 (or 7)
+            ]
+        };
+        let even = pick(lo);
+        let odd = pick(hi);
+        [even[0], odd[0], even[1], odd[1], even[2], odd[2], even[3], odd[3]]
+    }
+    let body = t / 8 * 8;
+    for i in (0..body).step_by(8) {
+        // SAFETY: i + 8 <= t = every column's length, and frames has 8 t values: the loads
+        // and stores touch cols[j][i .. i + 8] and frames[8 (i + k) .. + 8] for j, k < 8.
+        unsafe {
+            if dir == Direction::ToFrames {
+                let r = std::array::from_fn(|j| _mm512_loadu_pd(cols[j].as_ptr().add(i)));
+                for (k, f) in tr(r).into_iter().enumerate() {
+                    _mm512_storeu_pd(frames.as_mut_ptr().add(8 * (i + k)), f);
+                }
+            } else {
+                let r = std::array::from_fn(|k| _mm512_loadu_pd(frames.as_ptr().add(8 * (i + k))));
+                for (j, c) in tr(r).into_iter().enumerate() {
+                    _mm512_storeu_pd(cols[j].as_mut_ptr().add(i), c);
                 }
             }
         }
