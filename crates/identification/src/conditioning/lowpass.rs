@@ -187,6 +187,18 @@ pub(crate) trait Produce8 {
     fn produce(&mut self, from: usize, to: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), Self::Error>;
 }
 
+/// What [`Butterworth::filtfilt8_fed`] hands its output to as the backward pass makes it
+/// final: `consume(from, cols)` when samples `from..` of the eight columns are final, with
+/// `from` decreasing from call to call and 0 in the last call. It may change the final
+/// samples (the filter does not read them again).
+pub(crate) trait Consume8 {
+    type Error;
+    fn consume(&mut self, from: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), Self::Error>;
+}
+
+/// Samples per call of [`Consume8::consume`] (eight columns of them: 32 kB).
+const CONSUME_CHUNK: usize = 512;
+
 /// Samples per tile of [`cascade_pass`] (a tile of eight lanes is 2 kB, L1-resident).
 const TILE: usize = 32;
 
@@ -450,6 +462,36 @@ fn backward<const L: usize, const S: usize>(
         *f = st.step(*f);
     }
     cascade_pass(&mut st, cols, n, true)
+}
+
+/// [`backward`] handing the columns' samples to `consumer` chunk by chunk as they are
+/// written (the same operations in the same order: the state is carried from chunk to chunk).
+#[inline(always)]
+fn backward_consumed<const S: usize, C: Consume8>(
+    sections: &[Section; S],
+    cols: &mut [&mut [f64]; 8],
+    n: usize,
+    right: &mut [[f64; 8]],
+    consumer: &mut C,
+) -> Result<bool, C::Error> {
+    let x0 = right
+        .last()
+        .copied()
+        .unwrap_or(std::array::from_fn(|l| cols[l][n - 1]));
+    let mut st = Cascade::steady(sections, x0);
+    for f in right.iter_mut().rev() {
+        *f = st.step(*f);
+    }
+    let mut finite = true;
+    let mut end = n;
+    while end > 0 {
+        let start = end.saturating_sub(CONSUME_CHUNK);
+        let mut sub = cols.each_mut().map(|c| &mut c[start..end]);
+        finite &= cascade_pass(&mut st, &mut sub, end - start, true);
+        consumer.consume(start, cols)?;
+        end = start;
+    }
+    Ok(finite)
 }
 
 /// A digital Butterworth low-pass used forward-backward.
@@ -750,12 +792,13 @@ impl Butterworth {
     /// steady state for its first reflected input exactly as there, and a section's
     /// recursion does not care where its input was cut into ranges (its state is carried).
     #[inline(always)]
-    pub(crate) fn filtfilt8_fed<P: Produce8>(
+    pub(crate) fn filtfilt8_fed<P: Produce8, C: Consume8<Error = P::Error>>(
         &self,
         cols: [&mut [f64]; 8],
         scratch: &mut Vec<f64>,
         step: usize,
         producer: &mut P,
+        consumer: &mut C,
     ) -> Result<bool, P::Error> {
         let mut produce = |a, b, cols: &mut [&mut [f64]; 8]| producer.produce(a, b, cols);
         const L: usize = 8;
@@ -764,6 +807,7 @@ impl Butterworth {
         if n < 2 {
             // Nothing to filter (the callers check the length first): produce and leave.
             produce(0, n, &mut cols)?;
+            consumer.consume(0, &mut cols)?;
             return Ok(cols.iter().all(|c| c.iter().all(|v| v.is_finite())));
         }
         let step = step.max(1);
@@ -857,8 +901,29 @@ impl Butterworth {
             }
         }
 
-        // Backward, group after group, as in the two-step version.
-        Ok(self.backward_all(&mut cols, n, right))
+        // Backward, group after group, as in the two-step version; the last group's output
+        // is final, and handed to the consumer as it is written.
+        let groups = self.sections.len().div_ceil(FUSED);
+        let mut chunks = self.sections.chunks(FUSED);
+        for _ in 1..groups {
+            match chunks.next() {
+                Some(g) => match <&[Section; FUSED]>::try_from(g) {
+                    Ok(g) => backward(g, &mut cols, n, right),
+                    Err(_) => backward(std::array::from_ref(&g[0]), &mut cols, n, right),
+                },
+                None => true,
+            };
+        }
+        match chunks.next() {
+            Some(g) => match <&[Section; FUSED]>::try_from(g) {
+                Ok(g) => backward_consumed(g, &mut cols, n, right, consumer),
+                Err(_) => backward_consumed(std::array::from_ref(&g[0]), &mut cols, n, right, consumer),
+            },
+            None => {
+                consumer.consume(0, &mut cols)?;
+                Ok(true)
+            }
+        }
     }
 
     /// Zero-phase filtering, allocating the output.

@@ -444,6 +444,8 @@ pub struct Conditioned {
 #[derive(Clone, Default)]
 struct Work {
     differentiator: Option<differentiate::SavitzkyGolayDerivative>,
+    /// The housing's y velocity (not an output) when the derivatives follow the low-pass.
+    velocity: Vec<f64>,
 }
 
 impl PartialEq for Work {
@@ -568,20 +570,21 @@ fn front_end(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature, which was checked on the line above.
-            return unsafe { front_end_avx512(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
+            return unsafe { front_end_avx512(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: as above.
-            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
+            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
         }
     }
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 /// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
@@ -598,8 +601,9 @@ fn front_end_avx2(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 /// [`front_end`] compiled for AVX-512: the low-pass's eight lanes in one register each,
@@ -617,8 +621,9 @@ fn front_end_avx512(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 #[inline(always)]
@@ -632,6 +637,7 @@ fn front_end_body(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
     let len = raw.len();
     if raw.units != RawUnits::Volts || len < 2 || out.iter().any(|c| c.len() != len) {
@@ -673,7 +679,7 @@ fn front_end_body(
         temp,
         bad: 0,
     };
-    let finite = lp.filtfilt8_fed(dynamic, scratch, TILE, &mut producer)?;
+    let finite = lp.filtfilt8_fed(dynamic, scratch, TILE, &mut producer, derivatives)?;
     Ok((producer.bad == 0).then_some(finite))
 }
 
@@ -703,6 +709,72 @@ impl lowpass::Produce8 for FrontTiles<'_, '_> {
         }
         Ok(())
     }
+}
+
+/// What the front end's low-pass hands its final output to ([`lowpass::Consume8`]), range
+/// by range as the backward pass writes it, while it is in cache: the first and second
+/// derivatives of `x`, `y` (r', r'') and of the housing's `X`, `Y` (velocity, `X''`), and
+/// eq. 2's inertial part `F -= m X''` on the film force. The same operations on the same
+/// values as the stages after the low-pass ([`differentiate::SavitzkyGolayDerivative::
+/// apply_twice_each`] and the inertial loop of [`condition_into`]), only in another order of
+/// samples, so the same result bit for bit; the columns are not read back from memory.
+struct Derivatives<'a> {
+    sg: &'a differentiate::SavitzkyGolayDerivative,
+    mass_kg: f64,
+    /// `[first, second]` derivative of x, y, X, Y.
+    out: [[&'a mut [f64]; 2]; 4],
+    state: [differentiate::TwiceDescending; 4],
+    /// r'' (x, y) and the forces all finite so far.
+    finite: [bool; 3],
+    /// The last call had `from == 0`: every output is written.
+    complete: bool,
+    /// A column had the wrong length: the caller computes the derivatives itself.
+    refused: bool,
+}
+
+impl<'a> Derivatives<'a> {
+    fn new(sg: &'a differentiate::SavitzkyGolayDerivative, mass_kg: f64, out: [[&'a mut [f64]; 2]; 4]) -> Self {
+        Self { sg, mass_kg, out, state: Default::default(), finite: [true; 3], complete: false, refused: false }
+    }
+}
+
+impl lowpass::Consume8 for Derivatives<'_> {
+    type Error = IdentificationError;
+
+    #[inline(always)]
+    fn consume(&mut self, from: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), IdentificationError> {
+        let [x, y, _, _, hx, hy, fx, fy] = cols;
+        let [[vx, ax], [vy, ay], [hvx, hax], [hvy, hay]] = &mut self.out;
+        let [sx, sy, shx, shy] = &mut self.state;
+        let sg = self.sg;
+        let m = self.mass_kg;
+        let mut force_finite = true;
+        let results = [
+            sg.twice_descending(sx, from, x, vx, ax, |_, _| {}),
+            sg.twice_descending(sy, from, y, vy, ay, |_, _| {}),
+            sg.twice_descending(shx, from, hx, hvx, hax, |range, a| force_finite &= subtract_inertia(&mut fx[range], a, m)),
+            sg.twice_descending(shy, from, hy, hvy, hay, |range, a| force_finite &= subtract_inertia(&mut fy[range], a, m)),
+        ];
+        self.refused |= results.iter().any(Option::is_none);
+        self.finite[0] &= results[0].unwrap_or(false);
+        self.finite[1] &= results[1].unwrap_or(false);
+        self.finite[2] &= force_finite;
+        self.complete = from == 0;
+        Ok(())
+    }
+}
+
+/// Eq. 2's inertial part on a block, `f -= m a`; whether every result is finite.
+#[inline(always)]
+fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
+    // Locals, not captured state: written through a reference on every sample they kept
+    // this loop scalar (a store and a reload per sample).
+    let (m, mut finite) = (mass_kg, true);
+    for (f, &a) in force.iter_mut().zip(acc) {
+        *f -= m * a;
+        finite &= f.is_finite();
+    }
+    finite
 }
 
 /// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
@@ -955,13 +1027,39 @@ pub fn condition_into(
     // its forward pass fed tile by tile by the front end. `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
     let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
+    let mut housing_ax_m_s2 = next();
+    let mut housing_ay_m_s2 = next();
+    let mut ax_m_s2 = next();
+    let mut vy_m_s = next();
+    let mut ay_m_s2 = next();
+    // The times are written last: until then the buffer holds the housing's x velocity.
+    let mut t_s = next();
+    let mut housing_vy = std::mem::take(&mut work.velocity);
+    if housing_vy.len() != n {
+        housing_vy.clear();
+        housing_vy.resize(n, 0.0);
+    }
+    let mass = mechanics.housing_mass_kg;
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
     let mut scratch = Vec::new();
-    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch)?;
+    let mut derivatives = Derivatives::new(
+        &sg,
+        mass,
+        [
+            [&mut tmp, &mut ax_m_s2],
+            [&mut vy_m_s, &mut ay_m_s2],
+            [&mut t_s, &mut housing_ax_m_s2],
+            [&mut housing_vy, &mut housing_ay_m_s2],
+        ],
+    );
+    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch, &mut derivatives)?;
+    // The derivatives and eq. 2's inertial part followed the low-pass (`Some` finiteness of
+    // r'' in x and y and of the forces) or are still to be computed.
+    let derived = (fused.is_some() && derivatives.complete && !derivatives.refused).then_some(derivatives.finite);
     if fused.is_none() {
         // Something to report (or a record of SI values): the stages one by one.
         let mut si = front;
@@ -999,35 +1097,27 @@ pub fn condition_into(
     };
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
-    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`), and
+    // Housing acceleration: differentiate twice, as the paper does (velocity in `t_s`), and
     // eq. 2's inertial part, the film force on the journal `F -= m X''`, block by block as
     // the acceleration is formed (the same operation as `film_force::subtract_inertia_in_place`,
-    // without reading the columns back).
-    let mut housing_ax_m_s2 = next();
-    let mut housing_ay_m_s2 = next();
-    let mass = mechanics.housing_mass_kg;
-    let mut force_finite = true;
-    for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
-        sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
-            // Locals, not the captured flag and mass: written through a reference on every
-            // sample they kept this loop scalar (a store and a reload per sample).
-            let (m, mut finite) = (mass, true);
-            for (f, &a) in force[range].iter_mut().zip(a) {
-                *f -= m * a;
-                finite &= f.is_finite();
-            }
-            force_finite &= finite;
-        })?;
-    }
-    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
-
-    // r' and r''.
+    // without reading the columns back); then r' and r''. Done already if they could follow
+    // the low-pass (`derived`).
     let mut vx_m_s = tmp;
-    let mut ax_m_s2 = next();
-    let mut vy_m_s = next();
-    let mut ay_m_s2 = next();
-    let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
-    let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
+    let [ax_finite, ay_finite, force_finite] = match derived {
+        Some(finite) => finite,
+        None => {
+            let mut force_finite = true;
+            for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
+                sg.apply_twice_each(frame, &mut t_s, acc, |range, a| {
+                    force_finite &= subtract_inertia(&mut force[range], a, mass);
+                })?;
+            }
+            let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
+            let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
+            [ax_finite, ay_finite, force_finite]
+        }
+    };
+    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
     // non-finite number on. The stages checked their final outputs as they wrote them (the
@@ -1057,13 +1147,13 @@ pub fn condition_into(
         }
     }
 
-    let mut t_s = next();
     let t0 = raw.start_time_s;
     for (i, t) in t_s.iter_mut().enumerate() {
         *t = t0 + i as f64 / fs;
     }
     debug_assert_eq!(used, COLUMNS);
     work.differentiator = Some(sg);
+    work.velocity = housing_vy;
     *out = Conditioned {
         t_s,
         x_m,
@@ -1207,16 +1297,33 @@ mod tests {
             let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, raw.sample_rate_hz).unwrap();
             let mut dynamic = vec![a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2];
             lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new()).unwrap();
-            // eq. 2's inertial term, on the conditioner's own housing acceleration.
+            // The two derivatives (which follow the fused low-pass's backward pass) and eq. 2's
+            // inertial term, stage by stage.
+            let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, raw.sample_rate_hz).unwrap();
+            let twice = |x: &[f64]| {
+                let (mut v, mut a) = (vec![0.0; n], vec![0.0; n]);
+                sg.apply_twice_into(x, &mut v, &mut a).unwrap();
+                (v, a)
+            };
+            let (vx, ax) = twice(&dynamic[0]);
+            let (vy, ay) = twice(&dynamic[1]);
+            let (_, hax) = twice(&dynamic[4]);
+            let (_, hay) = twice(&dynamic[5]);
             let m = mechanics.housing_mass_kg;
-            for (f, a) in dynamic[6].iter_mut().zip(&c.housing_ax_m_s2) {
+            for (f, a) in dynamic[6].iter_mut().zip(&hax) {
                 *f -= m * a;
             }
-            for (f, a) in dynamic[7].iter_mut().zip(&c.housing_ay_m_s2) {
+            for (f, a) in dynamic[7].iter_mut().zip(&hay) {
                 *f -= m * a;
             }
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
             for (name, fused, staged) in [
+                ("vx_m_s", &c.vx_m_s, &vx),
+                ("ax_m_s2", &c.ax_m_s2, &ax),
+                ("vy_m_s", &c.vy_m_s, &vy),
+                ("ay_m_s2", &c.ay_m_s2, &ay),
+                ("housing_ax_m_s2", &c.housing_ax_m_s2, &hax),
+                ("housing_ay_m_s2", &c.housing_ay_m_s2, &hay),
                 ("x_m", &c.x_m, &dynamic[0]),
                 ("y_m", &c.y_m, &dynamic[1]),
                 ("tilt_x_m", &c.tilt_x_m, &dynamic[2]),
