@@ -209,6 +209,11 @@ impl SavitzkyGolayDerivative {
         self.half_length
     }
 
+    /// The sample rate the weights were designed for (Hz).
+    pub fn sample_rate_hz(&self) -> f64 {
+        self.sample_rate_hz
+    }
+
     /// `c_1 .. c_M` in 1/s: `out[n] = sum_k c_k (x[n+k] - x[n-k])`.
     pub fn coefficients(&self) -> &[f64] {
         &self.interior
@@ -414,16 +419,104 @@ impl SavitzkyGolayDerivative {
 
     /// The `M` outputs at each end (one-sided windows); `len >= 2M + 1`.
     fn edges(&self, input: &[f64], out: &mut [f64]) {
+        self.edge_left(input, out);
+        self.edge_right(input, out);
+    }
+
+    /// The first `M` outputs, on `input[..2M + 1]`; `len >= 2M + 1`.
+    fn edge_left(&self, input: &[f64], out: &mut [f64]) {
+        let width = 2 * self.half_length + 1;
+        for (o, lw) in out[..self.half_length].iter_mut().zip(self.left.chunks_exact(width)) {
+            *o = lw.iter().zip(&input[..width]).map(|(a, b)| a * b).sum();
+        }
+    }
+
+    /// The last `M` outputs, on the last `2M + 1` inputs; `len >= 2M + 1`.
+    fn edge_right(&self, input: &[f64], out: &mut [f64]) {
         let len = input.len();
         let m = self.half_length;
         let width = 2 * m + 1;
         let tail = &input[len - width..];
         for r in 0..m {
-            let lw = &self.left[r * width..(r + 1) * width];
-            out[r] = lw.iter().zip(&input[..width]).map(|(a, b)| a * b).sum();
             let rw = &self.right[r * width..(r + 1) * width];
             out[len - m + r] = rw.iter().zip(tail).map(|(a, b)| a * b).sum();
         }
+    }
+
+    /// [`SavitzkyGolayDerivative::apply_twice_each`] fed from the end of the record towards
+    /// its start, as a backward pass makes `input` final: `input[from..]` is final, `from`
+    /// decreasing from call to call and 0 in the last. Computes every output of `first` and
+    /// `second` whose inputs are final and that is not computed yet, and calls `each(range,
+    /// block)` on each range of `second` that became final (the ranges cover the column once
+    /// when `from` has reached 0). Each output is computed by the same kernel as in
+    /// [`SavitzkyGolayDerivative::apply_twice_each`], so the same result bit for bit;
+    /// returns whether the outputs of `second` computed in this call are finite. The three
+    /// columns must have the same length, at least `2M + 1`; else nothing is computed and
+    /// `None` returned (the caller then uses the one-pass form, which reports the mismatch).
+    pub(crate) fn twice_descending(
+        &self,
+        state: &mut TwiceDescending,
+        from: usize,
+        input: &[f64],
+        first: &mut [f64],
+        second: &mut [f64],
+        mut each: impl FnMut(std::ops::Range<usize>, &[f64]),
+    ) -> Option<bool> {
+        let len = input.len();
+        let m = self.half_length;
+        let width = 2 * m + 1;
+        if first.len() != len || second.len() != len || len < width {
+            return None;
+        }
+        let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
+        let st = state.at_length(len, m);
+        let from = from.min(len);
+        // First derivative: output i reads input[i - M ..= i + M].
+        if !st.first_right && from <= len - width {
+            self.edge_right(input, first);
+            st.first_right = true;
+        }
+        if st.first_right {
+            let lo = (from + m).clamp(m, st.first_lo);
+            if lo < st.first_lo {
+                self.interior_block(input, first, lo..st.first_lo);
+                st.first_lo = lo;
+            }
+            if from == 0 && !st.first_left {
+                self.edge_left(input, first);
+                st.first_left = true;
+            }
+        }
+        // first[ready..] is computed.
+        let ready = match (st.first_right, st.first_left) {
+            (false, _) => len,
+            (true, true) if st.first_lo <= m => 0,
+            (true, _) => st.first_lo,
+        };
+        // Second derivative, from `first` in the same way.
+        let mut finite = true;
+        if !st.second_right && ready <= len - width {
+            self.edge_right(first, second);
+            finite &= all_finite(&second[len - m..]);
+            each(len - m..len, &second[len - m..]);
+            st.second_right = true;
+        }
+        if ready < len {
+            let lo = (ready + m).clamp(m, st.second_lo);
+            if lo < st.second_lo {
+                self.interior_block(first, second, lo..st.second_lo);
+                finite &= all_finite(&second[lo..st.second_lo]);
+                each(lo..st.second_lo, &second[lo..st.second_lo]);
+                st.second_lo = lo;
+            }
+        }
+        if ready == 0 && !st.second_left {
+            self.edge_left(first, second);
+            finite &= all_finite(&second[..m]);
+            each(0..m, &second[..m]);
+            st.second_left = true;
+        }
+        Some(finite)
     }
 
     /// Differentiates `input` twice, as the paper does: `first` is its derivative and
@@ -503,6 +596,36 @@ impl SavitzkyGolayDerivative {
     }
 }
 
+/// How far [`SavitzkyGolayDerivative::twice_descending`] has got on one column.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TwiceDescending {
+    /// The column length and `M` the rest refers to (`None`: not started).
+    shape: Option<(usize, usize)>,
+    /// Interior outputs `first_lo .. len - M` of the first derivative are computed, and the
+    /// `M` at its right (left) end when `first_right` (`first_left`); likewise the second.
+    first_lo: usize,
+    first_right: bool,
+    first_left: bool,
+    second_lo: usize,
+    second_right: bool,
+    second_left: bool,
+}
+
+impl TwiceDescending {
+    /// The state, started afresh if it was for another shape.
+    fn at_length(&mut self, len: usize, m: usize) -> &mut Self {
+        if self.shape != Some((len, m)) {
+            *self = Self {
+                shape: Some((len, m)),
+                first_lo: len - m,
+                second_lo: len - m,
+                ..Self::default()
+            };
+        }
+        self
+    }
+}
+
 /// One-call derivative (per second) of one channel's samples at `sample_rate_hz` with a
 /// Savitzky-Golay FIR of half-length `half_length`. NaN input is a `BadInput`.
 pub fn fir_derivative(
@@ -526,4 +649,52 @@ fn interior_point<const M: usize>(c: &[f64; M], x: &[f64], i: usize) -> f64 {
         acc += c[k - 1] * (x[i + k] - x[i - k]);
     }
     acc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The descending form, fed `from` in irregular steps (one sample, a few, a block and
+    /// more, as the low-pass's chunks and a record's end may fall), gives `apply_twice_each`'s
+    /// two derivatives bit for bit, and hands each sample of `second` on exactly once.
+    #[test]
+    fn twice_descending_equals_apply_twice_each_bit_for_bit() {
+        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut uniform = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for m in [2, 4, 5, 6, 7] {
+            let sg = SavitzkyGolayDerivative::new(m, 5000.0).unwrap();
+            for len in [2 * m + 1, 2 * m + 2, 4 * m + 3, 50, 1000, 1237] {
+                let x: Vec<f64> = (0..len).map(|_| uniform() - 0.5).collect();
+                let (mut f1, mut s1) = (vec![0.0; len], vec![0.0; len]);
+                assert!(sg.apply_twice_each(&x, &mut f1, &mut s1, |_, _| {}).unwrap());
+                let (mut f2, mut s2) = (vec![f64::NAN; len], vec![f64::NAN; len]);
+                let mut seen = vec![0u32; len];
+                let mut st = TwiceDescending::default();
+                let mut from = len;
+                while from > 0 {
+                    let step = [1, 3, 512, 17, 2 * m + 1][(uniform() * 5.0) as usize % 5];
+                    from = from.saturating_sub(step);
+                    let ok = sg.twice_descending(&mut st, from, &x, &mut f2, &mut s2, |r, b| {
+                        assert_eq!(r.len(), b.len());
+                        for i in r {
+                            seen[i] += 1;
+                        }
+                    });
+                    assert_eq!(ok, Some(true), "M {m}, len {len}, from {from}");
+                }
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert!(bits(&f1) == bits(&f2), "first, M {m}, len {len}");
+                assert!(bits(&s1) == bits(&s2), "second, M {m}, len {len}");
+                assert!(seen.iter().all(|&c| c == 1), "M {m}, len {len}: {seen:?}");
+            }
+        }
+        // Mismatched lengths are refused, not half computed.
+        let sg = SavitzkyGolayDerivative::new(5, 5000.0).unwrap();
+        let mut st = TwiceDescending::default();
+        assert_eq!(sg.twice_descending(&mut st, 0, &[0.0; 20], &mut [0.0; 19], &mut [0.0; 20], |_, _| {}), None);
+    }
 }

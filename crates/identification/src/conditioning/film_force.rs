@@ -155,8 +155,13 @@ pub fn static_part(
         });
     }
     let k = range.len() as f64;
-    Ok([
-        fx[range.clone()].iter().sum::<f64>() / k,
-        fy[range].iter().sum::<f64>() / k,
-    ])
+    // Both sums in one loop: each is still added up in index order from -0.0 (as `Iterator::
+    // sum` of f64 does: the same result, bit for bit), and the two chains of dependent adds
+    // overlap.
+    let (mut sx, mut sy) = (-0.0, -0.0);
+    for (&x, &y) in fx[range.clone()].iter().zip(&fy[range]) {
+        sx += x;
+        sy += y;
+    }
+    Ok([sx / k, sy / k])
 }

@@ -187,6 +187,18 @@ pub(crate) trait Produce8 {
     fn produce(&mut self, from: usize, to: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), Self::Error>;
 }
 
+/// What [`Butterworth::filtfilt8_fed`] hands its output to as the backward pass makes it
+/// final: `consume(from, cols)` when samples `from..` of the eight columns are final, with
+/// `from` decreasing from call to call and 0 in the last call. It may change the final
+/// samples (the filter does not read them again).
+pub(crate) trait Consume8 {
+    type Error;
+    fn consume(&mut self, from: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), Self::Error>;
+}
+
+/// Samples per call of [`Consume8::consume`] (eight columns of them: 32 kB).
+const CONSUME_CHUNK: usize = 512;
+
 /// Samples per tile of [`cascade_pass`] (a tile of eight lanes is 2 kB, L1-resident).
 const TILE: usize = 32;
 
@@ -258,6 +270,13 @@ fn transpose8<const L: usize>(
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
+        if L == 8 && std::arch::is_x86_feature_detected!("avx512f") {
+            let t = frames.len() / 8;
+            let mut c: [&mut [f64]; L] = cols.each_mut().map(|c| &mut c[start..start + t]);
+            // SAFETY: the CPU has AVX-512F (checked above).
+            unsafe { transpose8_avx512(c.as_mut_slice(), frames, dir) };
+            return true;
+        }
         if L == 8 && std::arch::is_x86_feature_detected!("avx2") {
             let t = frames.len() / 8;
             let mut c: [&mut [f64]; L] = cols.each_mut().map(|c| &mut c[start..start + t]);
@@ -330,6 +349,76 @@ fn transpose8_avx2(cols: &mut [&mut [f64]], frames: &mut [f64], dir: Direction) 
     }
 }
 
+/// [`transpose8`] by 8 x 8 register transposes (AVX-512): per eight samples of the eight
+/// columns, eight vector loads, 24 shuffles and eight vector stores, where the 4 x 4 blocks
+/// of [`transpose8_avx2`] take sixteen, 32 and sixteen. An 8 x 8 transpose is its own
+/// inverse, so one kernel serves both directions. Samples beyond the last multiple of eight
+/// move one by one.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn transpose8_avx512(cols: &mut [&mut [f64]], frames: &mut [f64], dir: Direction) {
+    use std::arch::x86_64::{
+        __m512d, _mm512_loadu_pd, _mm512_shuffle_f64x2, _mm512_storeu_pd, _mm512_unpackhi_pd,
+        _mm512_unpacklo_pd,
+    };
+    let t = frames.len() / 8;
+    if cols.len() != 8 || cols.iter().any(|c| c.len() != t) {
+        return;
+    }
+    // r[j] = eight consecutive values of row j -> the k-th value of every row, k = 0..8.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn tr(r: [__m512d; 8]) -> [__m512d; 8] {
+        // 128-bit lane k of lo[j] holds rows 2j, 2j + 1 at value 2k; of hi[j], at 2k + 1.
+        let lo: [__m512d; 4] = std::array::from_fn(|j| _mm512_unpacklo_pd(r[2 * j], r[2 * j + 1]));
+        let hi: [__m512d; 4] = std::array::from_fn(|j| _mm512_unpackhi_pd(r[2 * j], r[2 * j + 1]));
+        // Lanes (0, 2 | 0, 2) and (1, 3 | 1, 3) of two vectors, twice: the lanes of value 2k
+        // (or 2k + 1) of rows 0-1, 2-3, 4-5, 6-7 end up side by side.
+        let pick = |v: [__m512d; 4]| -> [__m512d; 4] {
+            let e0 = _mm512_shuffle_f64x2::<0x88>(v[0], v[1]);
+            let e1 = _mm512_shuffle_f64x2::<0xDD>(v[0], v[1]);
+            let f0 = _mm512_shuffle_f64x2::<0x88>(v[2], v[3]);
+            let f1 = _mm512_shuffle_f64x2::<0xDD>(v[2], v[3]);
+            [
+                _mm512_shuffle_f64x2::<0x88>(e0, f0), // value 0 (or 1)
+                _mm512_shuffle_f64x2::<0x88>(e1, f1), // value 2 (or 3)
+                _mm512_shuffle_f64x2::<0xDD>(e0, f0), // value 4 (or 5)
+                _mm512_shuffle_f64x2::<0xDD>(e1, f1), // value 6 (or 7)
+            ]
+        };
+        let even = pick(lo);
+        let odd = pick(hi);
+        [even[0], odd[0], even[1], odd[1], even[2], odd[2], even[3], odd[3]]
+    }
+    let body = t / 8 * 8;
+    for i in (0..body).step_by(8) {
+        // SAFETY: i + 8 <= t = every column's length, and frames has 8 t values: the loads
+        // and stores touch cols[j][i .. i + 8] and frames[8 (i + k) .. + 8] for j, k < 8.
+        unsafe {
+            if dir == Direction::ToFrames {
+                let r = std::array::from_fn(|j| _mm512_loadu_pd(cols[j].as_ptr().add(i)));
+                for (k, f) in tr(r).into_iter().enumerate() {
+                    _mm512_storeu_pd(frames.as_mut_ptr().add(8 * (i + k)), f);
+                }
+            } else {
+                let r = std::array::from_fn(|k| _mm512_loadu_pd(frames.as_ptr().add(8 * (i + k))));
+                for (j, c) in tr(r).into_iter().enumerate() {
+                    _mm512_storeu_pd(cols[j].as_mut_ptr().add(i), c);
+                }
+            }
+        }
+    }
+    for i in body..t {
+        for (l, c) in cols.iter_mut().enumerate() {
+            if dir == Direction::ToFrames {
+                frames[8 * i + l] = c[i];
+            } else {
+                c[i] = frames[8 * i + l];
+            }
+        }
+    }
+}
+
 /// `S` sections forward over the left extension, the columns and the right extension.
 #[inline(always)]
 fn forward<const L: usize, const S: usize>(
@@ -373,6 +462,36 @@ fn backward<const L: usize, const S: usize>(
         *f = st.step(*f);
     }
     cascade_pass(&mut st, cols, n, true)
+}
+
+/// [`backward`] handing the columns' samples to `consumer` chunk by chunk as they are
+/// written (the same operations in the same order: the state is carried from chunk to chunk).
+#[inline(always)]
+fn backward_consumed<const S: usize, C: Consume8>(
+    sections: &[Section; S],
+    cols: &mut [&mut [f64]; 8],
+    n: usize,
+    right: &mut [[f64; 8]],
+    consumer: &mut C,
+) -> Result<bool, C::Error> {
+    let x0 = right
+        .last()
+        .copied()
+        .unwrap_or(std::array::from_fn(|l| cols[l][n - 1]));
+    let mut st = Cascade::steady(sections, x0);
+    for f in right.iter_mut().rev() {
+        *f = st.step(*f);
+    }
+    let mut finite = true;
+    let mut end = n;
+    while end > 0 {
+        let start = end.saturating_sub(CONSUME_CHUNK);
+        let mut sub = cols.each_mut().map(|c| &mut c[start..end]);
+        finite &= cascade_pass(&mut st, &mut sub, end - start, true);
+        consumer.consume(start, cols)?;
+        end = start;
+    }
+    Ok(finite)
 }
 
 /// A digital Butterworth low-pass used forward-backward.
@@ -495,12 +614,28 @@ impl Butterworth {
     fn filtfilt_lanes<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the only requirement of a `target_feature` function is that the CPU
                 // has the feature, which was checked on the line above.
+                return unsafe { self.filtfilt_lanes_avx512(cols, scratch) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: as above.
                 return unsafe { self.filtfilt_lanes_avx2(cols, scratch) };
             }
         }
+        self.filtfilt_lanes_body(cols, scratch)
+    }
+
+    /// [`Butterworth::filtfilt_lanes`] compiled for AVX-512: eight lanes per instruction, and
+    /// 32 vector registers, enough for two sections' state and coefficients (with AVX2's 16
+    /// some went to the stack and back on every sample); 20 % less time for eight columns of
+    /// 4000 samples (1.9 against 2.4 ns per sample and column, best of six interleaved
+    /// runs). The same operations in the same order (Rust forms no fused multiply-add even
+    /// where the CPU has it), so the same result bit for bit.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn filtfilt_lanes_avx512<const L: usize>(&self, cols: [&mut [f64]; L], scratch: &mut Vec<f64>) -> bool {
         self.filtfilt_lanes_body(cols, scratch)
     }
 
@@ -657,12 +792,13 @@ impl Butterworth {
     /// steady state for its first reflected input exactly as there, and a section's
     /// recursion does not care where its input was cut into ranges (its state is carried).
     #[inline(always)]
-    pub(crate) fn filtfilt8_fed<P: Produce8>(
+    pub(crate) fn filtfilt8_fed<P: Produce8, C: Consume8<Error = P::Error>>(
         &self,
         cols: [&mut [f64]; 8],
         scratch: &mut Vec<f64>,
         step: usize,
         producer: &mut P,
+        consumer: &mut C,
     ) -> Result<bool, P::Error> {
         let mut produce = |a, b, cols: &mut [&mut [f64]; 8]| producer.produce(a, b, cols);
         const L: usize = 8;
@@ -671,6 +807,7 @@ impl Butterworth {
         if n < 2 {
             // Nothing to filter (the callers check the length first): produce and leave.
             produce(0, n, &mut cols)?;
+            consumer.consume(0, &mut cols)?;
             return Ok(cols.iter().all(|c| c.iter().all(|v| v.is_finite())));
         }
         let step = step.max(1);
@@ -764,8 +901,29 @@ impl Butterworth {
             }
         }
 
-        // Backward, group after group, as in the two-step version.
-        Ok(self.backward_all(&mut cols, n, right))
+        // Backward, group after group, as in the two-step version; the last group's output
+        // is final, and handed to the consumer as it is written.
+        let groups = self.sections.len().div_ceil(FUSED);
+        let mut chunks = self.sections.chunks(FUSED);
+        for _ in 1..groups {
+            match chunks.next() {
+                Some(g) => match <&[Section; FUSED]>::try_from(g) {
+                    Ok(g) => backward(g, &mut cols, n, right),
+                    Err(_) => backward(std::array::from_ref(&g[0]), &mut cols, n, right),
+                },
+                None => true,
+            };
+        }
+        match chunks.next() {
+            Some(g) => match <&[Section; FUSED]>::try_from(g) {
+                Ok(g) => backward_consumed(g, &mut cols, n, right, consumer),
+                Err(_) => backward_consumed(std::array::from_ref(&g[0]), &mut cols, n, right, consumer),
+            },
+            None => {
+                consumer.consume(0, &mut cols)?;
+                Ok(true)
+            }
+        }
     }
 
     /// Zero-phase filtering, allocating the output.

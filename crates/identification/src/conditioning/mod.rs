@@ -157,17 +157,34 @@ impl ConditioningConfig {
     /// Checks every field against the record's sample rate; errors name the field
     /// (`conditioning.lowpass_cutoff_hz`, ...).
     pub fn validate(&self, sample_rate_hz: f64) -> Result<(), IdentificationError> {
+        self.designs(sample_rate_hz, None).map(|_| ())
+    }
+
+    /// [`ConditioningConfig::validate`], returning the low-pass and the differentiator it
+    /// designed on the way. `reuse` is a differentiator designed before: taken as it is if it
+    /// has this half-length and sample rate (designing one solves `2M + 1` small
+    /// least-squares problems, a cost that showed in the conditioner node's short blocks).
+    fn designs(
+        &self,
+        sample_rate_hz: f64,
+        reuse: Option<differentiate::SavitzkyGolayDerivative>,
+    ) -> Result<(lowpass::Butterworth, differentiate::SavitzkyGolayDerivative), IdentificationError> {
         if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
             return Err(IdentificationError::invalid(
                 "sample_rate_hz",
                 format!("must be finite and > 0, got {sample_rate_hz}"),
             ));
         }
-        lowpass::Butterworth::design(self.lowpass_order, self.lowpass_cutoff_hz, sample_rate_hz)?;
-        differentiate::SavitzkyGolayDerivative::new(
-            self.differentiator_half_length,
-            sample_rate_hz,
-        )?;
+        let lp = lowpass::Butterworth::design(self.lowpass_order, self.lowpass_cutoff_hz, sample_rate_hz)?;
+        let sg = match reuse {
+            Some(sg)
+                if sg.half_length() == self.differentiator_half_length
+                    && sg.sample_rate_hz().to_bits() == sample_rate_hz.to_bits() =>
+            {
+                sg
+            }
+            _ => differentiate::SavitzkyGolayDerivative::new(self.differentiator_half_length, sample_rate_hz)?,
+        };
         if !(2..=deskew::MAX_TAPS).contains(&self.deskew_taps) {
             return Err(IdentificationError::invalid(
                 "conditioning.deskew_taps",
@@ -178,7 +195,7 @@ impl ConditioningConfig {
                 ),
             ));
         }
-        Ok(())
+        Ok((lp, sg))
     }
 }
 
@@ -416,6 +433,31 @@ pub struct Conditioned {
     pub valid: Range<usize>,
     /// Empty when every channel stayed in its linear range.
     pub range_violations: Vec<RangeViolation>,
+    /// What [`condition_into`] keeps for the next call besides the buffers.
+    work: Work,
+}
+
+/// [`condition_into`]'s memory between calls that is not part of the result: the
+/// differentiator last designed (its weights depend only on `M` and the sample rate). Any two
+/// compare equal, and it prints as nothing, so a `Conditioned` compares and prints as its
+/// data.
+#[derive(Clone, Default)]
+struct Work {
+    differentiator: Option<differentiate::SavitzkyGolayDerivative>,
+    /// The housing's y velocity (not an output) when the derivatives follow the low-pass.
+    velocity: Vec<f64>,
+}
+
+impl PartialEq for Work {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for Work {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("..")
+    }
 }
 
 impl Conditioned {
@@ -528,16 +570,21 @@ fn front_end(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature, which was checked on the line above.
-            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch) };
+            return unsafe { front_end_avx512(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
         }
     }
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 /// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
@@ -554,8 +601,29 @@ fn front_end_avx2(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch)
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
+}
+
+/// [`front_end`] compiled for AVX-512: the low-pass's eight lanes in one register each,
+/// with room for the two sections' state (see `lowpass::Butterworth::filtfilt_lanes_avx512`).
+/// The same operations in the same order, so the same result bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+fn front_end_avx512(
+    raw: &RawRecord,
+    col_of: &[usize; CHANNEL_COUNT],
+    calibration: &Calibration,
+    delays: &[Option<deskew::FractionalDelay>],
+    mechanics: &Mechanics,
+    lp: &lowpass::Butterworth,
+    out: &mut [Vec<f64>; CHANNEL_COUNT],
+    scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
+) -> Result<Option<bool>, IdentificationError> {
+    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 #[inline(always)]
@@ -569,6 +637,7 @@ fn front_end_body(
     lp: &lowpass::Butterworth,
     out: &mut [Vec<f64>; CHANNEL_COUNT],
     scratch: &mut Vec<f64>,
+    derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
     let len = raw.len();
     if raw.units != RawUnits::Volts || len < 2 || out.iter().any(|c| c.len() != len) {
@@ -610,7 +679,7 @@ fn front_end_body(
         temp,
         bad: 0,
     };
-    let finite = lp.filtfilt8_fed(dynamic, scratch, TILE, &mut producer)?;
+    let finite = lp.filtfilt8_fed(dynamic, scratch, TILE, &mut producer, derivatives)?;
     Ok((producer.bad == 0).then_some(finite))
 }
 
@@ -640,6 +709,72 @@ impl lowpass::Produce8 for FrontTiles<'_, '_> {
         }
         Ok(())
     }
+}
+
+/// What the front end's low-pass hands its final output to ([`lowpass::Consume8`]), range
+/// by range as the backward pass writes it, while it is in cache: the first and second
+/// derivatives of `x`, `y` (r', r'') and of the housing's `X`, `Y` (velocity, `X''`), and
+/// eq. 2's inertial part `F -= m X''` on the film force. The same operations on the same
+/// values as the stages after the low-pass ([`differentiate::SavitzkyGolayDerivative::
+/// apply_twice_each`] and the inertial loop of [`condition_into`]), only in another order of
+/// samples, so the same result bit for bit; the columns are not read back from memory.
+struct Derivatives<'a> {
+    sg: &'a differentiate::SavitzkyGolayDerivative,
+    mass_kg: f64,
+    /// `[first, second]` derivative of x, y, X, Y.
+    out: [[&'a mut [f64]; 2]; 4],
+    state: [differentiate::TwiceDescending; 4],
+    /// r'' (x, y) and the forces all finite so far.
+    finite: [bool; 3],
+    /// The last call had `from == 0`: every output is written.
+    complete: bool,
+    /// A column had the wrong length: the caller computes the derivatives itself.
+    refused: bool,
+}
+
+impl<'a> Derivatives<'a> {
+    fn new(sg: &'a differentiate::SavitzkyGolayDerivative, mass_kg: f64, out: [[&'a mut [f64]; 2]; 4]) -> Self {
+        Self { sg, mass_kg, out, state: Default::default(), finite: [true; 3], complete: false, refused: false }
+    }
+}
+
+impl lowpass::Consume8 for Derivatives<'_> {
+    type Error = IdentificationError;
+
+    #[inline(always)]
+    fn consume(&mut self, from: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), IdentificationError> {
+        let [x, y, _, _, hx, hy, fx, fy] = cols;
+        let [[vx, ax], [vy, ay], [hvx, hax], [hvy, hay]] = &mut self.out;
+        let [sx, sy, shx, shy] = &mut self.state;
+        let sg = self.sg;
+        let m = self.mass_kg;
+        let mut force_finite = true;
+        let results = [
+            sg.twice_descending(sx, from, x, vx, ax, |_, _| {}),
+            sg.twice_descending(sy, from, y, vy, ay, |_, _| {}),
+            sg.twice_descending(shx, from, hx, hvx, hax, |range, a| force_finite &= subtract_inertia(&mut fx[range], a, m)),
+            sg.twice_descending(shy, from, hy, hvy, hay, |range, a| force_finite &= subtract_inertia(&mut fy[range], a, m)),
+        ];
+        self.refused |= results.iter().any(Option::is_none);
+        self.finite[0] &= results[0].unwrap_or(false);
+        self.finite[1] &= results[1].unwrap_or(false);
+        self.finite[2] &= force_finite;
+        self.complete = from == 0;
+        Ok(())
+    }
+}
+
+/// Eq. 2's inertial part on a block, `f -= m a`; whether every result is finite.
+#[inline(always)]
+fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
+    // Locals, not captured state: written through a reference on every sample they kept
+    // this loop scalar (a store and a reload per sample).
+    let (m, mut finite) = (mass_kg, true);
+    for (f, &a) in force.iter_mut().zip(acc) {
+        *f -= m * a;
+        finite &= f.is_finite();
+    }
+    finite
 }
 
 /// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
@@ -674,6 +809,22 @@ fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
     }
 }
 
+/// Asks the CPU to bring `x[range]` (clamped to `x`) into its caches ahead of use: a hint
+/// that changes no value.
+#[inline(always)]
+fn prefetch(x: &[f64], range: Range<usize>) {
+    let end = range.end.min(x.len());
+    let r = &x[range.start.min(end)..end];
+    #[cfg(target_arch = "x86_64")]
+    for line in r.chunks(8) {
+        // SAFETY: SSE is part of every x86_64 CPU; a prefetch of an address inside `x` never
+        // faults and reads nothing into Rust.
+        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr().cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
+}
+
 /// One tile `o0..o1` (at most [`TILE`] scans) of [`front_end`] before the low-pass: the
 /// number of readings that are out of range or not finite.
 #[inline(always)]
@@ -691,8 +842,17 @@ fn front_tile(
     temp: &mut [f64],
 ) -> usize {
     let mut bad = 0;
-    for (c, t) in chans.iter().zip(tile.iter_mut()) {
-        let t = &mut t[..o1 - o0];
+    for (k, (c, t)) in chans.iter().zip(tile.iter_mut()).enumerate() {
+        prefetch(c.volts, o1..o1 + (o1 - o0));
+        // The frame probes, the bellows' load and the temperature are not combined with
+        // other channels: de-skewed straight into their columns, not via the tile and a copy.
+        let t: &mut [f64] = match k {
+            4 => &mut dynamic[4][o0..o1],
+            5 => &mut dynamic[5][o0..o1],
+            8 => &mut load[o0..o1],
+            9 => &mut temp[o0..o1],
+            _ => &mut t[..o1 - o0],
+        };
         let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
         let si = |v: f64| (v - offset) * gain;
         // `&` and `|`, not `&&`: no branch per reading, so the count vectorises. A plain
@@ -729,21 +889,18 @@ fn front_tile(
             t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
         }
     }
-    let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &*tile;
-    let [x, y, tilt_x, tilt_y, hx, hy, fx, fy] = dynamic;
+    let [a_x, a_y, b_x, b_y, _, _, f1, f2, _, _] = &*tile;
+    let [x, y, tilt_x, tilt_y, _, _, fx, fy] = dynamic;
+    let f3 = &load[o0..o1];
     for (i, n) in (o0..o1).enumerate() {
         [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
         [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
         [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
     }
     // The temperature is final here (it is not filtered): check it while it is in L1.
-    for v in &temperature[..o1 - o0] {
+    for v in &temp[o0..o1] {
         bad += !v.is_finite() as usize;
     }
-    hx[o0..o1].copy_from_slice(&frame_x[..o1 - o0]);
-    hy[o0..o1].copy_from_slice(&frame_y[..o1 - o0]);
-    load[o0..o1].copy_from_slice(&f3[..o1 - o0]);
-    temp[o0..o1].copy_from_slice(&temperature[..o1 - o0]);
     bad
 }
 
@@ -801,6 +958,7 @@ pub fn condition_into(
     out: &mut Conditioned,
 ) -> Result<(), IdentificationError> {
     let mut pool = out.take_columns();
+    let mut work = std::mem::take(&mut out.work);
     let mut violations = std::mem::take(&mut out.range_violations);
     violations.clear();
     *out = Conditioned::default();
@@ -822,7 +980,7 @@ pub fn condition_into(
     };
 
     raw.validate_shape()?;
-    config.validate(raw.sample_rate_hz)?;
+    let (lp, sg) = config.designs(raw.sample_rate_hz, work.differentiator.take())?;
     mechanics.validate()?;
     let fs = raw.sample_rate_hz;
 
@@ -840,8 +998,6 @@ pub fn condition_into(
         });
     }
 
-    let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, fs)?;
-    let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
     let mut delays = Vec::with_capacity(CHANNEL_COUNT);
     let mut deskew_trim = 0;
     for &ch in &ChannelId::ALL {
@@ -871,13 +1027,39 @@ pub fn condition_into(
     // its forward pass fed tile by tile by the front end. `tmp` ends up as the velocity `vx`.
     let mut tmp = next();
     let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
+    let mut housing_ax_m_s2 = next();
+    let mut housing_ay_m_s2 = next();
+    let mut ax_m_s2 = next();
+    let mut vy_m_s = next();
+    let mut ay_m_s2 = next();
+    // The times are written last: until then the buffer holds the housing's x velocity.
+    let mut t_s = next();
+    let mut housing_vy = std::mem::take(&mut work.velocity);
+    if housing_vy.len() != n {
+        housing_vy.clear();
+        housing_vy.resize(n, 0.0);
+    }
+    let mass = mechanics.housing_mass_kg;
     // The low-pass is linear and time-invariant, so it commutes with the linear combinations
     // the later steps form: take the mean and difference of the bearing ends and the applied
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
     let mut scratch = Vec::new();
-    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch)?;
+    let mut derivatives = Derivatives::new(
+        &sg,
+        mass,
+        [
+            [&mut tmp, &mut ax_m_s2],
+            [&mut vy_m_s, &mut ay_m_s2],
+            [&mut t_s, &mut housing_ax_m_s2],
+            [&mut housing_vy, &mut housing_ay_m_s2],
+        ],
+    );
+    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch, &mut derivatives)?;
+    // The derivatives and eq. 2's inertial part followed the low-pass (`Some` finiteness of
+    // r'' in x and y and of the forces) or are still to be computed.
+    let derived = (fused.is_some() && derivatives.complete && !derivatives.refused).then_some(derivatives.finite);
     if fused.is_none() {
         // Something to report (or a record of SI values): the stages one by one.
         let mut si = front;
@@ -915,35 +1097,27 @@ pub fn condition_into(
     };
     let [x_m, y_m, tilt_x_m, tilt_y_m, frame_x, frame_y, mut fx_n, mut fy_n] = dynamic;
 
-    // Housing acceleration: differentiate twice, as the paper does (velocity in `tmp`), and
+    // Housing acceleration: differentiate twice, as the paper does (velocity in `t_s`), and
     // eq. 2's inertial part, the film force on the journal `F -= m X''`, block by block as
     // the acceleration is formed (the same operation as `film_force::subtract_inertia_in_place`,
-    // without reading the columns back).
-    let mut housing_ax_m_s2 = next();
-    let mut housing_ay_m_s2 = next();
-    let mass = mechanics.housing_mass_kg;
-    let mut force_finite = true;
-    for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
-        sg.apply_twice_each(frame, &mut tmp, acc, |range, a| {
-            // Locals, not the captured flag and mass: written through a reference on every
-            // sample they kept this loop scalar (a store and a reload per sample).
-            let (m, mut finite) = (mass, true);
-            for (f, &a) in force[range].iter_mut().zip(a) {
-                *f -= m * a;
-                finite &= f.is_finite();
-            }
-            force_finite &= finite;
-        })?;
-    }
-    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
-
-    // r' and r''.
+    // without reading the columns back); then r' and r''. Done already if they could follow
+    // the low-pass (`derived`).
     let mut vx_m_s = tmp;
-    let mut ax_m_s2 = next();
-    let mut vy_m_s = next();
-    let mut ay_m_s2 = next();
-    let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
-    let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
+    let [ax_finite, ay_finite, force_finite] = match derived {
+        Some(finite) => finite,
+        None => {
+            let mut force_finite = true;
+            for (frame, acc, force) in [(&frame_x, &mut housing_ax_m_s2, &mut fx_n), (&frame_y, &mut housing_ay_m_s2, &mut fy_n)] {
+                sg.apply_twice_each(frame, &mut t_s, acc, |range, a| {
+                    force_finite &= subtract_inertia(&mut force[range], a, mass);
+                })?;
+            }
+            let ax_finite = sg.apply_twice_into_finite(&x_m, &mut vx_m_s, &mut ax_m_s2)?;
+            let ay_finite = sg.apply_twice_into_finite(&y_m, &mut vy_m_s, &mut ay_m_s2)?;
+            [ax_finite, ay_finite, force_finite]
+        }
+    };
+    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
     // non-finite number on. The stages checked their final outputs as they wrote them (the
@@ -973,12 +1147,13 @@ pub fn condition_into(
         }
     }
 
-    let mut t_s = next();
     let t0 = raw.start_time_s;
     for (i, t) in t_s.iter_mut().enumerate() {
         *t = t0 + i as f64 / fs;
     }
     debug_assert_eq!(used, COLUMNS);
+    work.differentiator = Some(sg);
+    work.velocity = housing_vy;
     *out = Conditioned {
         t_s,
         x_m,
@@ -1000,6 +1175,7 @@ pub fn condition_into(
         static_load_n: f3,
         valid,
         range_violations: violations,
+        work,
     };
     Ok(())
 }
@@ -1061,6 +1237,31 @@ mod tests {
         RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
     }
 
+    /// `condition_into` keeps the differentiator it designed for the next call: a call with
+    /// another half-length or sample rate must not use it. Conditioning into one `Conditioned`
+    /// with M = 5, then 7, then 5 at another rate, gives what fresh calls give.
+    #[test]
+    fn reused_differentiator_only_when_half_length_and_rate_match() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let mechanics = Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
+        let raw = volts_record(3000, &calibration, 7);
+        let mut other_rate = raw.clone();
+        other_rate.sample_rate_hz = 4000.0;
+        let m5 = ConditioningConfig::default();
+        let m7 = ConditioningConfig { differentiator_half_length: 7, ..ConditioningConfig::default() };
+        let mut work = Conditioned::default();
+        for (raw, config) in [(&raw, &m5), (&raw, &m7), (&other_rate, &m5), (&raw, &m5)] {
+            condition_into(raw, &calibration, &mechanics, config, &mut work).unwrap();
+            let fresh = condition(raw, &calibration, &mechanics, config).unwrap();
+            assert!(work == fresh, "M {} at {} Hz", config.differentiator_half_length, raw.sample_rate_hz);
+            assert_eq!(work.work.differentiator.as_ref().map(|d| (d.half_length(), d.sample_rate_hz())), Some((config.differentiator_half_length, raw.sample_rate_hz)));
+        }
+        // The velocity differs between M = 5 and 7, so the comparison above can fail.
+        let a = condition(&raw, &calibration, &mechanics, &m5).unwrap();
+        let b = condition(&raw, &calibration, &mechanics, &m7).unwrap();
+        assert!(a.vx_m_s != b.vx_m_s);
+    }
+
     /// The fused front end (calibration, range check, de-skew, the linear combinations and
     /// the low-pass's forward pass tile by tile) against the stages run one after the other
     /// on the same volts: the same bits, at record lengths that cut the tiles and the
@@ -1096,16 +1297,33 @@ mod tests {
             let lp = lowpass::Butterworth::design(config.lowpass_order, config.lowpass_cutoff_hz, raw.sample_rate_hz).unwrap();
             let mut dynamic = vec![a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2];
             lp.filtfilt_many_in_place(&mut dynamic, &mut Vec::new()).unwrap();
-            // eq. 2's inertial term, on the conditioner's own housing acceleration.
+            // The two derivatives (which follow the fused low-pass's backward pass) and eq. 2's
+            // inertial term, stage by stage.
+            let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, raw.sample_rate_hz).unwrap();
+            let twice = |x: &[f64]| {
+                let (mut v, mut a) = (vec![0.0; n], vec![0.0; n]);
+                sg.apply_twice_into(x, &mut v, &mut a).unwrap();
+                (v, a)
+            };
+            let (vx, ax) = twice(&dynamic[0]);
+            let (vy, ay) = twice(&dynamic[1]);
+            let (_, hax) = twice(&dynamic[4]);
+            let (_, hay) = twice(&dynamic[5]);
             let m = mechanics.housing_mass_kg;
-            for (f, a) in dynamic[6].iter_mut().zip(&c.housing_ax_m_s2) {
+            for (f, a) in dynamic[6].iter_mut().zip(&hax) {
                 *f -= m * a;
             }
-            for (f, a) in dynamic[7].iter_mut().zip(&c.housing_ay_m_s2) {
+            for (f, a) in dynamic[7].iter_mut().zip(&hay) {
                 *f -= m * a;
             }
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
             for (name, fused, staged) in [
+                ("vx_m_s", &c.vx_m_s, &vx),
+                ("ax_m_s2", &c.ax_m_s2, &ax),
+                ("vy_m_s", &c.vy_m_s, &vy),
+                ("ay_m_s2", &c.ay_m_s2, &ay),
+                ("housing_ax_m_s2", &c.housing_ax_m_s2, &hax),
+                ("housing_ay_m_s2", &c.housing_ay_m_s2, &hay),
                 ("x_m", &c.x_m, &dynamic[0]),
                 ("y_m", &c.y_m, &dynamic[1]),
                 ("tilt_x_m", &c.tilt_x_m, &dynamic[2]),
