@@ -13,6 +13,9 @@ cargo --version
 rustc --version
 
 echo "== Rust tests (built optimised: see [profile.test] in Cargo.toml)"
+# A clean clone gains nothing from incremental caches, and they cost several GB of
+# disk (a CI run once died of a full disk while linking). Set it to 1 to keep them.
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 mkdir -p target
 set +e
 cargo test --workspace --profile test -- --nocapture 2>&1 | tee target/test-output.txt
