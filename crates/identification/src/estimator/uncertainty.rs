@@ -421,29 +421,37 @@ pub fn spectral_of_decimated(decimated: &[&[f64]], n: usize, p: usize, mean: &[f
         out.lag[k] = lag * q;
         // Σ over every q-th sample of a band-limited product is 1/q of the full sum, so the
         // full window's S is q² times the decimated one's.
-        for a in 0..p {
-            for b in a..p {
-                s[a * p + b] /= nfft as f64;
-                if q > 1 {
-                    s[a * p + b] *= rescale;
-                }
-                s[b * p + a] = s[a * p + b];
-            }
-        }
-        // Cov_z = G⁻¹ S G⁻¹ (scaled); b_j = z_j / scale_j.
-        for j in 0..p {
-            let mut v = 0.0;
-            for l in 0..p {
-                let mut row = 0.0;
-                for r in 0..p {
-                    row += s[l * p + r] * ginv_s[r * p + j];
-                }
-                v += ginv_s[j * p + l] * row;
-            }
-            out.se[j * m + k] = (v.max(0.0) * dof).sqrt() / scale[j];
-        }
+        standard_errors_from_sums(&mut s, p, nfft, q, rescale, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
     }
     out
+}
+
+/// Finishes one right-hand side's `S` (the upper triangle of bin sums, `p x p` row-major):
+/// divides by `nfft`, scales a decimated one by `rescale = q²`, mirrors it, and passes each
+/// coefficient's standard error `sqrt(max(Cov_z[j][j], 0) dof) / scale_j`, with
+/// `Cov_z = G⁻¹ S G⁻¹` (scaled), to `put(j, se)`.
+#[allow(clippy::too_many_arguments)]
+fn standard_errors_from_sums(s: &mut [f64], p: usize, nfft: usize, q: usize, rescale: f64, ginv_s: &[f64], dof: f64, scale: &[f64], mut put: impl FnMut(usize, f64)) {
+    for a in 0..p {
+        for b in a..p {
+            s[a * p + b] /= nfft as f64;
+            if q > 1 {
+                s[a * p + b] *= rescale;
+            }
+            s[b * p + a] = s[a * p + b];
+        }
+    }
+    for j in 0..p {
+        let mut v = 0.0;
+        for l in 0..p {
+            let mut row = 0.0;
+            for r in 0..p {
+                row += s[l * p + r] * ginv_s[r * p + j];
+            }
+            v += ginv_s[j * p + l] * row;
+        }
+        put(j, (v.max(0.0) * dof).sqrt() / scale[j]);
+    }
 }
 
 /// The spectra, bins `0..=N/2`, of the real and imaginary parts of the signal whose transform
@@ -860,27 +868,7 @@ fn spectral_of_decimated_reference(decimated: &[&[f64]], n: usize, p: usize, mea
     let rescale = (q * q) as f64;
     for (k, mut s) in sums.into_iter().enumerate() {
         out.lag[k] = lag * q;
-        for a in 0..p {
-            for b in a..p {
-                s[a * p + b] /= nfft as f64;
-                if q > 1 {
-                    s[a * p + b] *= rescale;
-                }
-                s[b * p + a] = s[a * p + b];
-            }
-        }
-        // Cov_z = G⁻¹ S G⁻¹ (scaled); b_j = z_j / scale_j.
-        for j in 0..p {
-            let mut v = 0.0;
-            for l in 0..p {
-                let mut row = 0.0;
-                for r in 0..p {
-                    row += s[l * p + r] * ginv_s[r * p + j];
-                }
-                v += ginv_s[j * p + l] * row;
-            }
-            out.se[j * m + k] = (v.max(0.0) * dof).sqrt() / scale[j];
-        }
+        standard_errors_from_sums(&mut s, p, nfft, q, rescale, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
     }
     out
 }
