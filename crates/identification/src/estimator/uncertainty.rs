@@ -411,7 +411,6 @@ pub fn spectral_of_decimated(decimated: &[&[f64]], n: usize, p: usize, mean: &[f
 
     // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k) per right-hand side, each entry's terms in bin
     // order.
-    let rescale = (q * q) as f64;
     for (k, dens) in density.iter().enumerate() {
         let mut s = match p {
             4 => bin_sums::<4>(&re, &im, nb, dens, nfft),
@@ -421,17 +420,18 @@ pub fn spectral_of_decimated(decimated: &[&[f64]], n: usize, p: usize, mean: &[f
         out.lag[k] = lag * q;
         // Σ over every q-th sample of a band-limited product is 1/q of the full sum, so the
         // full window's S is q² times the decimated one's.
-        standard_errors_from_sums(&mut s, p, nfft, q, rescale, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
+        standard_errors_from_sums(&mut s, p, nfft, q, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
     }
     out
 }
 
 /// Finishes one right-hand side's `S` (the upper triangle of bin sums, `p x p` row-major):
-/// divides by `nfft`, scales a decimated one by `rescale = q²`, mirrors it, and passes each
+/// divides by `nfft`, scales a decimated one (`q > 1`) by `q²`, mirrors it, and passes each
 /// coefficient's standard error `sqrt(max(Cov_z[j][j], 0) dof) / scale_j`, with
 /// `Cov_z = G⁻¹ S G⁻¹` (scaled), to `put(j, se)`.
 #[allow(clippy::too_many_arguments)]
-fn standard_errors_from_sums(s: &mut [f64], p: usize, nfft: usize, q: usize, rescale: f64, ginv_s: &[f64], dof: f64, scale: &[f64], mut put: impl FnMut(usize, f64)) {
+fn standard_errors_from_sums(s: &mut [f64], p: usize, nfft: usize, q: usize, ginv_s: &[f64], dof: f64, scale: &[f64], mut put: impl FnMut(usize, f64)) {
+    let rescale = (q * q) as f64;
     for a in 0..p {
         for b in a..p {
             s[a * p + b] /= nfft as f64;
@@ -865,10 +865,9 @@ fn spectral_of_decimated_reference(decimated: &[&[f64]], n: usize, p: usize, mea
     }
     // Σ over every q-th sample of a band-limited product is 1/q of the full sum, so the full
     // window's S is q² times the decimated one's.
-    let rescale = (q * q) as f64;
     for (k, mut s) in sums.into_iter().enumerate() {
         out.lag[k] = lag * q;
-        standard_errors_from_sums(&mut s, p, nfft, q, rescale, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
+        standard_errors_from_sums(&mut s, p, nfft, q, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
     }
     out
 }
