@@ -2,17 +2,20 @@
 //! `identify`, whose JSON must carry coefficients close to the film model's; bad input gives
 //! an error that names the file, line and column, and a non-zero exit.
 
-use std::path::PathBuf;
+#[path = "support/scratch.rs"]
+mod support;
+
 use std::process::{Command, Output};
+
+use support::Scratch;
 
 fn oilfilm(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_oilfilm")).args(args).env("RUST_BACKTRACE", "0").output().expect("the oilfilm binary runs")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("oilfilm-cli-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir.join(name)
+/// A path `name` in a fresh directory of its own, removed when the test passes.
+fn scratch(name: &str) -> Scratch {
+    Scratch::new("oilfilm-cli-test", name)
 }
 
 fn matrix(v: &serde_json::Value) -> [[f64; 2]; 2] {
@@ -120,7 +123,6 @@ fn identify_a_bag_gives_the_live_estimates() {
     assert!(!live.estimates.is_empty());
 
     let dir = scratch("graph-bag");
-    let _ = std::fs::remove_dir_all(&dir);
     let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
     let spec = |t: &topics::Topic| {
         TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()
@@ -189,7 +191,6 @@ fn diagnose_names_a_hidden_runout_prints_the_contract_and_writes_a_report() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("no-such-record.txt"), "the error names the file");
     let _ = std::fs::remove_file(&record);
-    let _ = std::fs::remove_dir_all(&report_dir);
 }
 
 #[test]
@@ -226,7 +227,6 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
     assert!(live.conditioned.iter().all(|c| c.flags.iter().any(|f| f == "chain=causal")));
 
     let dir = scratch("causal-graph-bag");
-    let _ = std::fs::remove_dir_all(&dir);
     let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
     let spec = |t: &topics::Topic| {
         TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()

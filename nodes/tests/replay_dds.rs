@@ -4,8 +4,13 @@
 //! and the estimates after the damage are solved and near the film's coefficients: the
 //! graph keeps running.
 
+#[path = "../../tests/support/scratch.rs"]
+mod scratch;
+
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
+
+use scratch::Scratch;
 
 use oilfilm_identification::ascii::{self, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
@@ -37,9 +42,7 @@ fn a_damaged_record_replays_on_dds_and_still_identifies() {
     lines[bad[1]] = lines[bad[1]].replacen(' ', " x", 2);
     let cut = lines[bad[2]].len() / 2;
     lines[bad[2]].truncate(cut);
-    let dir = std::env::temp_dir().join(format!("oilfilm-replay-dds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("damaged.txt");
+    let file = Scratch::new("oilfilm-replay-dds", "damaged.txt");
     std::fs::write(&file, lines.join("\n") + "\n").unwrap();
 
     std::env::set_var("ROS_DOMAIN_ID", (40 + std::process::id() % 50).to_string());

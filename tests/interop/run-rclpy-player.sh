@@ -15,4 +15,7 @@ export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((100 + RANDOM % 100))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"
-exec timeout 120 "$OILFILM_ROS_PYTHON_BIN" tests/interop/test_rclpy_player.py "$(cd "$bin_dir" && pwd)" "$work/sim_rig"
+# Not `exec`: the EXIT trap above must still run to remove $work.
+status=0
+timeout 120 "$OILFILM_ROS_PYTHON_BIN" tests/interop/test_rclpy_player.py "$(cd "$bin_dir" && pwd)" "$work/sim_rig" || status=$?
+exit "$status"

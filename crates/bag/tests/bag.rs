@@ -4,6 +4,8 @@
 
 #[path = "../examples/common/sim_rig.rs"]
 mod sim_rig;
+#[path = "../../../tests/support/scratch.rs"]
+mod scratch;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -18,10 +20,8 @@ fn published() -> &'static [Published] {
     P.get_or_init(|| sim_rig::published(&sim_rig::short_run(2.0)))
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("oilfilm-bag-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d.join(name)
+fn tmp(name: &str) -> scratch::Scratch {
+    scratch::Scratch::new("oilfilm-bag-test", name)
 }
 
 /// The bag holds exactly the published messages: in log-time order, each topic's in the
@@ -156,7 +156,7 @@ fn split_by_duration_and_by_size_keep_every_message_and_rewrite_metadata() {
 /// no metadata.yaml, the file cut half-way through that chunk. Returns the bag directory,
 /// the file and the messages of the complete chunks 0..k as the mcap crate's own reader
 /// sees them in the intact file.
-fn killed_mid_chunk(name: &str) -> (PathBuf, PathBuf, Vec<(u64, Vec<u8>)>, usize) {
+fn killed_mid_chunk(name: &str) -> (scratch::Scratch, PathBuf, Vec<(u64, Vec<u8>)>, usize) {
     let dir = tmp(name);
     let options = WriterOptions { chunk_size: 32 << 10, ..WriterOptions::default() };
     sim_rig::write_bag(&dir, published(), options).unwrap().close().unwrap();

@@ -6,9 +6,11 @@
 
 #[path = "../examples/common/sim_rig.rs"]
 mod sim_rig;
+#[path = "../../../tests/support/scratch.rs"]
+mod scratch;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -22,10 +24,8 @@ fn published() -> &'static [Published] {
     P.get_or_init(|| sim_rig::published(&sim_rig::short_run(2.0)))
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("oilfilm-bag-records-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d.join(name)
+fn tmp(name: &str) -> scratch::Scratch {
+    scratch::Scratch::new("oilfilm-bag-records", name)
 }
 
 /// A message as the mcap crate reads it: topic, sequence, log time, publish time, bytes.
@@ -236,7 +236,6 @@ fn every_file_reads_in_the_mcap_crate_with_crcs_summary_and_indexes_checked() {
                 let files = check_bag(&dir, compression, want);
                 assert!(files.len() >= 3, "{name}: split into {} files", files.len());
                 written.push((workers, files));
-                let _ = std::fs::remove_dir_all(dir.parent().unwrap());
             }
             // Chunks go to the file in the order they were closed, whoever compressed them:
             // the same bytes with any number of workers.
