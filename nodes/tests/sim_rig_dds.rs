@@ -7,6 +7,9 @@
 //!
 //! Each run uses its own ROS_DOMAIN_ID so concurrent test binaries cannot cross-talk.
 
+#[path = "../../tests/support/scratch.rs"]
+mod scratch;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -18,6 +21,7 @@ use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
 use oilfilm_nodes::launch::{NodeLaunch, Supervisor};
 use oilfilm_nodes::params::NodeArgs;
 use oilfilm_nodes::ports::Receive;
+use scratch::Scratch;
 use oilfilm_nodes::topics;
 use oilfilm_physics::config::RigConfig;
 
@@ -53,8 +57,9 @@ fn write_params(dir: &Path, rig: &RigConfig, p: &GraphParams) -> PathBuf {
 
 /// Runs the graph on DDS until `expected` estimates arrived (or a minute passed).
 fn run_on_dds(tag: &str, rig: &RigConfig, p: &GraphParams, expected: usize) -> Vec<CoefficientEstimate> {
-    let dir = std::env::temp_dir().join(format!("oilfilm-dds-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    // The rig and params files, removed when the run's checks pass.
+    let dir = Scratch::new(&format!("oilfilm-dds-{tag}"), "files");
+    std::fs::create_dir_all(&*dir).unwrap();
     let params = write_params(&dir, rig, p);
     let domain = 100 + (std::process::id() % 60) as u16 + if tag == "sine" { 60 } else { 0 };
     // SAFETY of the environment: set before any DDS context of this test exists; the two tests
