@@ -5,7 +5,9 @@
 //! [`crate::topics`] (ros2-client's subscription default is best-effort, keep-last 1); the
 //! typed parameters are declared through the standard parameter services, and a change
 //! from `ros2 param set` (or rclpy) is checked against the typed struct before it is
-//! accepted, then handed to the node's loop.
+//! accepted, then handed to the node's loop; and the node re-announces itself on
+//! `ros_discovery_info` so a graph that missed its first announcement still lists it
+//! (ADR 0017).
 
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -116,6 +118,72 @@ pub struct RosNode {
     params: Arc<Mutex<Map<String, Value>>>,
     changed: Arc<Mutex<bool>>,
     spinner: Option<std::thread::JoinHandle<()>>,
+    announcer: Option<Announcer>,
+}
+
+/// Re-announces the node on `ros_discovery_info` while it lives.
+///
+/// ros2-client announces a node (the participant's `ParticipantEntitiesInfo`) only when
+/// an entity is created, from a transient-local keep-last-1 writer. The ROS graph cache
+/// (rmw_dds_common, behind `ros2 node list` and rclpy's `get_node_names`) reads that
+/// keyless topic with keep-last 1 too, so when several nodes start together an
+/// announcement can be overwritten in a busy reader's queue by another participant's
+/// before it is taken, and then it is never sent again: the node's topics are visible but
+/// the node is not. CI saw exactly that once (`rclpy sees our four nodes`, 2 cores busy).
+/// So the current info is sent again from a second writer of this participant, after
+/// waits of 0.5, 1, 2, 4 and 8 s and then every 15 s. The graph cache keys by participant
+/// GID, so a repeat only restates what the first announcement said.
+struct Announcer {
+    stop: std::sync::mpsc::Sender<()>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl Announcer {
+    fn start(context: &Context) -> Result<Self, NodeError> {
+        use ros2_client::builtin_topics::ros_discovery;
+        use ros2_client::dds::rustdds::{TopicKind, serialization::CDRSerializerAdapter};
+        use ros2_client::entities_info::ParticipantEntitiesInfo;
+        let participant = context.domain_participant();
+        let topic = participant
+            .create_topic(
+                ros_discovery::TOPIC_NAME.to_string(),
+                ros_discovery::TYPE_NAME.to_string(),
+                &ros_discovery::QOS_PUB,
+                TopicKind::NoKey,
+            )
+            .map_err(|e| mw("ros_discovery_info topic", e))?;
+        let writer = participant
+            .create_publisher(&ros_discovery::QOS_PUB)
+            .map_err(|e| mw("ros_discovery_info publisher", e))?
+            .create_datawriter_no_key::<ParticipantEntitiesInfo, CDRSerializerAdapter<_>>(&topic, None)
+            .map_err(|e| mw("ros_discovery_info writer", e))?;
+        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        let context = context.clone();
+        let thread = std::thread::Builder::new()
+            .name("ros-discovery-announcer".into())
+            .spawn(move || {
+                let mut wait = std::time::Duration::from_millis(500);
+                // Ends on a stop message or when the sender is dropped.
+                while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(wait) {
+                    if let Err(e) = writer.write(context.participant_entities_info(), None) {
+                        tracing::warn!("re-announcing the node on ros_discovery_info failed: {e:?}");
+                    }
+                    wait = if wait >= std::time::Duration::from_secs(8) {
+                        std::time::Duration::from_secs(15)
+                    } else {
+                        wait * 2
+                    };
+                }
+            })
+            .map_err(|e| NodeError::Io { what: "ros_discovery_info announcer thread".into(), source: e })?;
+        Ok(Self { stop, thread })
+    }
+
+    /// Stops before the context goes, so its farewell (an empty node list) is the last word.
+    fn stop(self) {
+        let _ = self.stop.send(());
+        let _ = self.thread.join();
+    }
 }
 
 impl RosNode {
@@ -156,7 +224,16 @@ impl RosNode {
                 }
             })
             .map_err(|e| NodeError::Io { what: "spinner thread".into(), source: e })?;
-        Ok(Self { context, node, namespace: args.namespace.clone(), params: shared, changed, spinner: Some(handle) })
+        let announcer = Announcer::start(&context)?;
+        Ok(Self {
+            context,
+            node,
+            namespace: args.namespace.clone(),
+            params: shared,
+            changed,
+            spinner: Some(handle),
+            announcer: Some(announcer),
+        })
     }
 
     /// The namespace the node's topics live under.
@@ -269,7 +346,10 @@ impl RosNode {
     /// participant, so the node's own entities are removed from a live participant; then
     /// waits for the spinner, whose end lets the participant say goodbye to DDS.
     pub fn shutdown(self) {
-        let RosNode { node, spinner, context, .. } = self;
+        let RosNode { node, spinner, context, announcer, .. } = self;
+        if let Some(a) = announcer {
+            a.stop();
+        }
         drop(node);
         drop(context);
         if let Some(h) = spinner {
