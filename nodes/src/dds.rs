@@ -138,20 +138,29 @@ struct Announcer {
     thread: std::thread::JoinHandle<()>,
 }
 
+/// The `ros_discovery_info` topic (rmw_dds_common's `ParticipantEntitiesInfo`, the QoS
+/// ros2-client's own writer has) in `participant`.
+pub fn ros_discovery_topic(
+    participant: &ros2_client::dds::rustdds::DomainParticipant,
+) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
+    use ros2_client::builtin_topics::ros_discovery;
+    participant
+        .create_topic(
+            ros_discovery::TOPIC_NAME.to_string(),
+            ros_discovery::TYPE_NAME.to_string(),
+            &ros_discovery::QOS_PUB,
+            ros2_client::dds::rustdds::TopicKind::NoKey,
+        )
+        .map_err(|e| mw("ros_discovery_info topic", e))
+}
+
 impl Announcer {
     fn start(context: &Context) -> Result<Self, NodeError> {
         use ros2_client::builtin_topics::ros_discovery;
-        use ros2_client::dds::rustdds::{TopicKind, serialization::CDRSerializerAdapter};
+        use ros2_client::dds::rustdds::serialization::CDRSerializerAdapter;
         use ros2_client::entities_info::ParticipantEntitiesInfo;
         let participant = context.domain_participant();
-        let topic = participant
-            .create_topic(
-                ros_discovery::TOPIC_NAME.to_string(),
-                ros_discovery::TYPE_NAME.to_string(),
-                &ros_discovery::QOS_PUB,
-                TopicKind::NoKey,
-            )
-            .map_err(|e| mw("ros_discovery_info topic", e))?;
+        let topic = ros_discovery_topic(&participant)?;
         let writer = participant
             .create_publisher(&ros_discovery::QOS_PUB)
             .map_err(|e| mw("ros_discovery_info publisher", e))?

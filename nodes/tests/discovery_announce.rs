@@ -9,12 +9,11 @@
 
 use std::time::{Duration, Instant};
 
-use oilfilm_nodes::dds::RosNode;
+use oilfilm_nodes::dds::{ros_discovery_topic, RosNode};
 use oilfilm_nodes::params::NodeArgs;
-use ros2_client::builtin_topics::ros_discovery;
 use ros2_client::dds::rustdds::{
     policy::{Durability, History},
-    DomainParticipant, QosPolicyBuilder, TopicKind,
+    DomainParticipant, QosPolicyBuilder,
 };
 use ros2_client::entities_info::{NodeEntitiesInfo, ParticipantEntitiesInfo};
 use ros2_client::NodeName;
@@ -30,14 +29,7 @@ fn a_late_volatile_reader_hears_the_node_announced_again() {
     std::thread::sleep(Duration::from_secs(1));
 
     let participant = DomainParticipant::new(domain).expect("a second participant");
-    let topic = participant
-        .create_topic(
-            ros_discovery::TOPIC_NAME.to_string(),
-            ros_discovery::TYPE_NAME.to_string(),
-            &ros_discovery::QOS_PUB,
-            TopicKind::NoKey,
-        )
-        .expect("the ros_discovery_info topic");
+    let topic = ros_discovery_topic(&participant).expect("the ros_discovery_info topic");
     let qos = QosPolicyBuilder::new()
         .durability(Durability::Volatile)
         .reliable(ros2_client::dds::rustdds::Duration::ZERO)
