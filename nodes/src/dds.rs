@@ -129,7 +129,8 @@ pub struct RosNode {
 /// keyless topic with keep-last 1 too, so when several nodes start together an
 /// announcement can be overwritten in a busy reader's queue by another participant's
 /// before it is taken, and then it is never sent again: the node's topics are visible but
-/// the node is not. CI saw exactly that once (`rclpy sees our four nodes`, 2 cores busy).
+/// the node is not. CI failed on that once (`rclpy sees our four nodes`), and 3 of 8 runs
+/// of the live rclpy test here with both cores busy.
 /// So the current info is sent again from a second writer of this participant, after
 /// waits of 0.5, 1, 2, 4 and 8 s and then every 15 s. The graph cache keys by participant
 /// GID, so a repeat only restates what the first announcement said.
