@@ -118,7 +118,7 @@ pub struct RosNode {
     params: Arc<Mutex<Map<String, Value>>>,
     changed: Arc<Mutex<bool>>,
     spinner: Option<std::thread::JoinHandle<()>>,
-    announcer: Option<Announcer>,
+    announcer: Announcer,
 }
 
 /// Re-announces the node on `ros_discovery_info` while it lives.
@@ -242,7 +242,7 @@ impl RosNode {
             params: shared,
             changed,
             spinner: Some(handle),
-            announcer: Some(announcer),
+            announcer,
         })
     }
 
@@ -357,9 +357,7 @@ impl RosNode {
     /// waits for the spinner, whose end lets the participant say goodbye to DDS.
     pub fn shutdown(self) {
         let RosNode { node, spinner, context, announcer, .. } = self;
-        if let Some(a) = announcer {
-            a.stop();
-        }
+        announcer.stop();
         drop(node);
         drop(context);
         if let Some(h) = spinner {
