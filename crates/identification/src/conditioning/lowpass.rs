@@ -800,13 +800,12 @@ impl Butterworth {
         producer: &mut P,
         consumer: &mut C,
     ) -> Result<bool, P::Error> {
-        let mut produce = |a, b, cols: &mut [&mut [f64]; 8]| producer.produce(a, b, cols);
         const L: usize = 8;
         let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
         let mut cols = cols.map(|c| &mut c[..n]);
         if n < 2 {
             // Nothing to filter (the callers check the length first): produce and leave.
-            produce(0, n, &mut cols)?;
+            producer.produce(0, n, &mut cols)?;
             consumer.consume(0, &mut cols)?;
             return Ok(cols.iter().all(|c| c.iter().all(|v| v.is_finite())));
         }
@@ -819,7 +818,7 @@ impl Butterworth {
 
         // The first range reaches sample `pad`, which the left reflection needs unfiltered.
         let mut produced = (pad + 1).max(step).min(n);
-        produce(0, produced, &mut cols)?;
+        producer.produce(0, produced, &mut cols)?;
         for i in 1..=pad {
             for l in 0..L {
                 left[pad - i][l] = 2.0 * cols[l][0] - cols[l][i];
@@ -882,7 +881,7 @@ impl Butterworth {
             }
             a = produced;
             produced = (a + step).min(n);
-            produce(a, produced, &mut cols)?;
+            producer.produce(a, produced, &mut cols)?;
         }
         // right[i - 1] held x[n - 1 - i]; the reflection is 2 x[n - 1] - x[n - 1 - i].
         for f in right.iter_mut() {
