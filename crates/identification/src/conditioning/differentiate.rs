@@ -157,6 +157,64 @@ pub struct SavitzkyGolayDerivative {
     right: Vec<f64>,
 }
 
+/// The interior of [`SavitzkyGolayDerivative::interior_block`] for one x86 vector width: a
+/// dispatcher on the half-length `M` and a kernel with `M` known at compile time, `W` outputs
+/// per vector. Per output: two unaligned loads, a subtract, a multiply and an add per tap,
+/// summed in the order of [`interior_point`] (no fused multiply-add), so the same bits as
+/// the plain sum.
+#[cfg(target_arch = "x86_64")]
+macro_rules! interior_kernels {
+    (
+        $(#[$doc:meta])*
+        $dispatch:ident, $kernel:ident, $feature:literal, $w:literal,
+        $vec:ident, $set1:ident, $load:ident, $store:ident, $add:ident, $sub:ident, $mul:ident
+    ) => {
+        $(#[$doc])*
+        #[target_feature(enable = $feature)]
+        fn $dispatch(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+            match self.half_length {
+                4 => self.$kernel::<4>(input, out, range),
+                5 => self.$kernel::<5>(input, out, range),
+                6 => self.$kernel::<6>(input, out, range),
+                _ => self.interior_block_body::<4>(input, out, range),
+            }
+        }
+
+        #[target_feature(enable = $feature)]
+        fn $kernel<const M: usize>(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
+            use std::arch::x86_64::{$add, $load, $mul, $set1, $store, $sub, $vec};
+            let Ok(c) = <[f64; M]>::try_from(&self.interior[..M.min(self.interior.len())]) else {
+                return self.interior_block_passes(input, out, range);
+            };
+            let (start, end) = (range.start, range.end);
+            // Outputs start..end read input[start - M .. end + M] (the caller keeps the range
+            // inside M..len - M, and slicing checks it).
+            let x = &input[start - M..end + M];
+            let dst = &mut out[start..end];
+            let cv: [$vec; M] = std::array::from_fn(|k| $set1(c[k]));
+            let body = dst.len() / $w * $w;
+            let mut j = 0;
+            while j < body {
+                // SAFETY: j + W <= body <= dst.len(), and the loads read x[j + M - k .. j + M +
+                // k + W] for 1 <= k <= M, inside x[0 .. dst.len() + 2M] = x[..].
+                unsafe {
+                    let p = x.as_ptr().add(j + M);
+                    let d = |k: usize| $sub($load(p.add(k)), $load(p.sub(k)));
+                    let mut acc = $mul(cv[0], d(1));
+                    for k in 2..M + 1 {
+                        acc = $add(acc, $mul(cv[k - 1], d(k)));
+                    }
+                    $store(dst.as_mut_ptr().add(j), acc);
+                }
+                j += $w;
+            }
+            for (j, o) in dst.iter_mut().enumerate().skip(body) {
+                *o = interior_point(&c, x, j + M);
+            }
+        }
+    };
+}
+
 impl SavitzkyGolayDerivative {
     /// Designs the filter; `2 <= half_length <= MAX_HALF_LENGTH` (a degree-4 fit needs at
     /// least 5 samples).
@@ -281,112 +339,24 @@ impl SavitzkyGolayDerivative {
         self.interior_block_body::<4>(input, out, range);
     }
 
-    /// Four outputs per instruction, written with the AVX2 intrinsics: the compiler's own
-    /// vectorisation of [`SavitzkyGolayDerivative::interior_block_const`] built each shifted
-    /// vector from half loads and blends. Per output the same operations in the same order,
-    /// so the same result bit for bit.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn interior_block_avx2(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
-        match self.half_length {
-            4 => self.interior_block_avx2_const::<4>(input, out, range),
-            5 => self.interior_block_avx2_const::<5>(input, out, range),
-            6 => self.interior_block_avx2_const::<6>(input, out, range),
-            _ => self.interior_block_body::<4>(input, out, range),
-        }
+    interior_kernels! {
+        /// Four outputs per instruction, written with the AVX2 intrinsics: the compiler's own
+        /// vectorisation of [`SavitzkyGolayDerivative::interior_block_const`] built each
+        /// shifted vector from half loads and blends. Per output the same operations in the
+        /// same order, so the same result bit for bit.
+        interior_block_avx2, interior_block_avx2_const, "avx2", 4,
+        __m256d, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn interior_block_avx2_const<const M: usize>(
-        &self,
-        input: &[f64],
-        out: &mut [f64],
-        range: std::ops::Range<usize>,
-    ) {
-        use std::arch::x86_64::{__m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd};
-        let Ok(c) = <[f64; M]>::try_from(&self.interior[..M.min(self.interior.len())]) else {
-            return self.interior_block_passes(input, out, range);
-        };
-        let (start, end) = (range.start, range.end);
-        // Outputs start..end read input[start - M .. end + M] (the caller keeps the range
-        // inside M..len - M, and slicing checks it).
-        let x = &input[start - M..end + M];
-        let dst = &mut out[start..end];
-        let cv: [__m256d; M] = std::array::from_fn(|k| _mm256_set1_pd(c[k]));
-        let body = dst.len() / 4 * 4;
-        let mut j = 0;
-        while j < body {
-            // SAFETY: j + 4 <= body <= dst.len(), and the loads read x[j + M - k .. j + M + k
-            // + 4] for 1 <= k <= M, inside x[0 .. dst.len() + 2M] = x[..].
-            unsafe {
-                let p = x.as_ptr().add(j + M);
-                let d = |k: usize| _mm256_sub_pd(_mm256_loadu_pd(p.add(k)), _mm256_loadu_pd(p.sub(k)));
-                let mut acc = _mm256_mul_pd(cv[0], d(1));
-                for k in 2..M + 1 {
-                    acc = _mm256_add_pd(acc, _mm256_mul_pd(cv[k - 1], d(k)));
-                }
-                _mm256_storeu_pd(dst.as_mut_ptr().add(j), acc);
-            }
-            j += 4;
-        }
-        for (j, o) in dst.iter_mut().enumerate().skip(body) {
-            *o = interior_point(&c, x, j + M);
-        }
-    }
-
-    /// Eight outputs per instruction, written with the AVX-512 intrinsics (the compiler's own
-    /// vectorisation of [`SavitzkyGolayDerivative::interior_block_const`] at eight lanes
-    /// used gathers and permutes, no faster than four lanes). Per output the same
-    /// operations in the same order, so the same result bit for bit.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn interior_block_avx512(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
-        match self.half_length {
-            4 => self.interior_block_avx512_const::<4>(input, out, range),
-            5 => self.interior_block_avx512_const::<5>(input, out, range),
-            6 => self.interior_block_avx512_const::<6>(input, out, range),
-            _ => self.interior_block_body::<4>(input, out, range),
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn interior_block_avx512_const<const M: usize>(
-        &self,
-        input: &[f64],
-        out: &mut [f64],
-        range: std::ops::Range<usize>,
-    ) {
-        use std::arch::x86_64::{__m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd};
-        let Ok(c) = <[f64; M]>::try_from(&self.interior[..M.min(self.interior.len())]) else {
-            return self.interior_block_passes(input, out, range);
-        };
-        let (start, end) = (range.start, range.end);
-        // Outputs start..end read input[start - M .. end + M] (the caller keeps the range
-        // inside M..len - M, and slicing checks it).
-        let x = &input[start - M..end + M];
-        let dst = &mut out[start..end];
-        let cv: [__m512d; M] = std::array::from_fn(|k| _mm512_set1_pd(c[k]));
-        let body = dst.len() / 8 * 8;
-        let mut j = 0;
-        while j < body {
-            // SAFETY: j + 8 <= body <= dst.len(), and the loads read x[j + M - k .. j + M + k
-            // + 8] for 1 <= k <= M, inside x[0 .. dst.len() + 2M] = x[..].
-            unsafe {
-                let p = x.as_ptr().add(j + M);
-                let d = |k: usize| _mm512_sub_pd(_mm512_loadu_pd(p.add(k)), _mm512_loadu_pd(p.sub(k)));
-                let mut acc = _mm512_mul_pd(cv[0], d(1));
-                for k in 2..M + 1 {
-                    acc = _mm512_add_pd(acc, _mm512_mul_pd(cv[k - 1], d(k)));
-                }
-                _mm512_storeu_pd(dst.as_mut_ptr().add(j), acc);
-            }
-            j += 8;
-        }
-        for (j, o) in dst.iter_mut().enumerate().skip(body) {
-            *o = interior_point(&c, x, j + M);
-        }
+    interior_kernels! {
+        /// Eight outputs per instruction, written with the AVX-512 intrinsics (the compiler's
+        /// own vectorisation of [`SavitzkyGolayDerivative::interior_block_const`] at eight
+        /// lanes used gathers and permutes, no faster than four lanes). Per output the same
+        /// operations in the same order, so the same result bit for bit.
+        interior_block_avx512, interior_block_avx512_const, "avx512f", 8,
+        __m512d, _mm512_set1_pd, _mm512_loadu_pd, _mm512_storeu_pd, _mm512_add_pd, _mm512_sub_pd, _mm512_mul_pd
     }
 
     /// `W` outputs per vector (4 for AVX2, 8 for AVX-512).
