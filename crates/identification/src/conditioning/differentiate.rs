@@ -359,7 +359,8 @@ impl SavitzkyGolayDerivative {
         __m512d, _mm512_set1_pd, _mm512_loadu_pd, _mm512_storeu_pd, _mm512_add_pd, _mm512_sub_pd, _mm512_mul_pd
     }
 
-    /// `W` outputs per vector (4 for AVX2, 8 for AVX-512).
+    /// `W` outputs at a time, left to the compiler to vectorise: the path of builds without
+    /// AVX2, and of the kernels above for half-lengths other than 4-6.
     #[inline(always)]
     fn interior_block_body<const W: usize>(&self, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
         match self.half_length {

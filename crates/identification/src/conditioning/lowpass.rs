@@ -803,6 +803,9 @@ impl Butterworth {
         const L: usize = 8;
         let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
         let mut cols = cols.map(|c| &mut c[..n]);
+        // `producer` is called directly, never through a local closure: a closure is a
+        // function of its own, compiled without the target features of the function this is
+        // inlined into (ADR 0016, amendment 1).
         if n < 2 {
             // Nothing to filter (the callers check the length first): produce and leave.
             producer.produce(0, n, &mut cols)?;
