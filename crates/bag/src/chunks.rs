@@ -233,6 +233,9 @@ struct State {
     /// The open file; `None` while a thread writes to it (`writing`) or when none is open.
     sink: Option<FileSink>,
     writing: bool,
+    /// The open file's length when the writing thread took it: what [`Pipeline::file_len_bound`]
+    /// counts while `sink` is away (the batch being written is still in `in_flight_bytes`).
+    taken_len: u64,
     /// The open file's path, for errors.
     path: PathBuf,
     /// The first error, not yet reported to the writing thread.
@@ -278,6 +281,7 @@ fn drain<'a>(shared: &'a Shared, mut st: MutexGuard<'a, State>) -> MutexGuard<'a
             return st;
         }
         let mut sink = st.sink.take();
+        st.taken_len = sink.as_ref().map_or(0, FileSink::position);
         st.writing = true;
         let skip = st.failed;
         drop(st);
@@ -323,6 +327,17 @@ fn drain<'a>(shared: &'a Shared, mut st: MutexGuard<'a, State>) -> MutexGuard<'a
         }
         shared.changed.notify_all();
     }
+}
+
+/// [`Pipeline::file_len_bound`].
+fn len_bound(shared: &Shared) -> u64 {
+    let st = lock(shared);
+    let written = match &st.sink {
+        Some(sink) => sink.position(),
+        None if st.writing => st.taken_len,
+        None => 0,
+    };
+    written + st.in_flight_bytes
 }
 
 fn fail(st: &mut State, e: BagError) {
@@ -381,6 +396,7 @@ impl Pipeline {
                 in_flight_bytes: 0,
                 sink: None,
                 writing: false,
+                taken_len: 0,
                 path: dir.to_path_buf(),
                 error: None,
                 failed: false,
@@ -487,10 +503,12 @@ impl Pipeline {
     }
 
     /// Bytes written to the open file, plus the uncompressed size of the chunks on their
-    /// way to it (an upper bound of what they will add).
+    /// way to it (an upper bound of what they will add). While a thread is writing, the
+    /// file's length when it took the file: counting nothing then let a file grow past its
+    /// split size by whatever was written meanwhile (a test saw 648 kB against 300 kB, once
+    /// in about eight runs).
     pub fn file_len_bound(&self) -> u64 {
-        let st = lock(&self.shared);
-        st.sink.as_ref().map_or(0, FileSink::position) + st.in_flight_bytes
+        len_bound(&self.shared)
     }
 
     /// Waits until everything handed over is written and returns the file (for its
@@ -543,6 +561,51 @@ mod tests {
         assert_eq!(starts, (0..10).collect::<Vec<_>>());
         assert!(sink.chunk_indexes.windows(2).all(|w| w[0].chunk_start_offset < w[1].chunk_start_offset));
         assert_eq!(std::fs::metadata(&path).unwrap().len(), sink.position());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The writer splits a file by [`Pipeline::file_len_bound`], so it must never fall below
+    /// what is already in the file, also while a thread is writing (the file is out of the
+    /// shared state then). Uncompressed chunks, so that a worker is writing most of the time,
+    /// and a thread watching: the file's length on disk first, then the bound.
+    #[test]
+    fn the_file_length_bound_covers_the_file_while_chunks_are_written() {
+        let dir = std::env::temp_dir().join(format!("oilfilm-bag-chunks-bound-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bound.mcap");
+        let mut p = Pipeline::new(Compression::None, 0, 1, &dir).unwrap();
+        p.start_file(FileSink::new(path.clone(), File::create(&path).unwrap()));
+        let shared = Arc::clone(&p.shared);
+        let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let watcher = {
+            let (path, done) = (path.clone(), Arc::clone(&done));
+            std::thread::spawn(move || {
+                // (bound, length on disk just before) where the bound was short; observations.
+                let (mut short, mut seen) = (None, 0u64);
+                while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                    let on_disk = std::fs::metadata(&path).map_or(0, |m| m.len());
+                    let bound = len_bound(&shared);
+                    seen += 1;
+                    // A chunk record is its records plus a header and message indexes of a
+                    // few dozen bytes: the bound counts the records only.
+                    if bound + 512 < on_disk && short.is_none() {
+                        short = Some((bound, on_disk));
+                    }
+                }
+                (short, seen)
+            })
+        };
+        for i in 0..200u64 {
+            let records = vec![i as u8; 256 << 10];
+            p.submit_chunk(Gathered { records, index: vec![(1, i, 0)], start_ns: i, end_ns: i }).unwrap();
+        }
+        // Stopped before the file is taken back (it has no length in the state after that).
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        let (short, seen) = watcher.join().unwrap();
+        let sink = p.finish_file().unwrap();
+        assert!(seen > 100, "the watcher looked {seen} times");
+        assert_eq!(short, None, "bound below the file's length (bound, length) over {seen} looks");
+        assert_eq!(sink.chunk_indexes.len(), 200);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
