@@ -252,42 +252,95 @@ fn read_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<Ow
 /// the chunk header.
 pub(crate) fn decompress_chunk<'a>(header: &mcap::records::ChunkHeader, data: &'a [u8]) -> Result<std::borrow::Cow<'a, [u8]>, String> {
     use std::borrow::Cow;
-    /// Up to this size a zstd chunk is decompressed in one call into a buffer of the
+    if header.compression.is_empty() {
+        check_chunk(header, data)?;
+        return Ok(Cow::Borrowed(data));
+    }
+    let mut out = Vec::new();
+    decompress_into(header, data, &mut out, &mut None)?;
+    Ok(Cow::Owned(out))
+}
+
+/// What one reader thread reuses from chunk to chunk: the buffer for a chunk's record as
+/// read from the file, the buffer for its decompressed records and a zstd context. Without
+/// them every chunk of a bag allocated two buffers of up to half a megabyte, which the
+/// kernel handed out page by page (a page fault and a zeroed page each), and a context.
+#[derive(Default)]
+pub(crate) struct ChunkBuffers {
+    pub(crate) record: Vec<u8>,
+    pub(crate) records: Vec<u8>,
+    pub(crate) zstd: Option<zstd::bulk::Decompressor<'static>>,
+}
+
+/// [`decompress_chunk`] into `out` (its contents replaced), with the zstd context kept in
+/// `zstd` for the next chunk: the same checks, the same bytes.
+pub(crate) fn decompress_chunk_reusing<'a>(
+    header: &mcap::records::ChunkHeader,
+    data: &'a [u8],
+    out: &'a mut Vec<u8>,
+    zstd: &mut Option<zstd::bulk::Decompressor<'static>>,
+) -> Result<&'a [u8], String> {
+    if header.compression.is_empty() {
+        check_chunk(header, data)?;
+        return Ok(data);
+    }
+    decompress_into(header, data, out, zstd)?;
+    Ok(out)
+}
+
+/// A compressed chunk's records into `out`, checked.
+fn decompress_into(header: &mcap::records::ChunkHeader, data: &[u8], out: &mut Vec<u8>, zstd: &mut Option<zstd::bulk::Decompressor<'static>>) -> Result<(), String> {
+    /// Up to this size a zstd chunk is decompressed in one call into a buffer of at least the
     /// header's size (not touched beyond what the frame fills); a larger claim streams into
     /// a growing buffer instead of being trusted for an allocation.
     const BULK_MAX: u64 = 1 << 30;
     let size = header.uncompressed_size;
-    let records: Cow<[u8]> = match header.compression.as_str() {
-        "" => Cow::Borrowed(data),
-        "zstd" if size <= BULK_MAX => Cow::Owned(zstd::bulk::decompress(data, size as usize).map_err(|e| format!("zstd chunk: {e}"))?),
+    out.clear();
+    match header.compression.as_str() {
+        "zstd" if size <= BULK_MAX => {
+            let context = match zstd {
+                Some(c) => c,
+                None => zstd.insert(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd chunk: {e}"))?),
+            };
+            // A frame longer than the buffer is an error; one longer than the header's size
+            // but within a buffer left larger by an earlier chunk fails the size check below.
+            out.reserve(size as usize);
+            context.decompress_to_buffer(data, out).map_err(|e| format!("zstd chunk: {e}"))?;
+        }
         "zstd" => {
             let d = zstd::stream::read::Decoder::new(data).map_err(|e| format!("zstd chunk: {e}"))?;
-            Cow::Owned(read_limited(d, size).map_err(|e| format!("zstd chunk: {e}"))?)
+            read_limited(d, size, out).map_err(|e| format!("zstd chunk: {e}"))?;
         }
         "lz4" => {
             let d = lz4::Decoder::new(data).map_err(|e| format!("lz4 chunk: {e}"))?;
-            Cow::Owned(read_limited(d, size).map_err(|e| format!("lz4 chunk: {e}"))?)
+            read_limited(d, size, out).map_err(|e| format!("lz4 chunk: {e}"))?;
         }
         other => return Err(format!("chunk compression `{other}` is not zstd, lz4 or none")),
-    };
+    }
+    check_chunk(header, out)
+}
+
+/// A chunk's records against its header: their size, and their CRC when it is given.
+fn check_chunk(header: &mcap::records::ChunkHeader, records: &[u8]) -> Result<(), String> {
+    let size = header.uncompressed_size;
     if records.len() as u64 != size {
         return Err(format!("chunk holds {} bytes uncompressed, its header says {size}", records.len()));
     }
     if header.uncompressed_crc != 0 {
-        let crc = crc32fast::hash(&records);
+        let crc = crc32fast::hash(records);
         if crc != header.uncompressed_crc {
             return Err(format!("chunk CRC {crc:#010x} differs from its header's {:#010x}", header.uncompressed_crc));
         }
     }
-    Ok(records)
+    Ok(())
 }
 
 /// Reads at most `size` bytes (and one more, to notice a longer stream), growing the buffer
 /// as data arrives rather than trusting the header's size for an allocation.
-fn read_limited(r: impl Read, size: u64) -> std::io::Result<Vec<u8>> {
-    // A buffer of the claimed size up to 64 MiB (more than any chunk of ours) saves the
-    // copies of growing it; beyond that it grows as data arrives.
-    let mut out = Vec::with_capacity(size.min(64 << 20) as usize + 1);
-    r.take(size.saturating_add(1)).read_to_end(&mut out)?;
-    Ok(out)
+fn read_limited(r: impl Read, size: u64, out: &mut Vec<u8>) -> std::io::Result<()> {
+    // Room for the claimed size up to 64 MiB (more than any chunk of ours) saves the copies
+    // of growing the buffer; beyond that it grows as data arrives.
+    out.reserve(size.min(64 << 20) as usize + 1);
+    r.take(size.saturating_add(1)).read_to_end(out)?;
+    Ok(())
 }

@@ -148,6 +148,7 @@ impl Bag {
                 let tx = tx.clone();
                 let (jobs, files, channels, paths, stop, taken) = (&jobs, &files, &channels, &paths, &stop, &taken);
                 s.spawn(move || {
+                    let mut buffers = crate::scan::ChunkBuffers::default();
                     loop {
                         let i = taken.fetch_add(1, Ordering::Relaxed);
                         let Some(job) = jobs.get(i) else { return };
@@ -155,7 +156,7 @@ impl Bag {
                             return;
                         }
                         let (Some(file), Some(ch)) = (&files[job.file], &channels[job.file]) else { continue };
-                        let out = read_chunk_of(file, &paths[job.file], &job.index, ch, decode);
+                        let out = read_chunk_of(file, &paths[job.file], &job.index, ch, decode, &mut buffers);
                         if out.is_err() {
                             stop.store(true, Ordering::Relaxed);
                         }
@@ -281,12 +282,15 @@ fn read_chunk_of<T>(
     index: &ChunkIndex,
     channels: &Channels,
     decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync),
+    buffers: &mut crate::scan::ChunkBuffers,
 ) -> Result<Vec<(u64, T)>> {
     let offset = index.chunk_start_offset;
     let format = |what: String| BagError::Format { path: path.to_path_buf(), offset: Some(offset), what };
     // indexed_plan() checked the chunk lies inside the file.
-    let mut record = vec![0u8; index.chunk_length as usize];
-    file.read_exact_at(&mut record, offset).map_err(io(path))?;
+    let record = &mut buffers.record;
+    record.clear();
+    record.resize(index.chunk_length as usize, 0);
+    file.read_exact_at(record, offset).map_err(io(path))?;
     if record[0] != 0x06 {
         return Err(format("the chunk index points at a record that is not a chunk".into()));
     }
@@ -295,7 +299,7 @@ fn read_chunk_of<T>(
         Ok(_) => return Err(format("the chunk index points at a record that is not a chunk".into())),
         Err(e) => return Err(format(format!("chunk: {e}"))),
     };
-    let records = crate::scan::decompress_chunk(&header, &data).map_err(format)?;
+    let records = crate::scan::decompress_chunk_reusing(&header, &data, &mut buffers.records, &mut buffers.zstd).map_err(format)?;
     let mut out = Vec::new();
     let mut at = 0usize;
     let mut n = 0u64;
