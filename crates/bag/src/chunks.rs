@@ -504,9 +504,8 @@ impl Pipeline {
 
     /// Bytes written to the open file, plus the uncompressed size of the chunks on their
     /// way to it (an upper bound of what they will add). While a thread is writing, the
-    /// file's length when it took the file: counting nothing then let a file grow past its
-    /// split size by whatever was written meanwhile (a test saw 648 kB against 300 kB, once
-    /// in about eight runs).
+    /// file's length when it took the file (counting nothing then let a file grow past its
+    /// split size by whatever was written meanwhile).
     pub fn file_len_bound(&self) -> u64 {
         len_bound(&self.shared)
     }

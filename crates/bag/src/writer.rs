@@ -47,7 +47,8 @@ pub struct WriterOptions {
     /// Close a chunk once it spans this much log time: bounds what a crash loses.
     pub max_chunk_duration_ns: u64,
     /// Start a new file once the current one reaches this many bytes on disk (checked
-    /// before each message; the open chunk is not counted until it is closed).
+    /// before each message; the chunks still gathering, one per topic with
+    /// `chunk_per_topic`, are not counted until they are closed).
     pub split_size_bytes: Option<u64>,
     /// Start a new file once a message is this much log time after the file's first.
     pub split_duration_ns: Option<u64>,
