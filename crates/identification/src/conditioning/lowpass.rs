@@ -58,7 +58,10 @@
 //! development machine. The only scratch memory is the two reflections and one tile.
 //! [`super::condition`] feeds the forward pass from its front end tile by tile
 //! (`filtfilt8_fed`: the same operations in the same order), so the eight columns are not
-//! written out by the front end and read straight back by the filter.
+//! written out by the front end and read straight back by the filter. There the forward
+//! pass's output stays in frames (a scratch of eight values per sample) until the backward
+//! pass has made it final: two transposes per sample instead of four, and no write of the
+//! unfiltered columns (ADR 0016, amendment 2).
 
 use oilfilm_physics::daq::ChannelId;
 
@@ -179,7 +182,8 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
 }
 
 /// What [`Butterworth::filtfilt8_fed`] filters: `produce(a, b, cols)` writes samples `a..b`
-/// of the eight columns. A trait with an `#[inline(always)]` method rather than a closure,
+/// of the eight columns into `cols`, eight buffers of `b - a` values (sample `a + i` at index
+/// `i`; not the output columns). A trait with an `#[inline(always)]` method rather than a closure,
 /// so that the producer's code is compiled into the caller's `target_feature` function (a
 /// closure is a function of its own, compiled without the caller's features).
 pub(crate) trait Produce8 {
@@ -464,30 +468,70 @@ fn backward<const L: usize, const S: usize>(
     cascade_pass(&mut st, cols, n, true)
 }
 
-/// [`backward`] handing the columns' samples to `consumer` chunk by chunk as they are
-/// written (the same operations in the same order: the state is carried from chunk to chunk).
+/// Samples `start .. start + frames.len()` of eight columns into frames of eight lanes.
 #[inline(always)]
-fn backward_consumed<const S: usize, C: Consume8>(
+fn to_frames(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]]) {
+    let t = frames.len();
+    if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToFrames) {
+        for (l, col) in cols.iter().enumerate() {
+            for (f, &x) in frames.iter_mut().zip(&col[start..start + t]) {
+                f[l] = x;
+            }
+        }
+    }
+}
+
+/// Frames of eight lanes into samples `start .. start + frames.len()` of eight columns.
+#[inline(always)]
+fn to_columns(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]]) {
+    let t = frames.len();
+    if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToColumns) {
+        for (l, col) in cols.iter_mut().enumerate() {
+            for (x, f) in col[start..start + t].iter_mut().zip(frames.iter()) {
+                *x = f[l];
+            }
+        }
+    }
+}
+
+/// [`backward`] over frames kept by the forward pass (in place), for all but the last group.
+#[inline(always)]
+fn backward_frames<const S: usize>(sections: &[Section; S], store: &mut [[f64; 8]], right: &mut [[f64; 8]]) {
+    let x0 = right.last().copied().unwrap_or_else(|| store.last().copied().unwrap_or([0.0; 8]));
+    let mut st = Cascade::steady(sections, x0);
+    for f in right.iter_mut().rev() {
+        *f = st.step(*f);
+    }
+    for f in store.iter_mut().rev() {
+        *f = st.step(*f);
+    }
+}
+
+/// [`backward_consumed`] over frames kept by the forward pass: each chunk, once filtered,
+/// moves into the columns and goes to `consumer` (the same operations in the same order).
+#[inline(always)]
+fn backward_frames_consumed<const S: usize, C: Consume8>(
     sections: &[Section; S],
     cols: &mut [&mut [f64]; 8],
-    n: usize,
+    store: &mut [[f64; 8]],
     right: &mut [[f64; 8]],
     consumer: &mut C,
 ) -> Result<bool, C::Error> {
-    let x0 = right
-        .last()
-        .copied()
-        .unwrap_or(std::array::from_fn(|l| cols[l][n - 1]));
+    let x0 = right.last().copied().unwrap_or_else(|| store.last().copied().unwrap_or([0.0; 8]));
     let mut st = Cascade::steady(sections, x0);
     for f in right.iter_mut().rev() {
         *f = st.step(*f);
     }
     let mut finite = true;
-    let mut end = n;
+    let mut end = store.len();
     while end > 0 {
         let start = end.saturating_sub(CONSUME_CHUNK);
-        let mut sub = cols.each_mut().map(|c| &mut c[start..end]);
-        finite &= cascade_pass(&mut st, &mut sub, end - start, true);
+        let chunk = &mut store[start..end];
+        for f in chunk.iter_mut().rev() {
+            *f = st.step(*f);
+        }
+        finite &= chunk.as_flattened().iter().fold(true, |ok, v| ok & v.is_finite());
+        to_columns(cols, start, chunk);
         consumer.consume(start, cols)?;
         end = start;
     }
@@ -779,12 +823,19 @@ impl Butterworth {
     }
 
     /// [`Butterworth::filtfilt_many_in_place_finite`] on eight columns of `n >= 2` samples
-    /// that `producer` writes as the filter goes: `produce(a, b, cols)` must write samples
-    /// `a..b` of all eight columns; it is called with adjacent ranges of at most `step`
-    /// samples (the first may be longer: it covers the left reflection's `pad + 1` samples)
-    /// that cover `0..n` in order, and an error from it is returned as is. Each range goes
-    /// through the forward pass while it is still in cache, instead of being written out by
-    /// the producer and read back by the filter.
+    /// that `producer` writes as the filter goes: `produce(a, b, range)` must write samples
+    /// `a..b` of all eight columns into `range` (see [`Produce8`]); it is called with adjacent
+    /// ranges of at most `step` samples (the first may be longer: it covers the left
+    /// reflection's `pad + 1` samples) that cover `0..n` in order, and an error from it is
+    /// returned as is. Each range goes through the forward pass while it is still in cache,
+    /// instead of being written out by the producer and read back by the filter.
+    ///
+    /// The forward pass keeps its output in frames of eight lanes in `scratch` (with the
+    /// reflections: `(n + 2 pad) x 8` values, plus the range buffers), and the backward pass
+    /// runs on those frames and moves each chunk into `cols` as it makes it final. So each
+    /// sample is transposed twice (columns to frames after it is produced, frames to columns
+    /// when it is final), not four times, and the output columns are written once, by the
+    /// backward pass (ADR 0016, amendment 2). `scratch` is grown when too short, never cleared.
     ///
     /// The same operations in the same order as the two-step version, so the same result
     /// bit for bit: the reflections are formed from the unfiltered samples (the right one's
@@ -814,17 +865,34 @@ impl Butterworth {
         }
         let step = step.max(1);
         let pad = self.settling.min(n - 1);
-        scratch.clear();
-        scratch.resize(2 * pad * L, 0.0);
-        let (frames, _) = scratch.as_chunks_mut::<L>();
-        let (left, right) = frames.split_at_mut(pad);
-
+        // The reflections, then the forward pass's output for every sample, in frames of eight
+        // lanes: the backward pass reads the frames as they are, instead of the forward pass
+        // transposing them back into the columns and the backward pass out again.
         // The first range reaches sample `pad`, which the left reflection needs unfiltered.
         let mut produced = (pad + 1).max(step).min(n);
-        producer.produce(0, produced, &mut cols)?;
+        // A range is produced into eight short columns that stay in cache, not into the
+        // output columns (which the backward pass writes first): the unfiltered samples are
+        // never written out to memory.
+        let cap = produced.max(step.min(n));
+        // Every value is written before it is read: grown when too short, never cleared (a
+        // record's worth of zeros written for nothing was 5 % of the whole call).
+        let needed = (2 * pad + n) * L + cap * L;
+        if scratch.len() < needed {
+            scratch.resize(needed, 0.0);
+        }
+        let (frame_part, range_part) = scratch[..needed].split_at_mut((2 * pad + n) * L);
+        let (frames, _) = frame_part.as_chunks_mut::<L>();
+        let (left, rest) = frames.split_at_mut(pad);
+        let (right, store) = rest.split_at_mut(pad);
+        let mut range_cols: [&mut [f64]; L] = {
+            let mut parts = range_part.chunks_exact_mut(cap);
+            std::array::from_fn(|_| parts.next().unwrap_or_default())
+        };
+        let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced]);
+        producer.produce(0, produced, &mut fresh)?;
         for i in 1..=pad {
             for l in 0..L {
-                left[pad - i][l] = 2.0 * cols[l][0] - cols[l][i];
+                left[pad - i][l] = 2.0 * fresh[l][0] - fresh[l][i];
             }
         }
         // Each group of sections in steady state for its first input (the previous group's
@@ -852,31 +920,36 @@ impl Butterworth {
         }
 
         // Forward over each produced range: first copy aside what the right reflection needs
-        // (samples n-1-pad .. n-1, unfiltered), then filter the range.
+        // (samples n-1-pad .. n-1, unfiltered), then move the range into frames and filter it.
         let mut last_sample = [0.0; L];
         let mut a = 0;
         loop {
+            let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced - a]);
             let tail = (n - 1 - pad).max(a)..(n - 1).min(produced);
             for j in tail {
                 for l in 0..L {
-                    right[n - 2 - j][l] = cols[l][j];
+                    right[n - 2 - j][l] = fresh[l][j - a];
                 }
             }
             if produced == n {
-                last_sample = std::array::from_fn(|l| cols[l][n - 1]);
+                last_sample = std::array::from_fn(|l| fresh[l][n - 1 - a]);
             }
-            let mut sub = cols.each_mut().map(|c| &mut c[a..produced]);
-            let len = produced - a;
+            let range = &mut store[a..produced];
+            to_frames(&mut fresh, 0, range);
             // Each state copied into a local for the pass: behind the Vec's pointer the
             // compiler kept it in memory, a load and a store per lane and sample.
             for st in states.iter_mut() {
                 let mut local = *st;
-                cascade_pass(&mut local, &mut sub, len, false);
+                for f in range.iter_mut() {
+                    *f = local.step(*f);
+                }
                 *st = local;
             }
             if let Some(st) = last.as_mut() {
                 let mut local = *st;
-                cascade_pass(&mut local, &mut sub, len, false);
+                for f in range.iter_mut() {
+                    *f = local.step(*f);
+                }
                 *st = local;
             }
             if produced == n {
@@ -884,7 +957,8 @@ impl Butterworth {
             }
             a = produced;
             produced = (a + step).min(n);
-            producer.produce(a, produced, &mut cols)?;
+            let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced - a]);
+            producer.produce(a, produced, &mut fresh)?;
         }
         // right[i - 1] held x[n - 1 - i]; the reflection is 2 x[n - 1] - x[n - 1 - i].
         for f in right.iter_mut() {
@@ -903,25 +977,28 @@ impl Butterworth {
             }
         }
 
-        // Backward, group after group, as in the two-step version; the last group's output
-        // is final, and handed to the consumer as it is written.
+        // Backward, group after group, as in the two-step version, over the frames; the last
+        // group's output is final, and goes into the columns and to the consumer chunk by
+        // chunk as it is written.
         let groups = self.sections.len().div_ceil(FUSED);
         let mut chunks = self.sections.chunks(FUSED);
         for _ in 1..groups {
             match chunks.next() {
                 Some(g) => match <&[Section; FUSED]>::try_from(g) {
-                    Ok(g) => backward(g, &mut cols, n, right),
-                    Err(_) => backward(std::array::from_ref(&g[0]), &mut cols, n, right),
+                    Ok(g) => backward_frames(g, store, right),
+                    Err(_) => backward_frames(std::array::from_ref(&g[0]), store, right),
                 },
-                None => true,
+                None => {}
             };
         }
         match chunks.next() {
             Some(g) => match <&[Section; FUSED]>::try_from(g) {
-                Ok(g) => backward_consumed(g, &mut cols, n, right, consumer),
-                Err(_) => backward_consumed(std::array::from_ref(&g[0]), &mut cols, n, right, consumer),
+                Ok(g) => backward_frames_consumed(g, &mut cols, store, right, consumer),
+                Err(_) => backward_frames_consumed(std::array::from_ref(&g[0]), &mut cols, store, right, consumer),
             },
             None => {
+                // No section: the output is the input.
+                to_columns(&mut cols, 0, store);
                 consumer.consume(0, &mut cols)?;
                 Ok(true)
             }

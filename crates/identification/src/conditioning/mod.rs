@@ -438,14 +438,18 @@ pub struct Conditioned {
 }
 
 /// [`condition_into`]'s memory between calls that is not part of the result: the
-/// differentiator last designed (its weights depend only on `M` and the sample rate). Any two
-/// compare equal, and it prints as nothing, so a `Conditioned` compares and prints as its
-/// data.
+/// differentiator last designed (its weights depend only on `M` and the sample rate) and
+/// buffers. Any two compare equal, and it prints as nothing, so a `Conditioned` compares and
+/// prints as its data.
 #[derive(Clone, Default)]
 struct Work {
     differentiator: Option<differentiate::SavitzkyGolayDerivative>,
     /// The housing's y velocity (not an output) when the derivatives follow the low-pass.
     velocity: Vec<f64>,
+    /// The low-pass's scratch: its reflections and its forward pass's output (eight values
+    /// per scan, `lowpass::Butterworth::filtfilt8_fed`). Kept between [`condition_into`]
+    /// calls, not returned by [`condition`].
+    scratch: Vec<f64>,
 }
 
 impl PartialEq for Work {
@@ -704,7 +708,7 @@ impl lowpass::Produce8 for FrontTiles<'_, '_> {
         let mut o0 = from;
         while o0 < to {
             let o1 = (o0 + TILE).min(to);
-            self.bad += front_tile(self.chans, &self.applied, self.len, o0, o1, &mut self.tile, &mut self.input, cols, self.load, self.temp);
+            self.bad += front_tile(self.chans, &self.applied, self.len, from, o0, o1, &mut self.tile, &mut self.input, cols, self.load, self.temp);
             o0 = o1;
         }
         Ok(())
@@ -833,6 +837,7 @@ fn front_tile(
     chans: &[FrontChannel<'_>],
     applied: &film_force::Applied,
     len: usize,
+    base: usize,
     o0: usize,
     o1: usize,
     tile: &mut [[f64; TILE]; CHANNEL_COUNT],
@@ -847,8 +852,8 @@ fn front_tile(
         // The frame probes, the bellows' load and the temperature are not combined with
         // other channels: de-skewed straight into their columns, not via the tile and a copy.
         let t: &mut [f64] = match k {
-            4 => &mut dynamic[4][o0..o1],
-            5 => &mut dynamic[5][o0..o1],
+            4 => &mut dynamic[4][o0 - base..o1 - base],
+            5 => &mut dynamic[5][o0 - base..o1 - base],
             8 => &mut load[o0..o1],
             9 => &mut temp[o0..o1],
             _ => &mut t[..o1 - o0],
@@ -892,7 +897,7 @@ fn front_tile(
     let [a_x, a_y, b_x, b_y, _, _, f1, f2, _, _] = &*tile;
     let [x, y, tilt_x, tilt_y, _, _, fx, fy] = dynamic;
     let f3 = &load[o0..o1];
-    for (i, n) in (o0..o1).enumerate() {
+    for (i, n) in (o0 - base..o1 - base).enumerate() {
         [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
         [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
         [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
@@ -914,6 +919,9 @@ pub fn condition(
 ) -> Result<Conditioned, IdentificationError> {
     let mut out = Conditioned::default();
     condition_into(raw, calibration, mechanics, config, &mut out)?;
+    // The result is kept by the caller; the low-pass's scratch (as large as eight of its
+    // columns) is not part of it.
+    out.work.scratch = Vec::new();
     Ok(out)
 }
 
@@ -1045,7 +1053,7 @@ pub fn condition_into(
     // part of eq. 2 first, then filter the eight columns that carry dynamics (one lock-step
     // pass of eight lanes, not ten raw channels). The bellows' load and the temperature keep
     // their de-skewed samples: only their means are used.
-    let mut scratch = Vec::new();
+    let mut scratch = std::mem::take(&mut work.scratch);
     let mut derivatives = Derivatives::new(
         &sg,
         mass,
@@ -1154,6 +1162,7 @@ pub fn condition_into(
     debug_assert_eq!(used, COLUMNS);
     work.differentiator = Some(sg);
     work.velocity = housing_vy;
+    work.scratch = scratch;
     *out = Conditioned {
         t_s,
         x_m,
