@@ -507,8 +507,10 @@ fn backward_frames<const S: usize>(sections: &[Section; S], store: &mut [[f64; 8
     }
 }
 
-/// [`backward_consumed`] over frames kept by the forward pass: each chunk, once filtered,
-/// moves into the columns and goes to `consumer` (the same operations in the same order).
+/// The last group of sections backward over the frames kept by the forward pass, chunk by
+/// chunk from the end: each chunk, once final, moves into the columns and goes to `consumer`
+/// (the state is carried from chunk to chunk: the same operations in the same order as one
+/// pass over the whole). Whether every output is finite.
 #[inline(always)]
 fn backward_frames_consumed<const S: usize, C: Consume8>(
     sections: &[Section; S],
@@ -865,17 +867,17 @@ impl Butterworth {
         }
         let step = step.max(1);
         let pad = self.settling.min(n - 1);
-        // The reflections, then the forward pass's output for every sample, in frames of eight
-        // lanes: the backward pass reads the frames as they are, instead of the forward pass
-        // transposing them back into the columns and the backward pass out again.
         // The first range reaches sample `pad`, which the left reflection needs unfiltered.
         let mut produced = (pad + 1).max(step).min(n);
-        // A range is produced into eight short columns that stay in cache, not into the
-        // output columns (which the backward pass writes first): the unfiltered samples are
-        // never written out to memory.
+        // `scratch`: the two reflections and the forward pass's output for every sample, in
+        // frames of eight lanes (the backward pass reads them as they are, instead of the
+        // forward pass transposing them back into the columns and the backward pass out
+        // again), then eight short columns a range is produced into. Those stay in cache:
+        // the unfiltered samples are never written out to the output columns, which the
+        // backward pass writes first. Every value is written before it is read, so the
+        // scratch is grown when too short and never cleared (a record's worth of zeros
+        // written for nothing was 5 % of the whole call).
         let cap = produced.max(step.min(n));
-        // Every value is written before it is read: grown when too short, never cleared (a
-        // record's worth of zeros written for nothing was 5 % of the whole call).
         let needed = (2 * pad + n) * L + cap * L;
         if scratch.len() < needed {
             scratch.resize(needed, 0.0);
@@ -885,6 +887,8 @@ impl Butterworth {
         let (left, rest) = frames.split_at_mut(pad);
         let (right, store) = rest.split_at_mut(pad);
         let mut range_cols: [&mut [f64]; L] = {
+            // `range_part` is `L` chunks of `cap >= 1` values (n >= 2), so each `next` has one;
+            // the empty default is never taken.
             let mut parts = range_part.chunks_exact_mut(cap);
             std::array::from_fn(|_| parts.next().unwrap_or_default())
         };
@@ -983,13 +987,12 @@ impl Butterworth {
         let groups = self.sections.len().div_ceil(FUSED);
         let mut chunks = self.sections.chunks(FUSED);
         for _ in 1..groups {
-            match chunks.next() {
-                Some(g) => match <&[Section; FUSED]>::try_from(g) {
+            if let Some(g) = chunks.next() {
+                match <&[Section; FUSED]>::try_from(g) {
                     Ok(g) => backward_frames(g, store, right),
                     Err(_) => backward_frames(std::array::from_ref(&g[0]), store, right),
-                },
-                None => {}
-            };
+                }
+            }
         }
         match chunks.next() {
             Some(g) => match <&[Section; FUSED]>::try_from(g) {
