@@ -368,8 +368,8 @@ fn accumulate_kernel(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
     }
 }
 
-/// `(Σ a_k w_k, Σ b_k w_k)`, each exactly [`weighted_sum`] (the same partial sums in the same
-/// order), in one pass over the taper.
+/// `(Σ a_k w_k, Σ b_k w_k)`, each exactly the test-only `weighted_sum` (the same partial sums
+/// in the same order), in one pass over the taper.
 #[inline(always)]
 fn weighted_sums(a: &[f64], b: &[f64], w: &[f64]) -> (f64, f64) {
     let n = a.len().min(b.len()).min(w.len());
