@@ -24,6 +24,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 import rclpy
@@ -123,8 +124,13 @@ def main():
     # node never listed (3 runs in 8 with both cores busy). Our nodes now re-announce
     # (Announcer in nodes/src/dds.rs): 0 in 8 under the same load.
     spin_until(executor, lambda: False, 1.0)
+    # The launch's output goes to a file, never to a pipe nobody reads: it prints every
+    # estimate, and with a pipe a slow run filled it (64 kB), blocked the launch in a write and
+    # so kept it from handling SIGINT. Its own process group, so the cleanup below can take
+    # the nodes with it.
+    launch_log = tempfile.NamedTemporaryFile(prefix="oilfilm-launch-", suffix=".log", delete=False)
     launch = subprocess.Popen([oilfilm, "launch", os.path.join(ROOT, "tests/interop/live/sim_rig.launch.yaml"), "--seconds", "120"],
-                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+                              stdout=launch_log, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
         # 1. The graph.
         want_nodes = {("exciter", NS), ("daq", NS), ("conditioner", NS), ("estimator", NS)}
@@ -221,8 +227,21 @@ def main():
               "on SIGINT the exciter publishes a ramp to zero (stop = true)")
         check(launch.wait(timeout=20) == 0, "oilfilm launch exits 0 after SIGINT")
     finally:
-        if launch.poll() is None:
-            launch.kill()
+        # The launch and every node it started (one process group): none may outlive the test
+        # (orphaned graphs from failed runs loaded the machine for the runs after them).
+        try:
+            os.killpg(launch.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        launch.wait()
+        launch_log.close()
+        if failures:
+            with open(launch_log.name, errors="replace") as f:
+                tail = f.readlines()[-40:]
+            print(f"last {len(tail)} lines of oilfilm launch's output ({launch_log.name}):", file=sys.stderr)
+            sys.stderr.writelines(tail)
+        else:
+            os.unlink(launch_log.name)
         node.destroy_node()
         rclpy.shutdown()
     print("rclpy live interop: " + ("ok" if not failures else f"{len(failures)} failure(s)"))
