@@ -223,13 +223,7 @@ fn cascade_pass<const L: usize, const S: usize>(
         let t = TILE.min(n - done);
         let start = if backward { n - done - t } else { done };
         let frames = &mut frames[..t];
-        if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToFrames) {
-            for (l, col) in cols.iter().enumerate() {
-                for (f, &x) in frames.iter_mut().zip(&col[start..start + t]) {
-                    f[l] = x;
-                }
-            }
-        }
+        to_frames(cols, start, frames);
         // Plain loops (a closure here was not inlined: a call per sample).
         if backward {
             for f in frames.iter_mut().rev() {
@@ -241,13 +235,7 @@ fn cascade_pass<const L: usize, const S: usize>(
             }
         }
         finite &= frames.as_flattened().iter().fold(true, |ok, v| ok & v.is_finite());
-        if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToColumns) {
-            for (l, col) in cols.iter_mut().enumerate() {
-                for (x, f) in col[start..start + t].iter_mut().zip(frames.iter()) {
-                    *x = f[l];
-                }
-            }
-        }
+        to_columns(cols, start, frames);
         done += t;
     }
     finite
@@ -468,9 +456,10 @@ fn backward<const L: usize, const S: usize>(
     cascade_pass(&mut st, cols, n, true)
 }
 
-/// Samples `start .. start + frames.len()` of eight columns into frames of eight lanes.
+/// Samples `start .. start + frames.len()` of `L` columns into frames of `L` lanes (by
+/// [`transpose8`] where it can, else one by one).
 #[inline(always)]
-fn to_frames(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]]) {
+fn to_frames<const L: usize>(cols: &mut [&mut [f64]; L], start: usize, frames: &mut [[f64; L]]) {
     let t = frames.len();
     if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToFrames) {
         for (l, col) in cols.iter().enumerate() {
@@ -481,9 +470,9 @@ fn to_frames(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]]) 
     }
 }
 
-/// Frames of eight lanes into samples `start .. start + frames.len()` of eight columns.
+/// Frames of `L` lanes into samples `start .. start + frames.len()` of `L` columns.
 #[inline(always)]
-fn to_columns(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]]) {
+fn to_columns<const L: usize>(cols: &mut [&mut [f64]; L], start: usize, frames: &mut [[f64; L]]) {
     let t = frames.len();
     if !transpose8(cols, start, frames.as_flattened_mut(), Direction::ToColumns) {
         for (l, col) in cols.iter_mut().enumerate() {
