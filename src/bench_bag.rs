@@ -270,9 +270,9 @@ fn causal_row(tmp: &Path, rig: &RigConfig, seconds: f64) -> Result<ReanalysisRow
         let inputs = crate::records::read_bag_inputs(&dir, crate::records::reader_threads())?;
         row.read_s = row.read_s.min(started.elapsed().as_secs_f64());
         drop(inputs);
-        let (out, timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
+        let ((out, _, _), timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
         row.keep_if_faster(timing);
-        row.equal_to_live &= out.0.estimates == rec.estimates;
+        row.equal_to_live &= out.estimates == rec.estimates;
     }
     Ok(row)
 }
@@ -449,9 +449,9 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, f
                 all_messages_s = all_messages_s.min(started.elapsed().as_secs_f64());
             }
             drop((frames, status));
-            let (out, timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
+            let ((out, _, _), timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
             row.keep_if_faster(timing);
-            row.equal_to_live &= out.0.estimates == rec.estimates;
+            row.equal_to_live &= out.estimates == rec.estimates;
         }
     }
     let out = last.context("no re-analysis pass ran")?;
