@@ -171,6 +171,8 @@ mod tests {
         assert!(parse_args("x", args(&["--ros-args", "-p", "novalue"])).is_err());
         let a = parse_args("x", args(&["--ros-args", "-r", "__node:=est2", "-r", "__ns:=rig2"])).unwrap();
         assert_eq!(a.fully_qualified_name(), "/rig2/est2");
+        // Passed: nothing to look at (a failing run keeps the file).
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -207,5 +209,6 @@ mod tests {
         assert!(e.contains("lowpass_order") && e.contains("<= 6"), "{e}");
         let a = parse_args("conditioner", args(&["--ros-args", "-p", "chain:=causal"])).unwrap();
         assert_eq!(load::<ConditionerParams>(&a).unwrap().0.chain().unwrap(), Chain::Causal);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
