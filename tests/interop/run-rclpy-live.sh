@@ -11,4 +11,4 @@ export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((100 + RANDOM % 100))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"
-exec timeout 240 "$OILFILM_ROS_PYTHON_BIN" tests/interop/test_rclpy_live.py "$(cd "$bin_dir" && pwd)"
+exec timeout 300 "$OILFILM_ROS_PYTHON_BIN" tests/interop/test_rclpy_live.py "$(cd "$bin_dir" && pwd)"
