@@ -72,9 +72,9 @@ class Participants:
     """The probe's rclpy participant, and a second one made only when the first never
     discovers a server.
 
-    Seen in about 1 run in 4 with both cores busy: the first participant's graph never holds
-    one of our services' request reader (or reply writer), for 30 s and more, while a
-    participant that joins later discovers it at once. The endpoint's discovery sample was
+    Seen in about 1 run in 4 with both cores busy, and in runs on a quiet machine: the first
+    participant's graph never holds one of our services' request reader (or reply writer),
+    for 30 s and more, while a participant that joins later discovers it within seconds. The endpoint's discovery sample was
     lost between RustDDS (ros2-client's DDS) and Fast DDS and never repaired; the services
     themselves answer. A fresh participant asks every peer for its endpoints again, as a
     new `ros2 param` process does. Each service reached only that way is named in the
