@@ -74,9 +74,9 @@ class Participants:
 
     Seen in about 1 run in 4 with both cores busy, and in runs on a quiet machine: the first
     participant's graph never holds one of our services' request reader (or reply writer),
-    for 30 s and more, while a participant that joins later discovers it within seconds. The endpoint's discovery sample was
-    lost between RustDDS (ros2-client's DDS) and Fast DDS and never repaired; the services
-    themselves answer. A fresh participant asks every peer for its endpoints again, as a
+    for 30 s and more, while a participant that joins later discovers it within seconds. Most likely the endpoint's discovery
+    sample was lost between RustDDS (ros2-client's DDS) and Fast DDS and never repaired (not
+    proven); the services themselves answer. A fresh participant asks every peer for its endpoints again, as a
     new `ros2 param` process does. Each service reached only that way is named in the
     output and in the last line (ADR 0017, amendment)."""
 
