@@ -352,17 +352,22 @@ impl RosNode {
         true
     }
 
-    /// Drops the node (which signals its spinner) while the spinner still holds the DDS
-    /// participant, so the node's own entities are removed from a live participant; then
-    /// waits for the spinner, whose end lets the participant say goodbye to DDS.
+    /// Drops the node (which signals its spinner) and waits for the spinner while this
+    /// still holds the DDS participant, so every entity of the node is removed from a live
+    /// participant; then drops the context, which lets the participant say goodbye to DDS.
+    ///
+    /// The order matters because ros2-client's spinner declares its context before the
+    /// parameter servers: ending last, it would drop the participant first, and each of the
+    /// twelve service endpoints then failed to be removed ("Cannot remove Reader/Writer ...
+    /// Disconnected", a RustDDS ERROR line apiece on every node's exit).
     pub fn shutdown(self) {
         let RosNode { node, spinner, context, announcer, .. } = self;
         announcer.stop();
         drop(node);
-        drop(context);
         if let Some(h) = spinner {
             let _ = h.join();
         }
+        drop(context);
     }
 }
 

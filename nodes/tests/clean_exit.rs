@@ -1,0 +1,69 @@
+//! A node binary stopped with SIGINT (as `oilfilm launch` and `ros2 launch` stop it) exits 0
+//! and logs no error on its way out.
+//!
+//! ros2-client's spinner declares its context before the parameter servers, so a spinner that
+//! outlived every other holder of the context dropped the DDS participant first; removing each
+//! of the node's twelve parameter-service endpoints then failed with a RustDDS ERROR line
+//! ("Cannot remove Reader ... Disconnected"), 39 of them at the end of every `oilfilm launch`.
+//! `RosNode::shutdown` now joins the spinner while it still holds the context.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+#[test]
+fn a_node_stopped_with_sigint_exits_0_without_an_error_line() {
+    // A domain of its own (the other DDS tests use 1-219).
+    let domain = 220 + std::process::id() % 12;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_oilfilm-estimator"))
+        .args(["--ros-args", "-r", "__node:=clean_exit", "-r", "__ns:=/oilfilm_test"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting oilfilm-estimator");
+    let stderr = child.stderr.take().expect("stderr is piped");
+    let (tx, rx) = mpsc::channel::<String>();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    // Up once it has applied its parameters: its parameter services exist from then on.
+    let mut log = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !log.iter().any(|l: &String| l.contains("parameters changed")) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(line) => log.push(line),
+            Err(_) => {
+                let _ = child.kill();
+                panic!("the estimator did not start within 30 s:\n{}", log.join("\n"));
+            }
+        }
+    }
+    // Let discovery and the announcer run a moment, as in any real run.
+    std::thread::sleep(Duration::from_millis(1500));
+    let sent = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("running kill");
+    assert!(sent.success(), "kill -INT failed");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("waiting for the estimator") {
+            break s;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("the estimator did not exit within 20 s of SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    reader.join().expect("the stderr reader");
+    log.extend(rx.try_iter());
+    let errors: Vec<&String> = log.iter().filter(|l| l.contains("ERROR")).collect();
+    assert!(status.success(), "exit status {status}:\n{}", log.join("\n"));
+    assert!(errors.is_empty(), "{} error line(s) on the way out:\n{}", errors.len(), log.join("\n"));
+    // The log was read to the end: the node said it was starting and gave its parameters.
+    assert!(log.iter().any(|l| l.contains("starting")), "{}", log.join("\n"));
+}
