@@ -9,6 +9,7 @@
 //! `ros_discovery_info` so a graph that missed its first announcement still lists it
 //! (ADR 0017).
 
+use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use ros2_client::{
@@ -110,15 +111,18 @@ pub fn from_parameter(p: &ParameterValue) -> Value {
 /// Checks a whole parameter set (the typed struct's validation): `Err(reason)` refuses it.
 pub type Validator = Box<dyn Fn(&Map<String, Value>) -> Result<(), String> + Send + Sync>;
 
-/// One ROS 2 node on DDS.
+/// One ROS 2 node on DDS. Dropping it (or [`RosNode::shutdown`]) takes the node off DDS in
+/// the order that leaves no entity behind: see the `Drop` impl.
 pub struct RosNode {
-    context: Context,
-    node: Node,
+    /// Dropped by hand, after `node` and the spinner (`Drop for RosNode`).
+    context: ManuallyDrop<Context>,
+    /// Dropped by hand, first after the announcer (`Drop for RosNode`).
+    node: ManuallyDrop<Node>,
     namespace: String,
     params: Arc<Mutex<Map<String, Value>>>,
     changed: Arc<Mutex<bool>>,
     spinner: Option<std::thread::JoinHandle<()>>,
-    announcer: Announcer,
+    announcer: Option<Announcer>,
 }
 
 /// Re-announces the node on `ros_discovery_info` while it lives.
@@ -236,13 +240,13 @@ impl RosNode {
             .map_err(|e| NodeError::Io { what: "spinner thread".into(), source: e })?;
         let announcer = Announcer::start(&context)?;
         Ok(Self {
-            context,
-            node,
+            context: ManuallyDrop::new(context),
+            node: ManuallyDrop::new(node),
             namespace: args.namespace.clone(),
             params: shared,
             changed,
             spinner: Some(handle),
-            announcer,
+            announcer: Some(announcer),
         })
     }
 
@@ -352,22 +356,34 @@ impl RosNode {
         true
     }
 
-    /// Drops the node (which signals its spinner) and waits for the spinner while this
-    /// still holds the DDS participant, so every entity of the node is removed from a live
-    /// participant; then drops the context, which lets the participant say goodbye to DDS.
+    /// Takes the node off DDS now (what dropping it does; the name says where a node ends).
+    pub fn shutdown(self) {
+        drop(self);
+    }
+}
+
+impl Drop for RosNode {
+    /// Stops the announcer (so ros2-client's farewell, an empty node list, stays the last
+    /// word), drops the node (which signals its spinner), waits for the spinner while this
+    /// still holds the DDS participant, then drops the context, which lets the participant
+    /// say goodbye to DDS. On every path out of a node, errors included.
     ///
     /// The order matters because ros2-client's spinner declares its context before the
-    /// parameter servers: ending last, it would drop the participant first, and each of the
-    /// twelve service endpoints then failed to be removed ("Cannot remove Reader/Writer ...
-    /// Disconnected", a RustDDS ERROR line apiece on every node's exit).
-    pub fn shutdown(self) {
-        let RosNode { node, spinner, context, announcer, .. } = self;
-        announcer.stop();
-        drop(node);
-        if let Some(h) = spinner {
+    /// parameter servers: ending as the context's last holder, it dropped the participant
+    /// first, and removing each of the twelve service endpoints then failed ("Cannot remove
+    /// Reader/Writer ... Disconnected", a RustDDS ERROR line apiece on every node's exit;
+    /// `nodes/tests/clean_exit.rs`).
+    fn drop(&mut self) {
+        if let Some(a) = self.announcer.take() {
+            a.stop();
+        }
+        // SAFETY: `node` is dropped here once, and nothing uses it after: this is `drop`.
+        unsafe { ManuallyDrop::drop(&mut self.node) };
+        if let Some(h) = self.spinner.take() {
             let _ = h.join();
         }
-        drop(context);
+        // SAFETY: as for `node`: dropped here once, never used after.
+        unsafe { ManuallyDrop::drop(&mut self.context) };
     }
 }
 

@@ -5,7 +5,8 @@
 //! outlived every other holder of the context dropped the DDS participant first; removing each
 //! of the node's twelve parameter-service endpoints then failed with a RustDDS ERROR line
 //! ("Cannot remove Reader ... Disconnected"), 39 of them at the end of every `oilfilm launch`.
-//! `RosNode::shutdown` now joins the spinner while it still holds the context.
+//! Dropping a `RosNode` (which `RosNode::shutdown` does) now joins the spinner while it still
+//! holds the context, on every path out of a node.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
