@@ -89,9 +89,11 @@ class Participants:
         self.rediscovered = []
 
     def for_node(self, target):
-        if target in self.missed:
-            return [self.fresh_one()]
-        return [self.first, None]
+        """The participants to try for a service of `target`, in order; the fresh one is
+        made only if the loop asks for it."""
+        if target not in self.missed:
+            yield self.first
+        yield self.fresh_one()
 
     def fresh_one(self):
         if self.fresh is None:
@@ -114,7 +116,7 @@ def call(parts, srv_type, name, request, timeout_s=10.0, discovery_s=20.0):
     # response reader have matched it; with both cores overloaded that has taken over 10 s.
     target = name.rsplit("/", 1)[0]
     for which in parts.for_node(target):
-        executor, node = which if which is not None else parts.fresh_one()
+        executor, node = which
         client = node.create_client(srv_type, name)
         t0 = time.monotonic()
         if not client.wait_for_service(timeout_sec=discovery_s):
