@@ -361,23 +361,37 @@ pub trait CdrElement: CdrField {
 macro_rules! element {
     ($($t:ty: $a:literal),*) => { $( impl CdrElement for $t { const ALIGN: usize = $a; } )* };
 }
-element!(u8: 1, i8: 1, u16: 2, i16: 2, u32: 4, i32: 4, u64: 8, i64: 8, f32: 4, bool: 1, String: 4);
+element!(bool: 1, String: 4);
 
-/// `float64[]` in bulk: the elements of a sequence are contiguous after one alignment (each is
-/// 8 bytes, so every later one is aligned too), so one bounds check and a
-/// `from_le_bytes` per 8-byte chunk replace a checked read per element; the DAQ and
-/// conditioned frames are nearly all float64[].
-impl CdrElement for f64 {
-    const ALIGN: usize = 8;
-    fn read_many(r: &mut CdrReader, n: usize, field: &str) -> Result<Vec<Self>, CdrError> {
-        if n == 0 {
-            return Ok(Vec::new());
+/// Numeric sequences in bulk: the elements of a sequence are contiguous after one alignment
+/// (each is as long as its alignment, so every later one is aligned too), so one bounds check
+/// and a `from_le_bytes` per chunk replace a checked read per element. The DAQ frames'
+/// `int16` counts and float64 values and the conditioned frames' float64 columns are nearly
+/// all of our bytes.
+macro_rules! bulk_element {
+    ($($t:ty),*) => { $(
+        impl CdrElement for $t {
+            const ALIGN: usize = std::mem::size_of::<$t>();
+            fn read_many(r: &mut CdrReader, n: usize, field: &str) -> Result<Vec<Self>, CdrError> {
+                const N: usize = std::mem::size_of::<$t>();
+                if n == 0 {
+                    return Ok(Vec::new());
+                }
+                r.align(N, field)?;
+                let bytes = r.take(n.checked_mul(N).ok_or_else(|| r.error(field, format!("count {n} overflows")))?, field)?;
+                Ok(bytes
+                    .chunks_exact(N)
+                    .map(|b| {
+                        let mut a = [0u8; N];
+                        a.copy_from_slice(b);
+                        <$t>::from_le_bytes(a)
+                    })
+                    .collect())
+            }
         }
-        r.align(8, field)?;
-        let bytes = r.take(n.checked_mul(8).ok_or_else(|| r.error(field, format!("count {n} overflows")))?, field)?;
-        Ok(bytes.chunks_exact(8).map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])).collect())
-    }
+    )* };
 }
+bulk_element!(u8, i8, u16, i16, u32, i32, u64, i64, f32, f64);
 
 fn element_error(e: CdrError, field: &str, i: usize) -> CdrError {
     CdrError {
