@@ -135,7 +135,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
                 values.extend_from_slice(&s.volts);
                 values.extend(std::iter::repeat_n(0.0, case.channels - s.volts.len()));
             }
-            DaqFrame {
+            let mut frame = DaqFrame {
                 header: Header { stamp: epoch.after_samples(first as i64, case.rate_hz).to_time(), frame_id: BEARING_FRAME_ID.into() },
                 sequence: k as u64,
                 first_scan: first,
@@ -147,7 +147,11 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
                 scan_count: scans.len() as u32,
                 values,
                 rig: rig.name.clone(),
-            }
+                ..Default::default()
+            };
+            // As the DAQ node sends them: the 16-bit ADC's counts (its volts are code x LSB).
+            frame.pack_counts(&vec![cal.lsb_v(); case.channels]);
+            frame
         })
         .collect();
 

@@ -86,6 +86,7 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
     let width = channels.len();
     let mut columns = vec![Vec::new(); width];
     let mut next_scan = first.first_scan;
+    let mut decoded = Vec::new();
     for (i, f) in frames.iter().enumerate() {
         if f.channel_names != first.channel_names || f.units != first.units || f.sample_rate_hz != first.sample_rate_hz {
             bail!("{name}: DAQ frame {i} (sequence {}) changes the channel layout, units or rate of frame 0", f.sequence);
@@ -93,10 +94,11 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
         if f.first_scan != next_scan {
             bail!("{name}: DAQ frame {i} (sequence {}) starts at scan {}, expected {next_scan}: the record has a gap", f.sequence, f.first_scan);
         }
-        if f.values.len() != f.scan_count as usize * width {
-            bail!("{name}: DAQ frame {i} (sequence {}) holds {} values for {} scans of {width} channels", f.sequence, f.values.len(), f.scan_count);
-        }
-        for scan in f.values.chunks(width) {
+        let samples = match f.samples(&mut decoded) {
+            Ok(s) => s,
+            Err(reason) => bail!("{name}: DAQ frame {i} (sequence {}): {reason}", f.sequence),
+        };
+        for scan in samples.chunks(width) {
             for (c, v) in columns.iter_mut().zip(scan) {
                 c.push(*v);
             }
@@ -107,7 +109,7 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
         sample_rate_hz: first.sample_rate_hz,
         start_time_s: first.first_scan as f64 / first.sample_rate_hz,
         channels,
-        units: if first.units == oilfilm_msgs::DaqFrame::UNITS_VOLTS { RawUnits::Volts } else { RawUnits::Si },
+        units: if first.units == oilfilm_msgs::DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
         columns,
     };
     let calibration = pipeline::calibration_for(rig, &raw, &first.channel_offsets_s).with_context(|| format!("{name}: the rig's calibration on the frames' schedule"))?;

@@ -44,7 +44,7 @@ fn main() -> anyhow::Result<()> {
                 values.extend_from_slice(&s.volts);
                 values.extend(std::iter::repeat_n(0.0, channels - s.volts.len()));
             }
-            DaqFrame {
+            let mut frame = DaqFrame {
                 header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
                 sequence: k as u64,
                 first_scan: (k * daq_block) as u64,
@@ -56,7 +56,11 @@ fn main() -> anyhow::Result<()> {
                 scan_count: scans.len() as u32,
                 values,
                 rig: rig.name.clone(),
-            }
+                ..Default::default()
+            };
+            // As the DAQ node sends them: the 16-bit ADC's counts.
+            frame.pack_counts(&vec![rig.daq.calibration().lsb_v(); channels]);
+            frame
         })
         .collect();
     println!("{} frames of {daq_block} scans x {channels} channels at {rate} Hz", frames.len());

@@ -30,18 +30,24 @@ fn main() -> anyhow::Result<()> {
         .scans
         .chunks(block)
         .enumerate()
-        .map(|(k, scans)| DaqFrame {
-            header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
-            sequence: k as u64,
-            first_scan: (k * block) as u64,
-            sample_rate_hz: rate,
-            units: DaqFrame::UNITS_VOLTS,
-            channel_names: names.clone(),
-            channel_units: vec!["V".into(); channels],
-            channel_offsets_s: offsets.clone(),
-            scan_count: scans.len() as u32,
-            values: scans.iter().flat_map(|s| s.volts.iter().copied()).collect(),
-            rig: rig.name.clone(),
+        .map(|(k, scans)| {
+            let mut frame = DaqFrame {
+                header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
+                sequence: k as u64,
+                first_scan: (k * block) as u64,
+                sample_rate_hz: rate,
+                units: DaqFrame::UNITS_VOLTS,
+                channel_names: names.clone(),
+                channel_units: vec!["V".into(); channels],
+                channel_offsets_s: offsets.clone(),
+                scan_count: scans.len() as u32,
+                values: scans.iter().flat_map(|s| s.volts.iter().copied()).collect(),
+                rig: rig.name.clone(),
+                ..Default::default()
+            };
+            // As the DAQ node sends them: the 16-bit ADC's counts.
+            frame.pack_counts(&vec![cal.lsb_v(); channels]);
+            frame
         })
         .collect();
     // The conditioner's share, both chains, timed the same way as the estimator below.

@@ -201,6 +201,8 @@ pub struct ConditionerCore {
     stream: Option<Stream>,
     work: Conditioned,
     sequence: u64,
+    /// A UNITS_COUNTS frame's samples in volts (`DaqFrame::samples`), reused.
+    decoded: Vec<f64>,
 }
 
 impl ConditionerCore {
@@ -215,6 +217,7 @@ impl ConditionerCore {
             stream: None,
             work: Conditioned::default(),
             sequence: 0,
+            decoded: Vec::new(),
         })
     }
 
@@ -232,7 +235,16 @@ impl ConditionerCore {
     /// Takes one DAQ frame; returns the conditioned frames it completes. `Err` for a frame
     /// that cannot be used (it is skipped; the stream goes on).
     pub fn push(&mut self, frame: &DaqFrame) -> Result<Vec<ConditionedFrame>, NodeError> {
+        let mut decoded = std::mem::take(&mut self.decoded);
+        let out = self.push_samples(frame, &mut decoded);
+        self.decoded = decoded;
+        out
+    }
+
+    fn push_samples(&mut self, frame: &DaqFrame, decoded: &mut Vec<f64>) -> Result<Vec<ConditionedFrame>, NodeError> {
         let (kept, n_scans) = self.check(frame)?;
+        // `check` accepted the samples' layout, so this is the frame's values or its counts in volts.
+        let samples = frame.samples(decoded).map_err(|reason| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason })?;
         let channels: Vec<ChannelId> = kept.iter().map(|(_, id)| *id).collect();
         let offsets: Vec<f64> = kept.iter().map(|(c, _)| frame.channel_offsets_s[*c]).collect();
         let restart = match &self.stream {
@@ -258,7 +270,7 @@ impl ConditionerCore {
         if let Some(c) = stream.causal.as_mut() {
             c.rows.clear();
             for k in 0..n_scans {
-                let row = &frame.values[k * width..(k + 1) * width];
+                let row = &samples[k * width..(k + 1) * width];
                 c.rows.extend(kept.iter().map(|&(col, _)| row[col]));
             }
             // Whole rows of the stream's channels by construction: this cannot fail.
@@ -285,7 +297,7 @@ impl ConditionerCore {
             return Ok(out);
         }
         for (col, (c, _)) in stream.columns.iter_mut().zip(&kept) {
-            col.extend(frame.values[*c..].iter().step_by(width).take(n_scans));
+            col.extend(samples[*c..].iter().step_by(width).take(n_scans));
         }
         let mut out = Vec::new();
         while let Some(stream) = self.stream.as_ref() {
@@ -307,12 +319,7 @@ impl ConditionerCore {
             return Err(bad(format!("{} channel_offsets_s for {width} channel_names", frame.channel_offsets_s.len())));
         }
         let n = frame.scan_count as usize;
-        if frame.values.len() != n.saturating_mul(width) {
-            return Err(bad(format!("{} values, but scan_count {n} x {width} channels = {}", frame.values.len(), n.saturating_mul(width))));
-        }
-        if frame.units != DaqFrame::UNITS_SI && frame.units != DaqFrame::UNITS_VOLTS {
-            return Err(bad(format!("units = {} is neither UNITS_SI (0) nor UNITS_VOLTS (1)", frame.units)));
-        }
+        frame.check_samples().map_err(bad)?;
         if frame.rig != self.rig.name {
             return Err(bad(format!("frame from rig `{}`, but this conditioner has the calibration of rig `{}` (parameter `rig`)", frame.rig, self.rig.name)));
         }

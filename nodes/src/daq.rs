@@ -185,6 +185,9 @@ pub struct SimDaqCore {
     exciting: bool,
     /// Blocks run without (complete) setpoints.
     pub blocks_without_setpoints: u64,
+    /// The ADC's volts per count when its codes fit `int16` (up to 16 bits): the frames then
+    /// carry the codes (UNITS_COUNTS), as a card's driver delivers them; volts otherwise.
+    volts_per_count: Option<f64>,
 }
 
 impl SimDaqCore {
@@ -203,7 +206,6 @@ impl SimDaqCore {
             rate_hz: rig.daq.sample_rate_hz,
             sim,
             rig_name: rig.name.clone(),
-            calibration,
             channels,
             offsets_s,
             epoch,
@@ -216,6 +218,8 @@ impl SimDaqCore {
             temperature_c: rig.operating.bearing_temperature_c,
             exciting: false,
             blocks_without_setpoints: 0,
+            volts_per_count: (calibration.adc_bits() <= 16).then(|| calibration.lsb_v()),
+            calibration,
         })
     }
 
@@ -261,13 +265,22 @@ impl SimDaqCore {
         }
         let first_scan = self.next_scan;
         let n = self.block_scans;
-        let mut values = Vec::with_capacity(n * self.channels.len());
+        let width = self.channels.len();
+        let (mut values, mut counts) = match self.volts_per_count {
+            Some(_) => (Vec::new(), Vec::with_capacity(n * width)),
+            None => (Vec::with_capacity(n * width), Vec::new()),
+        };
         for i in 1..=n as u64 {
             let scan = first_scan + i;
             let at = self.epoch.after_samples(scan as i64, self.rate_hz);
             let input = RigInput { exciter_n: self.setpoints.at(at) };
             let s = self.sim.step(&input, scan as f64 * self.sim.period_s())?;
-            values.extend_from_slice(&s.scan.volts);
+            match self.volts_per_count {
+                // The ADC clamps its codes to its bits (<= 16 here), so they fit; the volts it
+                // reports are `code * LSB`, exactly what the conditioner makes of the count.
+                Some(_) => counts.extend(s.scan.counts.iter().map(|&q| i16::try_from(q).unwrap_or(if q < 0 { i16::MIN } else { i16::MAX }))),
+                None => values.extend_from_slice(&s.scan.volts),
+            }
             self.static_load_n = s.truth.bellows_n;
             self.temperature_c = s.truth.temperature_c;
             self.exciting = input.exciter_n.iter().any(|f| *f != 0.0);
@@ -278,13 +291,15 @@ impl SimDaqCore {
             sequence: self.sequence,
             first_scan,
             sample_rate_hz: self.rate_hz,
-            units: DaqFrame::UNITS_VOLTS,
+            units: if self.volts_per_count.is_some() { DaqFrame::UNITS_COUNTS } else { DaqFrame::UNITS_VOLTS },
             channel_names: self.channels.iter().map(|c| c.name().to_string()).collect(),
-            channel_units: vec!["V".to_string(); self.channels.len()],
+            channel_units: vec!["V".to_string(); width],
             channel_offsets_s: self.offsets_s.clone(),
             scan_count: n as u32,
             values,
             rig: self.rig_name.clone(),
+            volts_per_count: self.volts_per_count.map_or_else(Vec::new, |lsb| vec![lsb; width]),
+            counts,
         };
         self.sequence += 1;
         Ok(frame)

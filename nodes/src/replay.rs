@@ -274,6 +274,9 @@ impl ReplayCore {
             scan_count: block.scans as u32,
             rig: s.header.rig.clone(),
             values: block.values,
+            // An ASCII record holds volts or SI, whatever card wrote it: they go as they are.
+            volts_per_count: Vec::new(),
+            counts: Vec::new(),
         };
         self.sequence += 1;
         let mut message = format!("{} of {}; {}", self.kind, self.reader.file_name(), s.speed_note);

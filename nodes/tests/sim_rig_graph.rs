@@ -93,7 +93,10 @@ fn recovers_and_replays(chain: &str) {
 
     // The DAQ node's frames are the offline simulator's record, bit for bit.
     let offline = simulate::simulate(&rig, &plan, 21.0, SimulateOptions { keep_states: false }, &mut |_| {}).unwrap();
-    let volts: Vec<f64> = rec.frames.iter().flat_map(|f| f.values.iter().copied()).collect();
+    // It sends the 16-bit ADC's counts; times its LSB they are the simulator's volts, exactly.
+    assert!(rec.frames.iter().all(|f| f.units == oilfilm_msgs::DaqFrame::UNITS_COUNTS && f.values.is_empty()));
+    let mut buf = Vec::new();
+    let volts: Vec<f64> = rec.frames.iter().flat_map(|f| f.samples(&mut buf).unwrap().to_vec()).collect();
     let expected: Vec<f64> = offline.scans.iter().flat_map(|s| s.volts.iter().copied()).collect();
     assert_eq!(volts.len(), expected.len());
     assert!(volts.iter().zip(&expected).all(|(a, b)| a.to_bits() == b.to_bits()), "graph DAQ differs from `oilfilm simulate`");
@@ -103,8 +106,10 @@ fn recovers_and_replays(chain: &str) {
 fn recut(frames: &[DaqFrame], size: usize) -> Vec<DaqFrame> {
     let first = &frames[0];
     let width = first.channel_names.len();
+    // The DAQ node sends its 16-bit ADC's counts; the recut frames carry them the same way.
     let values: Vec<f64> = frames.iter().flat_map(|f| f.values.iter().copied()).collect();
-    let scans = values.len() / width;
+    let counts: Vec<i16> = frames.iter().flat_map(|f| f.counts.iter().copied()).collect();
+    let scans = (values.len() + counts.len()) / width;
     let t0 = oilfilm_nodes::stamp::Stamp::from_time(&first.header.stamp);
     (0..scans)
         .step_by(size)
@@ -116,7 +121,8 @@ fn recut(frames: &[DaqFrame], size: usize) -> Vec<DaqFrame> {
                 sequence: k as u64,
                 first_scan: first.first_scan + s as u64,
                 scan_count: n as u32,
-                values: values[s * width..(s + n) * width].to_vec(),
+                values: values.get(s * width..(s + n) * width).map_or_else(Vec::new, <[f64]>::to_vec),
+                counts: counts.get(s * width..(s + n) * width).map_or_else(Vec::new, <[i16]>::to_vec),
                 ..first.clone()
             }
         })
@@ -171,7 +177,7 @@ fn lost_frame(chain: &str) {
     }
     // Frames from another rig or malformed are skipped, the stream goes on.
     let mut bad = rec.frames[..5].to_vec();
-    bad[2].values.pop();
+    bad[2].counts.pop();
     bad[3].rig = "other".into();
     let out = reanalyse(&rig, &p.conditioner, &p.estimator, &bad, &rec.status).unwrap();
     assert!(out.conditioned.iter().all(|c| c.first_sample + (c.x_m.len() as u64) <= 1000));

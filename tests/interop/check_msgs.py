@@ -130,7 +130,23 @@ def daq_cases():
     v.scan_count = 1
     v.values = [1.25, -0.5, 9.999]
     v.rig = "zhou2004.toml"
-    return [("si_two_scans", m), ("volts_empty_offsets", v)]
+    # ADC counts: values empty, the int16 sequence after the float64 one (an odd count of
+    # them, a rig name that leaves the float64[] length unaligned).
+    c = DaqFrame()
+    c.header = header(7, 8)
+    c.sequence = 2
+    c.first_scan = 1000
+    c.sample_rate_hz = 5000.0
+    c.units = DaqFrame.UNITS_COUNTS
+    c.channel_names = ["probe_a_x", "f1", "temperature"]
+    c.channel_units = ["V", "V", "V"]
+    c.channel_offsets_s = [0.0, 1e-5, 2e-5]
+    c.scan_count = 1
+    c.values = []
+    c.rig = "zhou"
+    c.volts_per_count = [20.0 / 65536] * 3
+    c.counts = [-32768, 1234, 32767]
+    return [("si_two_scans", m), ("volts_empty_offsets", v), ("counts_int16", c)]
 
 
 def conditioned_cases():

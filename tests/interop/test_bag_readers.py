@@ -116,8 +116,9 @@ def build_field(ts, desc, v):
         return v
     inner, _n = arg
     if inner[0].name == "BASE" and inner[1][0] not in ("string", "wstring"):
-        dtype = {"float64": np.float64, "float32": np.float32, "uint8": np.uint8, "bool": np.bool_,
-                 "uint32": np.uint32, "int32": np.int32, "uint64": np.uint64, "int64": np.int64}[inner[1][0]]
+        dtype = {"float64": np.float64, "float32": np.float32, "uint8": np.uint8, "int8": np.int8, "bool": np.bool_,
+                 "uint16": np.uint16, "int16": np.int16, "uint32": np.uint32, "int32": np.int32,
+                 "uint64": np.uint64, "int64": np.int64}[inner[1][0]]
         return np.array(v, dtype=dtype)
     return [build_field(ts, inner, x) for x in v]
 

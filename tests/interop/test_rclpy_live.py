@@ -211,8 +211,12 @@ def main():
             check(len(got[t]) > 0, f"echo received {len(got[t])} message(s) on {NS}/{t}")
         frames = list(got["daq/frames"])
         check(all(list(f.channel_names) == CHANNELS for f in frames), "DaqFrame channel names are the rig's ten, in scan order")
-        check(all(len(f.values) == f.scan_count * 10 and f.units == DaqFrame.UNITS_VOLTS and f.sample_rate_hz == 5000.0 for f in frames),
-              "DaqFrame shapes: values = scan_count x 10 volts at 5 kHz")
+        check(all(len(f.counts) == f.scan_count * 10 and len(f.values) == 0 and f.units == DaqFrame.UNITS_COUNTS
+                  and f.sample_rate_hz == 5000.0 for f in frames),
+              "DaqFrame shapes: counts = scan_count x 10 ADC codes at 5 kHz, values empty")
+        lsb = 20.0 / 65536
+        check(all(list(f.volts_per_count) == [lsb] * 10 for f in frames), "volts_per_count = the 16-bit +-10 V card's LSB on every channel")
+        check(any(max(abs(int(q)) for q in f.counts) > 100 for f in frames), "the counts move (the rig is turning and excited)")
         check(all(b.first_scan == a.first_scan + a.scan_count for a, b in zip(frames, frames[1:])), "DaqFrames are consecutive (no scan lost)")
         check(all(abs(o - 1e-5 * i) < 1e-12 for f in frames[:1] for i, o in enumerate(f.channel_offsets_s)), "channel offsets = the card's 10 us multiplex schedule")
         st = got["rig/status"][-1]

@@ -110,8 +110,16 @@ def main():
                         for h, w in zip(have, want))
         check(stamps_ok, f"{t}: header stamps are the recorded ones, in order")
         if ty == "oilfilm_msgs/msg/DaqFrame":
-            check(all(h.sequence == w["value"]["sequence"] and all(same(a, b) for a, b in zip(h.values.tolist(), w["value"]["values"]))
-                      for h, w in zip(have, want)), f"{t}: frame sequences and values as recorded")
+            # Samples are in values (SI, volts) or counts (the ADC's codes, as the DAQ node
+            # sends them): both compared whole, and the frames must hold some.
+            def same_samples(h, w):
+                v = w["value"]
+                return (h.sequence == v["sequence"] and h.units == v["units"]
+                        and len(h.values) == len(v["values"]) and all(same(a, b) for a, b in zip(h.values.tolist(), v["values"]))
+                        and h.counts.tolist() == v.get("counts", []) and h.volts_per_count.tolist() == v.get("volts_per_count", []))
+            check(all(same_samples(h, w) for h, w in zip(have, want)), f"{t}: frame sequences, units and samples as recorded")
+            check(all(len(w["value"]["values"]) + len(w["value"].get("counts", [])) > 0 for w in want),
+                  f"{t}: every recorded frame holds samples ({sum(len(w['value'].get('counts', [])) for w in want)} counts)")
     node.destroy_node()
     rclpy.shutdown()
     print("rclpy player interop: " + ("ok" if not failures else f"{len(failures)} failure(s)"))

@@ -88,7 +88,10 @@ fn every_topic_round_trips_byte_for_byte_and_decodes() {
             OilfilmMessage::ExciterCommand(m) => oilfilm_msgs::encode(&m),
             OilfilmMessage::DaqFrame(m) => {
                 frames += 1;
-                assert!(!m.values.is_empty());
+                // The simulated 16-bit card's frames carry its counts (ADR 0018).
+                assert_eq!(m.units, oilfilm_msgs::DaqFrame::UNITS_COUNTS);
+                assert!(m.values.is_empty() && !m.counts.is_empty());
+                m.check_samples().unwrap();
                 oilfilm_msgs::encode(&m)
             }
             OilfilmMessage::ConditionedFrame(m) => oilfilm_msgs::encode(&m),

@@ -47,6 +47,7 @@ fn frame(i: u64, t_ns: u64) -> DaqFrame {
         scan_count: scans,
         values: (0..scans as u64 * 10).map(|k| ((i * 1000 + k) as f64 * 0.37).sin()).collect(),
         rig: "zhou2004".into(),
+        ..Default::default()
     }
 }
 

@@ -22,6 +22,12 @@ pub use cdr::{
 };
 
 /// Declares a message struct and derives its CDR form and field table, in field order.
+///
+/// Fields in an optional `appended { .. }` block follow the others and were added to the
+/// .msg after messages without them were recorded: a message whose data ends where they
+/// would begin (at most 3 bytes of padding left) decodes with all of them at their default
+/// (empty), so old bags stay readable; otherwise all must be present. Only for top-level messages (none is nested in another) whose
+/// appended fields are sequences, so "absent" and "empty" cannot be confused with data.
 #[macro_export]
 macro_rules! ros_message {
     (
@@ -29,6 +35,9 @@ macro_rules! ros_message {
         pub struct $name:ident = $type_name:literal, definition = $definition:expr; {
             $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
         }
+        $( appended {
+            $( $(#[$ameta:meta])* pub $afield:ident : $aty:ty ),* $(,)?
+        } )?
         constants { $( $cname:ident : $cty:ty = $cval:literal as $cros:literal ),* $(,)? }
     ) => {
         $(#[$meta])*
@@ -36,6 +45,7 @@ macro_rules! ros_message {
         #[serde(deny_unknown_fields)]
         pub struct $name {
             $( $(#[$fmeta])* pub $field: $ty, )*
+            $( $( #[serde(default)] $(#[$ameta])* pub $afield: $aty, )* )?
         }
 
         impl $name {
@@ -51,12 +61,24 @@ macro_rules! ros_message {
             const MIN_BYTES: usize = 0 $( + <$ty as $crate::cdr::CdrField>::MIN_BYTES )*;
             fn write(&self, w: &mut $crate::cdr::CdrWriter) {
                 $( $crate::cdr::CdrField::write(&self.$field, w); )*
+                $( $( $crate::cdr::CdrField::write(&self.$afield, w); )* )?
             }
             fn read(r: &mut $crate::cdr::CdrReader, field: &str) -> Result<Self, $crate::cdr::CdrError> {
-                Ok(Self {
-                    $( $field: <$ty as $crate::cdr::CdrField>::read(r, stringify!($field))
-                        .map_err(|e| if field.is_empty() { e } else { e.within(field) })?, )*
-                })
+                $( let $field = <$ty as $crate::cdr::CdrField>::read(r, stringify!($field))
+                    .map_err(|e| if field.is_empty() { e } else { e.within(field) })?; )*
+                $(
+                    // A message written before the appended fields existed ends (at most 3
+                    // bytes of padding left) where they would start: all take their default.
+                    // Otherwise all must be there, so a cut between them is an error.
+                    let absent = r.remaining() <= 3;
+                    $( let $afield = if absent {
+                        Default::default()
+                    } else {
+                        <$aty as $crate::cdr::CdrField>::read(r, stringify!($afield))
+                            .map_err(|e| if field.is_empty() { e } else { e.within(field) })?
+                    }; )*
+                )?
+                Ok(Self { $( $field, )* $( $( $afield, )* )? })
             }
         }
 
@@ -64,7 +86,10 @@ macro_rules! ros_message {
             const TYPE_NAME: &'static str = $type_name;
             const DEFINITION: &'static str = $definition;
             fn fields() -> Vec<(&'static str, String)> {
-                vec![ $( (stringify!($field), <$ty as $crate::cdr::CdrField>::ros_type()) ),* ]
+                vec![
+                    $( (stringify!($field), <$ty as $crate::cdr::CdrField>::ros_type()), )*
+                    $( $( (stringify!($afield), <$aty as $crate::cdr::CdrField>::ros_type()), )* )?
+                ]
             }
             const CONSTANTS: &'static [(&'static str, &'static str, &'static str)] =
                 &[ $( (stringify!($cname), $cros, stringify!($cval)) ),* ];
@@ -207,9 +232,110 @@ ros_message! {
         pub values: Vec<f64>,
         pub rig: String,
     }
+    appended {
+        pub volts_per_count: Vec<f64>,
+        pub counts: Vec<i16>,
+    }
     constants {
         UNITS_SI: u8 = 0 as "uint8",
         UNITS_VOLTS: u8 = 1 as "uint8",
+        UNITS_COUNTS: u8 = 2 as "uint8",
+    }
+}
+
+impl DaqFrame {
+    /// Checks that the samples are where `units` says and as many as `scan_count` times the
+    /// channels: `values` for UNITS_SI and UNITS_VOLTS (`counts` and `volts_per_count` empty);
+    /// `counts` and one finite, positive `volts_per_count` per channel for UNITS_COUNTS
+    /// (`values` empty). The error names the field.
+    pub fn check_samples(&self) -> Result<(), String> {
+        let width = self.channel_names.len();
+        let n = (self.scan_count as usize).saturating_mul(width);
+        let expect = |field: &str, got: usize| {
+            if got == n {
+                Ok(())
+            } else {
+                Err(format!("{got} {field}, but scan_count {} x {width} channels = {n}", self.scan_count))
+            }
+        };
+        let must_be_empty = |field: &str, len: usize, units: &str| {
+            if len == 0 {
+                Ok(())
+            } else {
+                Err(format!("{field} holds {len} element(s); it must be empty with {units}"))
+            }
+        };
+        match self.units {
+            Self::UNITS_SI | Self::UNITS_VOLTS => {
+                let units = if self.units == Self::UNITS_SI { "UNITS_SI" } else { "UNITS_VOLTS" };
+                expect("values", self.values.len())?;
+                must_be_empty("counts", self.counts.len(), units)?;
+                must_be_empty("volts_per_count", self.volts_per_count.len(), units)
+            }
+            Self::UNITS_COUNTS => {
+                expect("counts", self.counts.len())?;
+                must_be_empty("values", self.values.len(), "UNITS_COUNTS")?;
+                if self.volts_per_count.len() != width {
+                    return Err(format!("{} volts_per_count for {width} channel_names", self.volts_per_count.len()));
+                }
+                match self.volts_per_count.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+                    Some(c) => Err(format!(
+                        "volts_per_count[{c}] (channel `{}`) = {}: must be finite and > 0",
+                        self.channel_names[c], self.volts_per_count[c]
+                    )),
+                    None => Ok(()),
+                }
+            }
+            other => Err(format!(
+                "units = {other} is none of UNITS_SI (0), UNITS_VOLTS (1), UNITS_COUNTS (2)"
+            )),
+        }
+    }
+
+    /// The scan-major samples as `values` would hold them, in the channel's SI unit or in
+    /// volts: `values` itself, or for UNITS_COUNTS each count times its channel's
+    /// `volts_per_count`, written into `buf` (its contents replaced). After
+    /// [`DaqFrame::check_samples`]; an error from it otherwise.
+    pub fn samples<'a>(&'a self, buf: &'a mut Vec<f64>) -> Result<&'a [f64], String> {
+        self.check_samples()?;
+        if self.units != Self::UNITS_COUNTS {
+            return Ok(&self.values);
+        }
+        buf.clear();
+        buf.reserve(self.counts.len());
+        let width = self.volts_per_count.len();
+        if width > 0 {
+            for scan in self.counts.chunks_exact(width) {
+                buf.extend(scan.iter().zip(&self.volts_per_count).map(|(&q, &lsb)| f64::from(q) * lsb));
+            }
+        }
+        Ok(buf)
+    }
+
+    /// `UNITS_VOLTS` samples (scan-major, as `values` holds them) as `UNITS_COUNTS`, when every
+    /// one is an exact multiple of its channel's `volts_per_count` within `int16`: then the
+    /// frame's `counts` decode to the very same `f64`s, so nothing downstream changes but the
+    /// bytes. `false` (and nothing changed) otherwise: the frame stays in volts.
+    pub fn pack_counts(&mut self, volts_per_count: &[f64]) -> bool {
+        let width = self.channel_names.len();
+        if self.units != Self::UNITS_VOLTS || volts_per_count.len() != width || width == 0 || !self.values.len().is_multiple_of(width) {
+            return false;
+        }
+        let mut counts = Vec::with_capacity(self.values.len());
+        for scan in self.values.chunks_exact(width) {
+            for (&v, &lsb) in scan.iter().zip(volts_per_count) {
+                let q = (v / lsb).round();
+                if !(q >= f64::from(i16::MIN) && q <= f64::from(i16::MAX)) || q * lsb != v {
+                    return false;
+                }
+                counts.push(q as i16);
+            }
+        }
+        self.units = Self::UNITS_COUNTS;
+        self.values = Vec::new();
+        self.counts = counts;
+        self.volts_per_count = volts_per_count.to_vec();
+        true
     }
 }
 

@@ -20,13 +20,131 @@ fn sample_daq() -> DaqFrame {
     }
 }
 
+/// The same frame with counts: both appended fields present.
+fn sample_counts() -> DaqFrame {
+    DaqFrame {
+        units: DaqFrame::UNITS_COUNTS,
+        values: Vec::new(),
+        volts_per_count: vec![3.0e-4, 3.0e-4],
+        counts: vec![-7, 12_000],
+        ..sample_daq()
+    }
+}
+
+oilfilm_msgs::ros_message! {
+    /// `DaqFrame` as first released, before `volts_per_count` and `counts` were appended: what
+    /// a bag recorded then holds.
+    pub struct DaqFrameV1 = "oilfilm_msgs/msg/DaqFrame", definition = ""; {
+        pub header: Header,
+        pub sequence: u64,
+        pub first_scan: u64,
+        pub sample_rate_hz: f64,
+        pub units: u8,
+        pub channel_names: Vec<String>,
+        pub channel_units: Vec<String>,
+        pub channel_offsets_s: Vec<f64>,
+        pub scan_count: u32,
+        pub values: Vec<f64>,
+        pub rig: String,
+    }
+    constants {}
+}
+
+/// The fields a first-release writer would have sent of `f`.
+fn as_v1(f: &DaqFrame) -> DaqFrameV1 {
+    DaqFrameV1 {
+        header: f.header.clone(),
+        sequence: f.sequence,
+        first_scan: f.first_scan,
+        sample_rate_hz: f.sample_rate_hz,
+        units: f.units,
+        channel_names: f.channel_names.clone(),
+        channel_units: f.channel_units.clone(),
+        channel_offsets_s: f.channel_offsets_s.clone(),
+        scan_count: f.scan_count,
+        values: f.values.clone(),
+        rig: f.rig.clone(),
+    }
+}
+
 #[test]
 fn every_truncation_is_an_error_not_a_panic() {
-    let bytes = encode(&sample_daq());
+    let bytes = encode(&sample_counts());
+    // The appended fields follow the first release's bytes unchanged: a cut where those end
+    // (or in the padding after them) is a complete old frame, every other cut an error.
+    let old = encode(&as_v1(&sample_counts()));
+    assert_eq!(bytes[..old.len()], old[..]);
+    let mut complete_old = 0;
     for n in 0..bytes.len() {
-        let e = decode::<DaqFrame>(&bytes[..n]).expect_err("truncated");
-        assert!(e.offset <= n, "{e}");
+        match decode::<DaqFrame>(&bytes[..n]) {
+            Err(e) => assert!(e.offset <= n, "{e}"),
+            Ok(f) => {
+                assert!((old.len()..old.len() + 4).contains(&n), "a cut at {n} of {} decoded: {f:?}", bytes.len());
+                assert!(f.counts.is_empty() && f.volts_per_count.is_empty(), "{f:?}");
+                complete_old += 1;
+            }
+        }
     }
+    assert!(complete_old >= 1, "the cut at the first release's end ({}) must decode", old.len());
+}
+
+#[test]
+fn a_frame_recorded_before_the_appended_fields_decodes_with_them_empty() {
+    let volts = DaqFrame {
+        first_scan: 9,
+        sample_rate_hz: 5000.0,
+        units: DaqFrame::UNITS_VOLTS,
+        channel_units: vec!["V".into(), "V".into()],
+        values: vec![0.25, -1.5],
+        ..sample_daq()
+    };
+    let old = encode(&as_v1(&volts));
+    let now: DaqFrame = decode_exact(&old).expect("an old frame decodes");
+    assert_eq!(now, volts);
+    now.check_samples().expect("an old frame's samples are where its units say");
+    // And a frame with counts carries them through a round trip.
+    let c = sample_counts();
+    assert_eq!(decode_exact::<DaqFrame>(&encode(&c)).expect("round trip"), c);
+}
+
+#[test]
+fn samples_decode_counts_and_name_what_is_inconsistent() {
+    let c = sample_counts();
+    let mut buf = vec![99.0];
+    assert_eq!(c.samples(&mut buf).expect("counts"), [-7.0 * 3.0e-4, 12_000.0 * 3.0e-4]);
+    let v = sample_daq();
+    assert_eq!(v.samples(&mut buf).expect("values"), [1.0, 2.0]);
+    let cases: [(DaqFrame, &str); 6] = [
+        (DaqFrame { counts: vec![1], ..sample_counts() }, "1 counts, but scan_count 1 x 2 channels = 2"),
+        (DaqFrame { volts_per_count: vec![3.0e-4], ..sample_counts() }, "1 volts_per_count for 2 channel_names"),
+        (DaqFrame { volts_per_count: vec![3.0e-4, f64::NAN], ..sample_counts() }, "volts_per_count[1] (channel `f2`) = NaN"),
+        (DaqFrame { values: vec![1.0, 2.0], ..sample_counts() }, "values holds 2 element(s); it must be empty with UNITS_COUNTS"),
+        (DaqFrame { counts: vec![1, 2], ..sample_daq() }, "counts holds 2 element(s); it must be empty with UNITS_SI"),
+        (DaqFrame { units: 7, ..sample_daq() }, "units = 7 is none of"),
+    ];
+    for (frame, want) in cases {
+        let e = frame.samples(&mut buf).expect_err(want);
+        assert!(e.contains(want), "{e} (wanted `{want}`)");
+    }
+}
+
+#[test]
+fn pack_counts_only_when_lossless() {
+    let lsb = 2.0 * 10.0 / 65536.0;
+    let volts = DaqFrame { units: DaqFrame::UNITS_VOLTS, values: vec![-7.0 * lsb, 12_000.0 * lsb], ..sample_daq() };
+    let mut packed = volts.clone();
+    assert!(packed.pack_counts(&[lsb, lsb]));
+    assert_eq!((packed.units, packed.counts.as_slice(), packed.values.len()), (DaqFrame::UNITS_COUNTS, &[-7i16, 12_000][..], 0));
+    let mut buf = Vec::new();
+    assert_eq!(packed.samples(&mut buf).expect("counts"), volts.values, "the counts decode to the very same volts");
+    for values in [vec![0.3 * lsb, 0.0], vec![40_000.0 * lsb, 0.0], vec![f64::NAN, 0.0]] {
+        let mut f = DaqFrame { values, ..volts.clone() };
+        let before = format!("{f:?}");
+        assert!(!f.pack_counts(&[lsb, lsb]), "{before}");
+        assert_eq!(format!("{f:?}"), before, "unchanged when not lossless (compared as text: NaN)");
+    }
+    let mut si = sample_daq();
+    assert!(!si.pack_counts(&[lsb, lsb]), "SI values are not counts");
 }
 
 #[test]

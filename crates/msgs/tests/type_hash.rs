@@ -14,7 +14,7 @@ const ROSIDL: &[(&str, &str)] = &[
     ("builtin_interfaces/msg/Time", "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197"),
     ("std_msgs/msg/Header", "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01"),
     ("oilfilm_msgs/msg/ExciterCommand", "RIHS01_3f0168b421d1e2f74d09080d63e8122a131876379f54f12b3cf3474b403da50d"),
-    ("oilfilm_msgs/msg/DaqFrame", "RIHS01_6586b9fe8c7fc49f669696391660bb917cbaaf96c70c88d3dcadf163fe0e879b"),
+    ("oilfilm_msgs/msg/DaqFrame", "RIHS01_c585104ebcfacd42cf1edf9c7e0f8e30514a750d29ebc98c3ec9061ad3e29dcd"),
     ("oilfilm_msgs/msg/ConditionedFrame", "RIHS01_633b5d90c5b55cb9db92692e77cc0d9acf4fbf0abb6f9ace2856033bf3f0f6bf"),
     ("oilfilm_msgs/msg/CoefficientEstimate", "RIHS01_87439f95ec86f7e098f608d8472d186def30124d2281d58163d57711d7450643"),
     ("oilfilm_msgs/msg/RigStatus", "RIHS01_28c780a23e00861cbda92acad04db9fe1a69aff3a04446204d23b7b288fc9c8b"),
