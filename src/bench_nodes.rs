@@ -23,7 +23,7 @@ use oilfilm_identification::conditioning::{self, RawRecord, RawUnits};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::calibration_for;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
+use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame};
 use oilfilm_nodes::conditioner::{Chain, ConditionerParams};
 use oilfilm_nodes::dds::RosNode;
 use oilfilm_nodes::params::NodeArgs;
@@ -117,43 +117,9 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     eprintln!("done");
     let cal = rig.daq.calibration();
     let order = cal.scan_order();
-    let mut names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
-    let mut offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
-    for k in names.len()..case.channels {
-        names.push(format!("aux_{k}"));
-        offsets.push(k as f64 * rig.daq.channel_interval_s);
-    }
+    let offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
     let epoch = Stamp::now();
-    let frames: Vec<DaqFrame> = rec
-        .scans
-        .chunks(case.daq_block)
-        .enumerate()
-        .map(|(k, scans)| {
-            let first = (k * case.daq_block) as u64;
-            let mut values = Vec::with_capacity(scans.len() * case.channels);
-            for s in scans {
-                values.extend_from_slice(&s.volts);
-                values.extend(std::iter::repeat_n(0.0, case.channels - s.volts.len()));
-            }
-            let mut frame = DaqFrame {
-                header: Header { stamp: epoch.after_samples(first as i64, case.rate_hz).to_time(), frame_id: BEARING_FRAME_ID.into() },
-                sequence: k as u64,
-                first_scan: first,
-                sample_rate_hz: case.rate_hz,
-                units: DaqFrame::UNITS_VOLTS,
-                channel_names: names.clone(),
-                channel_units: vec!["V".into(); case.channels],
-                channel_offsets_s: offsets.clone(),
-                scan_count: scans.len() as u32,
-                values,
-                rig: rig.name.clone(),
-                ..Default::default()
-            };
-            // As the DAQ node sends them: the 16-bit ADC's counts (its volts are code x LSB).
-            frame.pack_counts(&vec![cal.lsb_v(); case.channels]);
-            frame
-        })
-        .collect();
+    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, case.daq_block, case.channels, epoch)?;
 
     // The conditioner's edge (zero-phase: the scans past a block it waits for; causal: the
     // scans past a sample) and its first sample, as it will compute them.

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_msgs::{DaqFrame, Header, BEARING_FRAME_ID};
+use oilfilm_nodes::stamp::Stamp;
 use oilfilm_nodes::conditioner::{ConditionerCore, ConditionerParams};
 use oilfilm_identification::estimator::spectrum::LineSearch;
 use oilfilm_identification::estimator::solve::ScaledFactor;
@@ -26,43 +26,7 @@ fn main() -> anyhow::Result<()> {
     rig.daq.sample_rate_hz = rate;
     rig.daq.channel_interval_s = 1.0 / (rate * channels as f64);
     let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 300.0), seconds, SimulateOptions::default(), &mut |_| {})?;
-    let cal = rig.daq.calibration();
-    let order = cal.scan_order();
-    let mut names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
-    let mut offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
-    for k in names.len()..channels {
-        names.push(format!("aux_{k}"));
-        offsets.push(k as f64 * rig.daq.channel_interval_s);
-    }
-    let frames: Vec<DaqFrame> = rec
-        .scans
-        .chunks(daq_block)
-        .enumerate()
-        .map(|(k, scans)| {
-            let mut values = Vec::with_capacity(scans.len() * channels);
-            for s in scans {
-                values.extend_from_slice(&s.volts);
-                values.extend(std::iter::repeat_n(0.0, channels - s.volts.len()));
-            }
-            let mut frame = DaqFrame {
-                header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
-                sequence: k as u64,
-                first_scan: (k * daq_block) as u64,
-                sample_rate_hz: rate,
-                units: DaqFrame::UNITS_VOLTS,
-                channel_names: names.clone(),
-                channel_units: vec!["V".into(); channels],
-                channel_offsets_s: offsets.clone(),
-                scan_count: scans.len() as u32,
-                values,
-                rig: rig.name.clone(),
-                ..Default::default()
-            };
-            // As the DAQ node sends them: the 16-bit ADC's counts.
-            frame.pack_counts(&vec![rig.daq.calibration().lsb_v(); channels]);
-            frame
-        })
-        .collect();
+    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, daq_block, channels, Stamp(0))?;
     println!("{} frames of {daq_block} scans x {channels} channels at {rate} Hz", frames.len());
     for block in [10_000i64, 5_000, 2_000, 1_000] {
         let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: block, ..ConditionerParams::default() };

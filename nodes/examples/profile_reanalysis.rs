@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_msgs::{DaqFrame, Header, BEARING_FRAME_ID};
+use oilfilm_nodes::stamp::Stamp;
 use oilfilm_nodes::conditioner::{Chain, ConditionerCore, ConditionerParams};
 use oilfilm_nodes::estimator::{EstimatorCore, EstimatorParams};
 use oilfilm_physics::config::RigConfig;
@@ -21,35 +21,7 @@ fn main() -> anyhow::Result<()> {
     let rig = RigConfig::zhou2004()?;
     let rate = rig.daq.sample_rate_hz;
     let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), seconds, SimulateOptions::default(), &mut |_| {})?;
-    let cal = rig.daq.calibration();
-    let order = cal.scan_order();
-    let names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
-    let offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
-    let channels = names.len();
-    let frames: Vec<DaqFrame> = rec
-        .scans
-        .chunks(block)
-        .enumerate()
-        .map(|(k, scans)| {
-            let mut frame = DaqFrame {
-                header: Header { frame_id: BEARING_FRAME_ID.into(), ..Default::default() },
-                sequence: k as u64,
-                first_scan: (k * block) as u64,
-                sample_rate_hz: rate,
-                units: DaqFrame::UNITS_VOLTS,
-                channel_names: names.clone(),
-                channel_units: vec!["V".into(); channels],
-                channel_offsets_s: offsets.clone(),
-                scan_count: scans.len() as u32,
-                values: scans.iter().flat_map(|s| s.volts.iter().copied()).collect(),
-                rig: rig.name.clone(),
-                ..Default::default()
-            };
-            // As the DAQ node sends them: the 16-bit ADC's counts.
-            frame.pack_counts(&vec![cal.lsb_v(); channels]);
-            frame
-        })
-        .collect();
+    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, block, rig.daq.calibration().scan_order().len(), Stamp(0))?;
     // The conditioner's share, both chains, timed the same way as the estimator below.
     let mut conditioned = Vec::new();
     for chain in [Chain::ZeroPhase, Chain::Causal] {

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use oilfilm_identification::simulate::limits_of;
 use oilfilm_msgs::{DaqFrame, ExciterCommand, Header, RigStatus, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::daq::{Calibration, ChannelId};
+use oilfilm_physics::daq::{Calibration, ChannelId, DaqScan};
 use oilfilm_physics::rig::RigInput;
 use oilfilm_physics::simulation::SimulatedRig;
 use serde::{Deserialize, Serialize};
@@ -164,6 +164,57 @@ impl Setpoints {
             _ => [0.0; 2],
         }
     }
+}
+
+/// Scans simulated offline (`oilfilm_identification::simulate`) as the DAQ node publishes
+/// them: frames of `block` scans stamped from `epoch` on, the rig's channels in scan order with
+/// their multiplex offsets, then `aux_k` channels reading 0 V up to `channels` (a card with
+/// more inputs than the rig uses), and the ADC's counts when they are lossless (a card of up
+/// to 16 bits), volts otherwise. For benchmarks and profiles that need the node's frames
+/// without running the node.
+pub fn frames_of_scans(rig: &RigConfig, scans: &[DaqScan], block: usize, channels: usize, epoch: Stamp) -> Result<Vec<DaqFrame>, NodeError> {
+    let cal = rig.daq.calibration();
+    let order = cal.scan_order();
+    let mut names: Vec<String> = order.iter().map(|c| c.name().to_string()).collect();
+    let mut offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
+    for k in names.len()..channels {
+        names.push(format!("aux_{k}"));
+        offsets.push(k as f64 * rig.daq.channel_interval_s);
+    }
+    let width = names.len();
+    let rate = rig.daq.sample_rate_hz;
+    let lsb = vec![cal.lsb_v(); width];
+    Ok(scans
+        .chunks(block.max(1))
+        .enumerate()
+        .map(|(k, scans)| {
+            let first_scan = (k * block.max(1)) as u64;
+            let mut values = Vec::with_capacity(scans.len() * width);
+            for s in scans {
+                values.extend_from_slice(&s.volts);
+                values.extend(std::iter::repeat_n(0.0, width.saturating_sub(s.volts.len())));
+            }
+            let mut frame = DaqFrame {
+                header: Header { stamp: epoch.after_samples(first_scan as i64, rate).to_time(), frame_id: BEARING_FRAME_ID.into() },
+                sequence: k as u64,
+                first_scan,
+                sample_rate_hz: rate,
+                units: DaqFrame::UNITS_VOLTS,
+                channel_names: names.clone(),
+                channel_units: vec!["V".into(); width],
+                channel_offsets_s: offsets.clone(),
+                scan_count: scans.len() as u32,
+                values,
+                rig: rig.name.clone(),
+                ..Default::default()
+            };
+            if cal.adc_bits() <= 16 {
+                // The ADC's volts are code x LSB, so this holds for every frame of it.
+                frame.pack_counts(&lsb);
+            }
+            frame
+        })
+        .collect())
 }
 
 /// The simulated rig behind the DAQ node.
@@ -323,5 +374,59 @@ impl SimDaqCore {
 
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oilfilm_identification::excitation::ExcitationPlan;
+    use oilfilm_identification::simulate::{simulate, SimulateOptions};
+
+    fn samples(f: &DaqFrame) -> Vec<f64> {
+        let mut buf = Vec::new();
+        f.samples(&mut buf).unwrap().to_vec()
+    }
+
+    #[test]
+    fn frames_of_scans_are_the_scans_as_counts_with_aux_channels_at_zero() {
+        let rig = RigConfig::zhou2004().unwrap();
+        let rec = simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), 0.05, SimulateOptions::default(), &mut |_| {}).unwrap();
+        let frames = frames_of_scans(&rig, &rec.scans, 100, 12, Stamp(0)).unwrap();
+        assert_eq!(frames.iter().map(|f| f.scan_count).collect::<Vec<_>>(), [100, 100, 50]);
+        assert_eq!(frames[2].first_scan, 200);
+        assert_eq!(frames[1].header.stamp, Stamp(0).after_samples(100, rig.daq.sample_rate_hz).to_time());
+        let mut scan = 0;
+        for f in &frames {
+            assert_eq!((f.units, f.values.len()), (DaqFrame::UNITS_COUNTS, 0));
+            assert_eq!(&f.channel_names[10..], ["aux_10", "aux_11"]);
+            for row in samples(f).chunks_exact(12) {
+                assert_eq!(&row[..10], rec.scans[scan].volts.as_slice(), "scan {scan}: the ADC's volts exactly");
+                assert_eq!(&row[10..], [0.0, 0.0]);
+                scan += 1;
+            }
+        }
+        assert_eq!(scan, rec.scans.len());
+    }
+
+    #[test]
+    fn a_card_of_more_than_16_bits_sends_volts() {
+        let mut rig = RigConfig::zhou2004().unwrap();
+        rig.daq.adc_bits = 24;
+        let rec = simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), 0.01, SimulateOptions::default(), &mut |_| {}).unwrap();
+        let frames = frames_of_scans(&rig, &rec.scans, 25, 10, Stamp(0)).unwrap();
+        assert!(frames.iter().all(|f| f.units == DaqFrame::UNITS_VOLTS && f.counts.is_empty() && f.volts_per_count.is_empty()));
+        assert_eq!(samples(&frames[0])[..10], rec.scans[0].volts[..]);
+
+        let params = DaqParams { block_scans: 50, ..DaqParams::default() };
+        let mut core = SimDaqCore::new(&rig, &params, Stamp(0)).unwrap();
+        let f = core.produce().unwrap();
+        assert_eq!((f.units, f.values.len(), f.counts.len()), (DaqFrame::UNITS_VOLTS, 500, 0));
+        rig.daq.adc_bits = 16;
+        let mut core = SimDaqCore::new(&rig, &params, Stamp(0)).unwrap();
+        let f = core.produce().unwrap();
+        assert_eq!((f.units, f.values.len(), f.counts.len()), (DaqFrame::UNITS_COUNTS, 0, 500));
+        assert_eq!(f.volts_per_count, vec![rig.daq.calibration().lsb_v(); 10]);
+        f.check_samples().unwrap();
     }
 }
