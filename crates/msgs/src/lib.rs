@@ -304,10 +304,17 @@ impl DaqFrame {
         buf.clear();
         buf.reserve(self.counts.len());
         let width = self.volts_per_count.len();
-        if width > 0 {
-            for scan in self.counts.chunks_exact(width) {
-                buf.extend(scan.iter().zip(&self.volts_per_count).map(|(&q, &lsb)| f64::from(q) * lsb));
+        match self.volts_per_count.first() {
+            // One ADC range for every channel (the usual card): one flat loop, vectorised.
+            Some(&lsb) if self.volts_per_count.iter().all(|&v| v == lsb) => {
+                buf.extend(self.counts.iter().map(|&q| f64::from(q) * lsb));
             }
+            Some(_) => {
+                for scan in self.counts.chunks_exact(width) {
+                    buf.extend(scan.iter().zip(&self.volts_per_count).map(|(&q, &lsb)| f64::from(q) * lsb));
+                }
+            }
+            None => {}
         }
         Ok(buf)
     }

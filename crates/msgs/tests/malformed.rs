@@ -112,6 +112,8 @@ fn samples_decode_counts_and_name_what_is_inconsistent() {
     let c = sample_counts();
     let mut buf = vec![99.0];
     assert_eq!(c.samples(&mut buf).expect("counts"), [-7.0 * 3.0e-4, 12_000.0 * 3.0e-4]);
+    let ranges = DaqFrame { volts_per_count: vec![3.0e-4, 1.0e-3], scan_count: 2, counts: vec![-7, 12_000, 5, -5], ..sample_counts() };
+    assert_eq!(ranges.samples(&mut buf).expect("a range per channel"), [-7.0 * 3.0e-4, 12_000.0 * 1.0e-3, 5.0 * 3.0e-4, -5.0 * 1.0e-3]);
     let v = sample_daq();
     assert_eq!(v.samples(&mut buf).expect("values"), [1.0, 2.0]);
     let cases: [(DaqFrame, &str); 6] = [
