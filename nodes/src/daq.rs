@@ -166,6 +166,12 @@ impl Setpoints {
     }
 }
 
+/// The ADC's volts per count when its codes fit `int16` (a card of up to 16 bits): its frames
+/// then carry the codes (UNITS_COUNTS), as a card's driver delivers them; volts otherwise.
+fn counts_lsb(cal: &Calibration) -> Option<f64> {
+    (cal.adc_bits() <= 16).then(|| cal.lsb_v())
+}
+
 /// Scans simulated offline (`oilfilm_identification::simulate`) as the DAQ node publishes
 /// them: frames of `block` scans stamped from `epoch` on, the rig's channels in scan order with
 /// their multiplex offsets, then `aux_k` channels reading 0 V up to `channels` (a card with
@@ -183,7 +189,7 @@ pub fn frames_of_scans(rig: &RigConfig, scans: &[DaqScan], block: usize, channel
     }
     let width = names.len();
     let rate = rig.daq.sample_rate_hz;
-    let lsb = vec![cal.lsb_v(); width];
+    let lsb = counts_lsb(&cal).map(|lsb| vec![lsb; width]);
     Ok(scans
         .chunks(block.max(1))
         .enumerate()
@@ -208,9 +214,9 @@ pub fn frames_of_scans(rig: &RigConfig, scans: &[DaqScan], block: usize, channel
                 rig: rig.name.clone(),
                 ..Default::default()
             };
-            if cal.adc_bits() <= 16 {
+            if let Some(lsb) = &lsb {
                 // The ADC's volts are code x LSB, so this holds for every frame of it.
-                frame.pack_counts(&lsb);
+                frame.pack_counts(lsb);
             }
             frame
         })
@@ -236,8 +242,7 @@ pub struct SimDaqCore {
     exciting: bool,
     /// Blocks run without (complete) setpoints.
     pub blocks_without_setpoints: u64,
-    /// The ADC's volts per count when its codes fit `int16` (up to 16 bits): the frames then
-    /// carry the codes (UNITS_COUNTS), as a card's driver delivers them; volts otherwise.
+    /// [`counts_lsb`] of the rig's ADC.
     volts_per_count: Option<f64>,
 }
 
@@ -269,7 +274,7 @@ impl SimDaqCore {
             temperature_c: rig.operating.bearing_temperature_c,
             exciting: false,
             blocks_without_setpoints: 0,
-            volts_per_count: (calibration.adc_bits() <= 16).then(|| calibration.lsb_v()),
+            volts_per_count: counts_lsb(&calibration),
             calibration,
         })
     }
@@ -317,41 +322,36 @@ impl SimDaqCore {
         let first_scan = self.next_scan;
         let n = self.block_scans;
         let width = self.channels.len();
-        let (mut values, mut counts) = match self.volts_per_count {
-            Some(_) => (Vec::new(), Vec::with_capacity(n * width)),
-            None => (Vec::with_capacity(n * width), Vec::new()),
-        };
+        let mut values = Vec::with_capacity(n * width);
         for i in 1..=n as u64 {
             let scan = first_scan + i;
             let at = self.epoch.after_samples(scan as i64, self.rate_hz);
             let input = RigInput { exciter_n: self.setpoints.at(at) };
             let s = self.sim.step(&input, scan as f64 * self.sim.period_s())?;
-            match self.volts_per_count {
-                // The ADC clamps its codes to its bits (<= 16 here), so they fit; the volts it
-                // reports are `code * LSB`, exactly what the conditioner makes of the count.
-                Some(_) => counts.extend(s.scan.counts.iter().map(|&q| i16::try_from(q).unwrap_or(if q < 0 { i16::MIN } else { i16::MAX }))),
-                None => values.extend_from_slice(&s.scan.volts),
-            }
+            values.extend_from_slice(&s.scan.volts);
             self.static_load_n = s.truth.bellows_n;
             self.temperature_c = s.truth.temperature_c;
             self.exciting = input.exciter_n.iter().any(|f| *f != 0.0);
         }
         self.next_scan += n as u64;
-        let frame = DaqFrame {
+        let mut frame = DaqFrame {
             header: Header { stamp: self.epoch.after_samples(first_scan as i64, self.rate_hz).to_time(), frame_id: BEARING_FRAME_ID.into() },
             sequence: self.sequence,
             first_scan,
             sample_rate_hz: self.rate_hz,
-            units: if self.volts_per_count.is_some() { DaqFrame::UNITS_COUNTS } else { DaqFrame::UNITS_VOLTS },
+            units: DaqFrame::UNITS_VOLTS,
             channel_names: self.channels.iter().map(|c| c.name().to_string()).collect(),
             channel_units: vec!["V".to_string(); width],
             channel_offsets_s: self.offsets_s.clone(),
             scan_count: n as u32,
             values,
             rig: self.rig_name.clone(),
-            volts_per_count: self.volts_per_count.map_or_else(Vec::new, |lsb| vec![lsb; width]),
-            counts,
+            ..Default::default()
         };
+        if let Some(lsb) = self.volts_per_count {
+            // The ADC's volts are code x LSB and its codes fit int16: always lossless.
+            frame.pack_counts(&vec![lsb; width]);
+        }
         self.sequence += 1;
         Ok(frame)
     }

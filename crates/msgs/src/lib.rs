@@ -26,8 +26,9 @@ pub use cdr::{
 /// Fields in an optional `appended { .. }` block follow the others and were added to the
 /// .msg after messages without them were recorded: a message whose data ends where they
 /// would begin (at most 3 bytes of padding left) decodes with all of them at their default
-/// (empty), so old bags stay readable; otherwise all must be present. Only for top-level messages (none is nested in another) whose
-/// appended fields are sequences, so "absent" and "empty" cannot be confused with data.
+/// (empty), so old bags stay readable; otherwise all must be present. Only for top-level
+/// messages (none is nested in another) whose appended fields are sequences, so "absent"
+/// and "empty" cannot be confused with data.
 #[macro_export]
 macro_rules! ros_message {
     (
