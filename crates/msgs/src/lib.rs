@@ -333,10 +333,16 @@ impl DaqFrame {
         for scan in self.values.chunks_exact(width) {
             for (&v, &lsb) in scan.iter().zip(volts_per_count) {
                 let q = (v / lsb).round();
-                if !(q >= f64::from(i16::MIN) && q <= f64::from(i16::MAX)) || q * lsb != v {
+                if !(q >= f64::from(i16::MIN) && q <= f64::from(i16::MAX)) {
                     return false;
                 }
-                counts.push(q as i16);
+                // In range, so the cast is exact; what `samples` will make of the count must be
+                // `v` bit for bit (so -0.0, which a count cannot carry, stays in volts).
+                let count = q as i16;
+                if (f64::from(count) * lsb).to_bits() != v.to_bits() {
+                    return false;
+                }
+                counts.push(count);
             }
         }
         self.units = Self::UNITS_COUNTS;

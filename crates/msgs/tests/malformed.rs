@@ -139,7 +139,7 @@ fn pack_counts_only_when_lossless() {
     assert_eq!((packed.units, packed.counts.as_slice(), packed.values.len()), (DaqFrame::UNITS_COUNTS, &[-7i16, 12_000][..], 0));
     let mut buf = Vec::new();
     assert_eq!(packed.samples(&mut buf).expect("counts"), volts.values, "the counts decode to the very same volts");
-    for values in [vec![0.3 * lsb, 0.0], vec![40_000.0 * lsb, 0.0], vec![f64::NAN, 0.0]] {
+    for values in [vec![0.3 * lsb, 0.0], vec![40_000.0 * lsb, 0.0], vec![f64::NAN, 0.0], vec![-0.0, 0.0]] {
         let mut f = DaqFrame { values, ..volts.clone() };
         let before = format!("{f:?}");
         assert!(!f.pack_counts(&[lsb, lsb]), "{before}");
