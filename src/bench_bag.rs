@@ -404,7 +404,6 @@ fn sweep(tmp: &Path, frames: &[Encoded]) -> Result<Vec<RecordRow>> {
         .collect())
 }
 
-#[allow(clippy::too_many_arguments)]
 /// The DAQ frames the record rows write: int16 counts, as the DAQ node sends them (the record
 /// repeated, `counts_seconds` of rig data in all), and the same samples as float64 volts.
 struct DaqRecords<'a> {
