@@ -365,8 +365,9 @@ fn process_cpu_s() -> Option<f64> {
     })
 }
 
-/// zstd levels and worker threads on the DAQ frames, passes interleaved (round after round of
-/// every setting) so the machine's other load falls on all of them alike; best pass of each.
+/// zstd levels and worker threads on the DAQ frames (counts), passes interleaved (round after
+/// round of every setting) so the machine's other load falls on all of them alike; best pass
+/// of each.
 fn sweep(tmp: &Path, frames: &[Encoded]) -> Result<Vec<RecordRow>> {
     let mut settings = Vec::new();
     for threads in [0u32, 1, 2] {
@@ -393,7 +394,7 @@ fn sweep(tmp: &Path, frames: &[Encoded]) -> Result<Vec<RecordRow>> {
         .iter()
         .zip(best)
         .map(|(&(level, threads), (wall, on_disk))| RecordRow {
-            what: format!("DAQ frames, zstd level {level}, {threads} worker threads"),
+            what: format!("DAQ frames, counts, zstd level {level}, {threads} worker threads"),
             compression: Compression::Zstd,
             mb_s: payload as f64 / 1e6 / wall,
             msgs_s: frames.len() as f64 / wall,
