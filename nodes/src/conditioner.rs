@@ -191,6 +191,9 @@ impl Stream {
     }
 }
 
+/// The channels of a frame the chain uses: position in the frame, channel.
+type KeptChannels = Vec<(usize, ChannelId)>;
+
 /// The conditioner's state.
 pub struct ConditionerCore {
     rig: RigConfig,
@@ -242,9 +245,8 @@ impl ConditionerCore {
     }
 
     fn push_samples(&mut self, frame: &DaqFrame, decoded: &mut Vec<f64>) -> Result<Vec<ConditionedFrame>, NodeError> {
-        let (kept, n_scans) = self.check(frame)?;
-        // `check` accepted the samples' layout, so this is the frame's values or its counts in volts.
-        let samples = frame.samples(decoded).map_err(|reason| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason })?;
+        let (kept, samples) = self.check(frame, decoded)?;
+        let n_scans = frame.scan_count as usize;
         let channels: Vec<ChannelId> = kept.iter().map(|(_, id)| *id).collect();
         let offsets: Vec<f64> = kept.iter().map(|(c, _)| frame.channel_offsets_s[*c]).collect();
         let restart = match &self.stream {
@@ -309,7 +311,10 @@ impl ConditionerCore {
         Ok(out)
     }
 
-    fn check(&self, frame: &DaqFrame) -> Result<(Vec<(usize, ChannelId)>, usize), NodeError> {
+    /// The channels the chain uses (position in the frame, id) and the samples (the frame's
+    /// values, or its counts in volts decoded into `decoded`; `scan_count` x channels of them),
+    /// or why the frame cannot be used.
+    fn check<'a>(&self, frame: &'a DaqFrame, decoded: &'a mut Vec<f64>) -> Result<(KeptChannels, &'a [f64]), NodeError> {
         let bad = |reason: String| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason };
         if !(frame.sample_rate_hz.is_finite() && frame.sample_rate_hz > 0.0) {
             return Err(bad(format!("sample_rate_hz must be finite and > 0, got {}", frame.sample_rate_hz)));
@@ -318,8 +323,7 @@ impl ConditionerCore {
         if frame.channel_offsets_s.len() != width {
             return Err(bad(format!("{} channel_offsets_s for {width} channel_names", frame.channel_offsets_s.len())));
         }
-        let n = frame.scan_count as usize;
-        frame.check_samples().map_err(bad)?;
+        let samples = frame.samples(decoded).map_err(bad)?;
         if frame.rig != self.rig.name {
             return Err(bad(format!("frame from rig `{}`, but this conditioner has the calibration of rig `{}` (parameter `rig`)", frame.rig, self.rig.name)));
         }
@@ -334,7 +338,7 @@ impl ConditionerCore {
                 channels.push((c, id));
             }
         }
-        Ok((channels, n))
+        Ok((channels, samples))
     }
 
     fn start_stream(&mut self, frame: &DaqFrame, channels: Vec<ChannelId>, offsets_s: Vec<f64>, note: String) -> Result<(), NodeError> {
