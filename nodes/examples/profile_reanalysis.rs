@@ -5,6 +5,7 @@
 //! best and median of several passes. A loop to profile (`perf record`) the estimator alone.
 //!
 //! `cargo run --release -p oilfilm-nodes --example profile_reanalysis [PASSES]`
+//! (with `ONLY_CAUSAL=1`: the causal conditioner alone, e.g. under `perf record`)
 
 use std::time::Instant;
 
@@ -24,7 +25,11 @@ fn main() -> anyhow::Result<()> {
     let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, block, rig.daq.calibration().scan_order().len(), Stamp(0))?;
     // The conditioner's share, both chains, timed the same way as the estimator below.
     let mut conditioned = Vec::new();
+    let only_causal = std::env::var_os("ONLY_CAUSAL").is_some();
     for chain in [Chain::ZeroPhase, Chain::Causal] {
+        if only_causal && chain == Chain::ZeroPhase {
+            continue;
+        }
         let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: 1_000, chain: chain.name().into(), ..ConditionerParams::default() };
         let mut times = Vec::new();
         for _ in 0..passes {

@@ -1,8 +1,9 @@
 //! Throughput of the conditioning chain on a record the size of the paper's (50 000 scans of
 //! 10 channels at 5 kHz): each stage on its own, then the whole `condition` call.
 //!
-//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into]`
-//! (`into`: only the whole `condition_into`, e.g. under `perf record`)
+//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into|causal]`
+//! (`into`: only the whole `condition_into`, `causal`: only the causal chain, e.g. under
+//! `perf record`)
 //!
 //! "samples" are channel samples: a 50 000-scan record has 500 000. Each figure is the best
 //! of `repeats` runs (default 15), to show the code's speed rather than the machine's load.
@@ -11,11 +12,12 @@ use std::f64::consts::PI;
 use std::hint::black_box;
 use std::time::Instant;
 
+use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
 use oilfilm_identification::conditioning::{
     calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
-    range_check, ConditioningConfig, Mechanics, RawRecord,
+    range_check, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
-use oilfilm_physics::daq::{ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
+use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
 
 /// Best wall time (s) of `repeats` runs of `f`.
@@ -50,7 +52,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(15)
         .max(1);
-    let only_into = args.next().as_deref() == Some("into");
+    let only = args.next();
+    let (only_into, only_causal) = (only.as_deref() == Some("into"), only.as_deref() == Some("causal"));
 
     // A record through the DAQ model: a few sines per channel, default sensor noise.
     let cfg = DaqConfig::zhou2004();
@@ -99,6 +102,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             black_box(&out);
         });
         report("condition_into (reusing the output buffers)", all, t);
+        return Ok(());
+    }
+
+    if only_causal {
+        report("causal chain (order 8 at 55.5 Hz, 1000-scan blocks)", all, causal(&raw, &cal, &mech, repeats));
         return Ok(());
     }
 
@@ -197,5 +205,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         black_box(&out);
     });
     report("condition_into (reusing the output buffers)", all, t);
+
+    report("causal chain (order 8 at 55.5 Hz, 1000-scan blocks)", all, causal(&raw, &cal, &mech, repeats));
     Ok(())
+}
+
+/// Best time of the causal chain (the conditioner node's `chain: causal`, at the sim_rig
+/// launch file's 55.5 Hz) fed as the node feeds it: rows of scans, 1 000 at a time, its output
+/// handed on after each block.
+fn causal(raw: &RawRecord, cal: &Calibration, mech: &Mechanics, repeats: usize) -> f64 {
+    let (n, channels) = (raw.len(), raw.channels.len());
+    let rows: Vec<f64> = (0..n).flat_map(|i| raw.columns.iter().map(move |c| c[i])).collect();
+    let columns = std::array::from_fn(|k| raw.channels.iter().position(|c| c.index() == k).unwrap()); // all ten channels
+    let conf = ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() };
+    let mut out = CausalOutput::default();
+    best_of(repeats, || {
+        let mut chain = CausalChain::new(&columns, channels, RawUnits::Volts, raw.sample_rate_hz, cal, mech, &conf).unwrap(); // a valid design
+        for block in rows.chunks(1_000 * channels) {
+            chain.push(block, &mut out).unwrap(); // whole scans
+            black_box(&out);
+            out.consume(out.len());
+        }
+    })
 }
