@@ -270,13 +270,23 @@ impl ConditionerCore {
         let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
         let width = frame.channel_names.len();
         if let Some(c) = stream.causal.as_mut() {
-            c.rows.clear();
-            for k in 0..n_scans {
-                let row = &samples[k * width..(k + 1) * width];
-                c.rows.extend(kept.iter().map(|&(col, _)| row[col]));
-            }
+            // The chain reads rows of the stream's channels in their order: when the frame
+            // holds just those, in that order (a DAQ sending the paper's ten channels), its
+            // samples (`scan_count` whole rows, checked) are such rows already; otherwise the
+            // kept readings are gathered.
+            let all_kept = kept.len() == width && kept.iter().enumerate().all(|(k, &(col, _))| col == k);
+            let rows = if all_kept {
+                samples
+            } else {
+                c.rows.clear();
+                for k in 0..n_scans {
+                    let row = &samples[k * width..(k + 1) * width];
+                    c.rows.extend(kept.iter().map(|&(col, _)| row[col]));
+                }
+                &c.rows
+            };
             // Whole rows of the stream's channels by construction: this cannot fail.
-            c.chain.push(&c.rows, &mut c.pending)?;
+            c.chain.push(rows, &mut c.pending)?;
             if !c.aligned && !c.pending.is_empty() {
                 // The first block starts at a multiple of `block_scans` of the DAQ's scan
                 // numbering, as the estimator's windows do (`[k hop, k hop + window)`): a
@@ -527,5 +537,70 @@ impl ConditionerCore {
         }
         s.first_scan += keep_from as u64;
         frame
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daq::frames_of_scans;
+    use oilfilm_identification::excitation::ExcitationPlan;
+    use oilfilm_identification::simulate::{self, SimulateOptions};
+
+    /// A frame's samples as volts in another channel order (`order[k]`: the frame's column
+    /// that goes to column `k`).
+    fn reordered(frame: &DaqFrame, order: &[usize]) -> DaqFrame {
+        let mut buf = Vec::new();
+        let samples = frame.samples(&mut buf).expect("the node's frames are consistent").to_vec();
+        let width = frame.channel_names.len();
+        let pick = |v: &[String]| order.iter().map(|&c| v[c].clone()).collect::<Vec<_>>();
+        DaqFrame {
+            units: DaqFrame::UNITS_VOLTS,
+            channel_names: pick(&frame.channel_names),
+            channel_units: pick(&frame.channel_units),
+            channel_offsets_s: order.iter().map(|&c| frame.channel_offsets_s[c]).collect(),
+            values: samples.chunks_exact(width).flat_map(|row| order.iter().map(move |&c| row[c])).collect(),
+            volts_per_count: Vec::new(),
+            counts: Vec::new(),
+            ..frame.clone()
+        }
+    }
+
+    /// The conditioned samples of every frame, as bits (the flags differ: a frame with
+    /// channels the chain does not use says so).
+    fn conditioned_bits(rig: &RigConfig, chain: &str, frames: &[DaqFrame]) -> Vec<Vec<u64>> {
+        let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: 500, chain: chain.into(), ..ConditionerParams::default() };
+        let mut core = ConditionerCore::new(rig.clone(), &params).expect("valid params");
+        let mut out = Vec::new();
+        for f in frames {
+            for c in core.push(f).expect("a consistent frame") {
+                let columns = [&c.x_m, &c.y_m, &c.x_dot_m_s, &c.y_dot_m_s, &c.x_ddot_m_s2, &c.y_ddot_m_s2, &c.fx_n, &c.fy_n];
+                let mut bits: Vec<u64> = columns.iter().flat_map(|v| v.iter().map(|x| x.to_bits())).collect();
+                bits.extend(c.valid.iter().map(|&v| u64::from(v)));
+                bits.push(c.first_sample);
+                out.push(bits);
+            }
+        }
+        out
+    }
+
+    /// The chain reads a frame of just its ten channels in scan order straight from the
+    /// frame; a frame with other channels, or in another order, is gathered first. Both ways
+    /// give the same conditioned samples, bit for bit, on both chains.
+    #[test]
+    fn frames_with_extra_or_reordered_channels_condition_to_the_same_bits() {
+        let rig = RigConfig::zhou2004().expect("built-in rig");
+        let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), 1.5, SimulateOptions::default(), &mut |_| {}).expect("simulation");
+        let ten = rig.daq.calibration().scan_order().len();
+        let plain = frames_of_scans(&rig, &rec.scans, 250, ten, Stamp(0)).expect("frames");
+        let with_aux = frames_of_scans(&rig, &rec.scans, 250, ten + 2, Stamp(0)).expect("frames");
+        let reversed: Vec<DaqFrame> = plain.iter().map(|f| reordered(f, &(0..ten).rev().collect::<Vec<_>>())).collect();
+        assert_eq!(plain[0].units, DaqFrame::UNITS_COUNTS, "the simulated card sends counts");
+        for chain in ["causal", "zero_phase"] {
+            let reference = conditioned_bits(&rig, chain, &plain);
+            assert!(reference.len() >= 8, "{chain}: {} conditioned frames", reference.len());
+            assert!(conditioned_bits(&rig, chain, &with_aux) == reference, "{chain}: two aux channels appended changed the output");
+            assert!(conditioned_bits(&rig, chain, &reversed) == reference, "{chain}: channels in reverse order changed the output");
+        }
     }
 }
