@@ -394,7 +394,7 @@ impl CausalChain {
     fn push_with(&mut self, isa: Isa, values: &[f64], out: &mut CausalOutput) {
         for block in values.chunks(MAX_BLOCK * self.width) {
             match isa {
-                Isa::Baseline => self.push_block::<false>(block, out),
+                Isa::Baseline => self.push_block::<false, false>(block, out),
                 // SAFETY: the only requirement of a `target_feature` function is that the CPU
                 // has the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
                 #[cfg(target_arch = "x86_64")]
@@ -408,13 +408,13 @@ impl CausalChain {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn push_block_avx2(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block::<false>(values, out);
+        self.push_block::<false, true>(values, out);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
     fn push_block_avx512(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block::<true>(values, out);
+        self.push_block::<true, false>(values, out);
     }
 
     /// The whole call stage by stage: calibrate every scan into channel columns, de-skew the
@@ -422,10 +422,11 @@ impl CausalChain {
     /// side by side), the differentiators over the block, eq. 2. Each sample goes through the
     /// same operations in the same order as it did scan by scan (the test module keeps that
     /// scan-by-scan chain as the reference), so the bits do not depend on the cutting.
-    /// `values` holds whole scans, at least one. `AVX512`: compiled into
-    /// [`Self::push_block_avx512`] (the CPU has AVX-512F), the low-pass written for it.
+    /// `values` holds whole scans, at least one. `AVX512`, `AVX2`: compiled into
+    /// [`Self::push_block_avx512`] (the CPU has AVX-512F) or [`Self::push_block_avx2`], the
+    /// low-pass written for it.
     #[inline(always)]
-    fn push_block<const AVX512: bool>(&mut self, values: &[f64], out: &mut CausalOutput) {
+    fn push_block<const AVX512: bool, const AVX2: bool>(&mut self, values: &[f64], out: &mut CausalOutput) {
         let width = self.width;
         let scans = values.len() / width;
         let n0 = self.scans;
@@ -523,7 +524,8 @@ impl CausalChain {
             let inputs = [&rx[..], &ry[..], &frame_x[..count], &frame_y[..count], &fx[..], &fy[..]];
             let [o0, o1, o2, o3, o4, o5, o_f3, o_t] = &mut buf.filtered;
             // The first two samples one by one: the first starts every section in its DC
-            // steady state, and the AVX-512 cascade needs two samples of history behind it.
+            // steady state, and the AVX-512 and AVX2 cascades need two samples of history
+            // behind them.
             let skip = (SHARED_FROM.saturating_sub(p0) as usize).min(count);
             for i in 0..skip {
                 let y = lowpass_scan(&self.sections, &mut self.iir, inputs.map(|c| c[i]), p0 + i as u64 == 0);
@@ -538,6 +540,9 @@ impl CausalChain {
                 // the CPU has AVX-512F (`Isa::detect`). `skip < count`: the samples before
                 // `SHARED_FROM` have gone through.
                 unsafe { avx512::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
+            } else if AVX2 && skip < count {
+                // SAFETY: as above, for `AVX2`, `push_block_avx2` and AVX2.
+                unsafe { avx2::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
             } else {
                 iir_block(&self.sections, &mut self.iir, inputs, outputs);
             }
@@ -954,6 +959,139 @@ mod avx512 {
             states[k] = SectionState { x1, x2, y1: lanes(y1[k]), y2: lanes(y2[k]) };
         }
     }
+}
+
+/// The low-pass written with the AVX2 intrinsics, the sections' histories shared as in
+/// [`avx512::iir_block`]. Sixteen 256-bit registers cannot hold the six lanes' state of the
+/// generic code (its rows of eight, four per section: 32 registers for the default order 8),
+/// so the compiler kept it on the stack, a load and a store per row and sample. Here the lanes
+/// go through the cascade in two groups, `x, y, X, Y` in one 256-bit register and then
+/// `F_x, F_y` in one 128-bit register, one group after the other over the block: `2 + 2 S`
+/// registers of state per group (ten for `S = 4`).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{iir_block as generic, lowpass, SectionState, LANES};
+    use std::arch::x86_64::{
+        __m128d, __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd, _mm_add_pd, _mm_loadu_pd, _mm_mul_pd,
+        _mm_set1_pd, _mm_storeu_pd, _mm_sub_pd,
+    };
+
+    /// Samples per tile: a group's lanes are moved into rows first and back after, so that
+    /// the loop carrying the recursion holds only the arithmetic.
+    const TILE: usize = 32;
+
+    /// [`super::iir_block`] for the CPUs with AVX2, the same operations in the same order for
+    /// every lane (`b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`, left to right, separate multiplies
+    /// and adds), after [`super::SHARED_FROM`] samples (see [`super::avx512::iir_block`]).
+    #[target_feature(enable = "avx2")]
+    pub(super) fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
+        debug_assert!(
+            states.windows(2).all(|w| w[1].x1.map(f64::to_bits) == w[0].y1.map(f64::to_bits) && w[1].x2.map(f64::to_bits) == w[0].y2.map(f64::to_bits)),
+            "the low-pass's sections share their histories only after {} samples",
+            super::SHARED_FROM
+        );
+        macro_rules! fixed {
+            ($s:literal) => {
+                if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
+                    let [i0, i1, i2, i3, i4, i5] = inp;
+                    let [o0, o1, o2, o3, o4, o5] = out;
+                    four::<$s>(sections, states, [i0, i1, i2, i3], [o0, o1, o2, o3]);
+                    two::<$s>(sections, states, [i4, i5], [o4, o5]);
+                    return;
+                }
+            };
+        }
+        fixed!(1);
+        fixed!(2);
+        fixed!(3);
+        fixed!(4);
+        fixed!(5);
+        fixed!(6);
+        generic(sections, states, inp, out);
+    }
+
+    /// One group of `$w` lanes starting at lane `$first`, in `$v` registers.
+    macro_rules! group {
+        ($name:ident, $first:literal, $w:literal, $v:ty, $load:ident, $store:ident, $set1:ident, $add:ident, $sub:ident, $mul:ident) => {
+            #[inline]
+            #[target_feature(enable = "avx2")]
+            fn $name<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; $w], out: [&mut [f64]; $w]) {
+                let n = out[0].len();
+                let inp = inp.map(|c| &c[..n]);
+                let mut out = out.map(|c| &mut c[..n]);
+                let load = |a: &[f64; LANES]| {
+                    let mut p = [0.0; $w];
+                    p.copy_from_slice(&a[$first..$first + $w]);
+                    // SAFETY: `p` holds the doubles read.
+                    unsafe { $load(p.as_ptr()) }
+                };
+                let coef: [[$v; 5]; S] = std::array::from_fn(|k| {
+                    let (b, a) = (sections[k].b, sections[k].a);
+                    [b[0], b[1], b[2], a[0], a[1]].map(|c| $set1(c))
+                });
+                let (mut in1, mut in2) = (load(&states[0].x1), load(&states[0].x2));
+                let mut y1: [$v; S] = std::array::from_fn(|k| load(&states[k].y1));
+                let mut y2: [$v; S] = std::array::from_fn(|k| load(&states[k].y2));
+                let mut rows = [[0.0; $w]; TILE];
+                let mut start = 0;
+                while start < n {
+                    let t = TILE.min(n - start);
+                    let rows = &mut rows[..t];
+                    for (l, c) in inp.iter().enumerate() {
+                        for (r, &v) in rows.iter_mut().zip(&c[start..start + t]) {
+                            r[l] = v;
+                        }
+                    }
+                    for r in rows.iter_mut() {
+                        // SAFETY: `r` holds the doubles read.
+                        let x0 = unsafe { $load(r.as_ptr()) };
+                        let (mut x, mut x1, mut x2) = (x0, in1, in2);
+                        for k in 0..S {
+                            let [b0, b1, b2, a1, a2] = coef[k];
+                            let acc = $add($mul(b0, x), $mul(b1, x1));
+                            let acc = $add(acc, $mul(b2, x2));
+                            let acc = $sub(acc, $mul(a1, y1[k]));
+                            let y = $sub(acc, $mul(a2, y2[k]));
+                            // The next section's input history is this one's output history.
+                            x1 = y1[k];
+                            x2 = y2[k];
+                            y2[k] = y1[k];
+                            y1[k] = y;
+                            x = y;
+                        }
+                        in2 = in1;
+                        in1 = x0;
+                        // SAFETY: `r` has room for the doubles written.
+                        unsafe { $store(r.as_mut_ptr(), x) };
+                    }
+                    for (l, c) in out.iter_mut().enumerate() {
+                        for (o, r) in c[start..start + t].iter_mut().zip(rows.iter()) {
+                            *o = r[l];
+                        }
+                    }
+                    start += t;
+                }
+                let lanes = |v: $v| -> [f64; $w] {
+                    let mut p = [0.0; $w];
+                    // SAFETY: `p` has room for the doubles written.
+                    unsafe { $store(p.as_mut_ptr(), v) };
+                    p
+                };
+                for k in 0..S {
+                    let (x1, x2) = if k == 0 { (lanes(in1), lanes(in2)) } else { (lanes(y1[k - 1]), lanes(y2[k - 1])) };
+                    let (y1, y2) = (lanes(y1[k]), lanes(y2[k]));
+                    let st = &mut states[k];
+                    st.x1[$first..$first + $w].copy_from_slice(&x1);
+                    st.x2[$first..$first + $w].copy_from_slice(&x2);
+                    st.y1[$first..$first + $w].copy_from_slice(&y1);
+                    st.y2[$first..$first + $w].copy_from_slice(&y2);
+                }
+            }
+        };
+    }
+
+    group!(four, 0, 4, __m256d, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_set1_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd);
+    group!(two, 4, 2, __m128d, _mm_loadu_pd, _mm_storeu_pd, _mm_set1_pd, _mm_add_pd, _mm_sub_pd, _mm_mul_pd);
 }
 
 #[cfg(test)]
