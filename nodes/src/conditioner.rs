@@ -270,12 +270,11 @@ impl ConditionerCore {
         let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
         let width = frame.channel_names.len();
         if let Some(c) = stream.causal.as_mut() {
-            // The chain reads rows of the stream's channels in their order: when the frame
-            // holds just those, in that order (a DAQ sending the paper's ten channels), its
-            // samples (`scan_count` whole rows, checked) are such rows already; otherwise the
-            // kept readings are gathered.
-            let all_kept = kept.len() == width && kept.iter().enumerate().all(|(k, &(col, _))| col == k);
-            let rows = if all_kept {
+            // The chain reads rows of the stream's channels in the frame's order (`kept` is
+            // in frame order): when the frame holds only channels the chain uses (a DAQ
+            // sending the paper's ten, in any order), its samples (`scan_count` whole rows,
+            // checked) are such rows already; otherwise the kept readings are gathered.
+            let rows = if kept.len() == width {
                 samples
             } else {
                 c.rows.clear();
@@ -584,9 +583,10 @@ mod tests {
         out
     }
 
-    /// The chain reads a frame of just its ten channels in scan order straight from the
-    /// frame; a frame with other channels, or in another order, is gathered first. Both ways
-    /// give the same conditioned samples, bit for bit, on both chains.
+    /// The causal chain reads a frame of only its ten channels straight from the frame (in
+    /// whatever order: its column map follows the frame); a frame with other channels too is
+    /// gathered first. Every way gives the same conditioned samples, bit for bit, on both
+    /// chains.
     #[test]
     fn frames_with_extra_or_reordered_channels_condition_to_the_same_bits() {
         let rig = RigConfig::zhou2004().expect("built-in rig");
