@@ -208,7 +208,7 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
         crate::records::reader_threads_beside_analysis(),
     );
     println!(
-        "the conditioner + estimator alone, on frames already in memory, one thread: {:.1} ms ({:.0}x real time); the conditioner core alone {:.1} ms, the estimator core alone {:.1} ms",
+        "the conditioner (zero-phase chain, as in every row but the last) + estimator alone, on frames already in memory, one thread: {:.1} ms ({:.0}x real time); the conditioner core alone {:.1} ms, the estimator core alone {:.1} ms",
         re.analyse_s * 1e3,
         seconds / re.analyse_s,
         re.condition_s * 1e3,
