@@ -799,8 +799,8 @@ fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&
     }
 }
 
-/// Lanes in the registers: the six padded to eight (one AVX-512 register, two AVX2 ones);
-/// the padding lanes stay zero.
+/// Lanes in the generic code's rows and the AVX-512 register: the six padded to eight; the
+/// padding lanes stay zero. (The AVX2 cascade groups them four and two instead, unpadded.)
 const PADDED: usize = 8;
 
 #[inline(always)]
