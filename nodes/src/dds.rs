@@ -136,11 +136,25 @@ pub struct RosNode {
 /// the node is not. CI failed on that once (`rclpy sees our four nodes`), and 3 of 8 runs
 /// of the live rclpy test here with both cores busy.
 /// So the current info is sent again from a second writer of this participant, after
-/// waits of 0.5, 1, 2, 4 and 8 s and then every 15 s. The graph cache keys by participant
-/// GID, so a repeat only restates what the first announcement said.
+/// waits of 0.5, 1, 2, 4 and 8 s and then every 15 s, each scaled by a factor drawn once per
+/// process in [0.75, 1.25). Without the factor, nodes launched together repeated their
+/// announcements together, so the burst that lost one could lose it again every time (a
+/// clean-clone CI run saw the conditioner unlisted for 30 s, through five repeats). The
+/// graph cache keys by participant GID, so a repeat only restates what the first
+/// announcement said.
 struct Announcer {
     stop: std::sync::mpsc::Sender<()>,
     thread: std::thread::JoinHandle<()>,
+}
+
+/// The announcer's factor on its waits, in [0.75, 1.25): from the standard library's
+/// per-process random hasher keys, so processes started together get different schedules.
+fn schedule_scale() -> f64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    // The top 53 bits as a fraction in [0, 1).
+    0.75 + 0.5 * ((h.finish() >> 11) as f64 / (1u64 << 53) as f64)
 }
 
 /// The `ros_discovery_info` topic (rmw_dds_common's `ParticipantEntitiesInfo`, the QoS
@@ -176,9 +190,10 @@ impl Announcer {
         let thread = std::thread::Builder::new()
             .name("ros-discovery-announcer".into())
             .spawn(move || {
+                let scale = schedule_scale();
                 let mut wait = std::time::Duration::from_millis(500);
                 // Ends on a stop message or when the sender is dropped.
-                while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(wait) {
+                while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(wait.mul_f64(scale)) {
                     if let Err(e) = writer.write(context.participant_entities_info(), None) {
                         tracing::warn!("re-announcing the node on ros_discovery_info failed: {e:?}");
                     }
@@ -555,4 +570,17 @@ pub fn shutdown_flag() -> Result<Arc<std::sync::atomic::AtomicBool>, NodeError> 
 pub fn init_logging() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rustdds=warn,ros2_client=warn"));
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every draw lies in [0.75, 1.25), and draws differ (each `RandomState` has keys of its
+    /// own), so nodes started together do not share one announcement schedule.
+    #[test]
+    fn announcement_schedules_are_scaled_differently_within_a_quarter() {
+        let draws: Vec<f64> = (0..200).map(|_| super::schedule_scale()).collect();
+        assert!(draws.iter().all(|s| (0.75..1.25).contains(s)), "{draws:?}");
+        let (lo, hi) = draws.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &s| (lo.min(s), hi.max(s)));
+        assert!(hi - lo > 0.25, "200 draws span only {lo}..{hi}");
+    }
 }
