@@ -149,24 +149,23 @@ struct Stream {
     offsets_s: Vec<f64>,
     rig: String,
     calibration: oilfilm_physics::daq::Calibration,
-    /// Scan index of `columns[*][0]`.
+    /// Scan index of `raw.columns[*][0]`.
     first_scan: u64,
     /// The stream's first scan and its rig time: every stamp is computed from these, so
     /// rounding never accumulates.
     origin_scan: u64,
     origin_stamp: Stamp,
-    /// Raw columns, scan order.
-    columns: Vec<Vec<f64>>,
-    /// The record of the block being conditioned: its columns are refilled from `columns`
-    /// for every block (no allocation once they are a block long), channels and units fixed
-    /// for the stream.
+    /// The scans received and still needed, one column per channel in the stream's order
+    /// (channels and units fixed for the stream): each block is conditioned as a window of
+    /// it ([`conditioning::condition_window_into`]), not copied out. Scans no block needs
+    /// any more are dropped in batches (see [`ConditionerCore::condition_block`]).
     raw: RawRecord,
     /// Next scan to publish.
     next_out: u64,
     edge: usize,
     /// Why the stream (re)started, for the first frame's flags.
     start_note: Option<String>,
-    /// The causal chain's state (`chain: causal`); `columns` and `raw` stay empty then.
+    /// The causal chain's state (`chain: causal`); `raw` stays empty then.
     causal: Option<Box<CausalStream>>,
 }
 
@@ -186,7 +185,7 @@ impl Stream {
     fn end_scan(&self) -> u64 {
         match &self.causal {
             Some(c) => self.origin_scan + c.chain.scans(),
-            None => self.first_scan + self.columns.first().map_or(0, Vec::len) as u64,
+            None => self.first_scan + self.raw.len() as u64,
         }
     }
 }
@@ -307,7 +306,7 @@ impl ConditionerCore {
             }
             return Ok(out);
         }
-        for (col, (c, _)) in stream.columns.iter_mut().zip(&kept) {
+        for (col, (c, _)) in stream.raw.columns.iter_mut().zip(&kept) {
             col.extend(samples[*c..].iter().step_by(width).take(n_scans));
         }
         let mut out = Vec::new();
@@ -393,7 +392,6 @@ impl ConditionerCore {
             first_scan: frame.first_scan,
             origin_scan: frame.first_scan,
             origin_stamp: Stamp::from_time(&frame.header.stamp),
-            columns: vec![Vec::new(); channels.len()],
             raw: RawRecord {
                 sample_rate_hz: frame.sample_rate_hz,
                 start_time_s: 0.0,
@@ -477,17 +475,13 @@ impl ConditionerCore {
         let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
         let begin = (s.next_out - s.first_scan) as usize - s.edge;
         let end = begin + block + 2 * s.edge;
-        for (dst, src) in s.raw.columns.iter_mut().zip(&s.columns) {
-            dst.clear();
-            dst.extend_from_slice(&src[begin..end]);
-        }
         let stamp = s.origin_stamp.after_samples((s.next_out - s.origin_scan) as i64, s.rate_hz);
         let mut frame = Self::next_frame(&mut self.sequence, &self.config, stamp, s.next_out, s.rate_hz);
         if let Some(note) = s.start_note.take() {
             frame.flags.push(note);
         }
         let edge = s.edge;
-        match conditioning::condition_into(&s.raw, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
+        match conditioning::condition_window_into(&s.raw, begin..end, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
             Ok(()) => {
                 let w = &self.work;
                 let r = edge..edge + block;
@@ -529,12 +523,16 @@ impl ConditionerCore {
             }
         }
         s.next_out += block as u64;
-        // Keep `edge` scans before the next block.
+        // The next block needs `edge` scans before it; those before them are dropped once
+        // they are at least four times as many as the scans kept (a move of the kept scans
+        // every few blocks, not at every block; the windows conditioned are the same).
         let keep_from = (s.next_out - s.first_scan) as usize - edge;
-        for c in &mut s.columns {
-            c.drain(..keep_from);
+        if keep_from >= 4 * (s.raw.len() - keep_from) {
+            for c in &mut s.raw.columns {
+                c.drain(..keep_from);
+            }
+            s.first_scan += keep_from as u64;
         }
-        s.first_scan += keep_from as u64;
         frame
     }
 }

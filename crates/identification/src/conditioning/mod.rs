@@ -567,6 +567,7 @@ struct FrontChannel<'a> {
 #[allow(clippy::too_many_arguments)]
 fn front_end(
     raw: &RawRecord,
+    window: Range<usize>,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
@@ -581,14 +582,14 @@ fn front_end(
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the only requirement of a `target_feature` function is that the CPU has
             // the feature, which was checked on the line above.
-            return unsafe { front_end_avx512(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
+            return unsafe { front_end_avx512(raw, window, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: as above.
-            return unsafe { front_end_avx2(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
+            return unsafe { front_end_avx2(raw, window, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives) };
         }
     }
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
+    front_end_body(raw, window, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 /// [`front_end`] compiled for AVX2: the same operations in the same order (no fused
@@ -598,6 +599,7 @@ fn front_end(
 #[allow(clippy::too_many_arguments)]
 fn front_end_avx2(
     raw: &RawRecord,
+    window: Range<usize>,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
@@ -607,7 +609,7 @@ fn front_end_avx2(
     scratch: &mut Vec<f64>,
     derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
+    front_end_body(raw, window, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 /// [`front_end`] compiled for AVX-512: the low-pass's eight lanes in one register each,
@@ -618,6 +620,7 @@ fn front_end_avx2(
 #[allow(clippy::too_many_arguments)]
 fn front_end_avx512(
     raw: &RawRecord,
+    window: Range<usize>,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
@@ -627,13 +630,14 @@ fn front_end_avx512(
     scratch: &mut Vec<f64>,
     derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    front_end_body(raw, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
+    front_end_body(raw, window, col_of, calibration, delays, mechanics, lp, out, scratch, derivatives)
 }
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn front_end_body(
     raw: &RawRecord,
+    window: Range<usize>,
     col_of: &[usize; CHANNEL_COUNT],
     calibration: &Calibration,
     delays: &[Option<deskew::FractionalDelay>],
@@ -643,13 +647,13 @@ fn front_end_body(
     scratch: &mut Vec<f64>,
     derivatives: &mut Derivatives<'_>,
 ) -> Result<Option<bool>, IdentificationError> {
-    let len = raw.len();
+    let len = window.len();
     if raw.units != RawUnits::Volts || len < 2 || out.iter().any(|c| c.len() != len) {
         return Ok(None);
     }
     let mut chans = Vec::with_capacity(CHANNEL_COUNT);
     for (&ch, delay) in ChannelId::ALL.iter().zip(delays) {
-        let (Some(delay), Some(volts)) = (delay, raw.columns.get(col_of[ch.index()])) else {
+        let (Some(delay), Some(volts)) = (delay, raw.columns.get(col_of[ch.index()]).and_then(|c| c.get(window.clone()))) else {
             return Ok(None);
         };
         let c = calibration.channel(ch)?;
@@ -965,13 +969,29 @@ pub fn condition_into(
     config: &ConditioningConfig,
     out: &mut Conditioned,
 ) -> Result<(), IdentificationError> {
+    condition_window_into(raw, 0..raw.len(), calibration, mechanics, config, out)
+}
+
+/// [`condition_into`] on the scans `window` of `raw`: the result (indices, `valid`, range
+/// violations, bits) is the one [`condition_into`] gives for a record holding only those
+/// scans and starting `window.start` scans later, without copying them into one. A
+/// streaming conditioner keeps the scans it has in one record and conditions a window of it
+/// per block. A window that does not fit in the record is a `BadInput`.
+pub fn condition_window_into(
+    raw: &RawRecord,
+    window: Range<usize>,
+    calibration: &Calibration,
+    mechanics: &Mechanics,
+    config: &ConditioningConfig,
+    out: &mut Conditioned,
+) -> Result<(), IdentificationError> {
     let mut pool = out.take_columns();
     let mut work = std::mem::take(&mut out.work);
     let mut violations = std::mem::take(&mut out.range_violations);
     violations.clear();
     *out = Conditioned::default();
     let mut used = 0;
-    let n = raw.len();
+    let n = window.len();
     // A buffer of `n` samples from the pool; its contents are overwritten by every stage.
     let mut next = || -> Vec<f64> {
         let v = pool.get_mut(used).map(std::mem::take).unwrap_or_default();
@@ -988,6 +1008,12 @@ pub fn condition_into(
     };
 
     raw.validate_shape()?;
+    if window.end > raw.len() || window.start > window.end {
+        return Err(IdentificationError::BadInput {
+            what: "window".into(),
+            reason: format!("scans {window:?} of a record of {} scans", raw.len()),
+        });
+    }
     let (lp, sg) = config.designs(raw.sample_rate_hz, work.differentiator.take())?;
     mechanics.validate()?;
     let fs = raw.sample_rate_hz;
@@ -1064,7 +1090,7 @@ pub fn condition_into(
             [&mut housing_vy, &mut housing_ay_m_s2],
         ],
     );
-    let fused = front_end(raw, &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch, &mut derivatives)?;
+    let fused = front_end(raw, window.clone(), &col_of, calibration, &delays, mechanics, &lp, &mut front, &mut scratch, &mut derivatives)?;
     // The derivatives and eq. 2's inertial part followed the low-pass (`Some` finiteness of
     // r'' in x and y and of the forces) or are still to be computed.
     let derived = (fused.is_some() && derivatives.complete && !derivatives.refused).then_some(derivatives.finite);
@@ -1072,7 +1098,7 @@ pub fn condition_into(
         // Something to report (or a record of SI values): the stages one by one.
         let mut si = front;
         for (&ch, delay) in ChannelId::ALL.iter().zip(&delays) {
-            let column = &raw.columns[col_of[ch.index()]];
+            let column = &raw.columns[col_of[ch.index()]][window.clone()];
             let buf = &mut si[ch.index()];
             match raw.units {
                 RawUnits::Volts => calibrate::to_si_into(ch, column, calibration, buf)?,
@@ -1155,7 +1181,7 @@ pub fn condition_into(
         }
     }
 
-    let t0 = raw.start_time_s;
+    let t0 = raw.start_time_s + window.start as f64 / fs;
     for (i, t) in t_s.iter_mut().enumerate() {
         *t = t0 + i as f64 / fs;
     }
@@ -1244,6 +1270,39 @@ mod tests {
             })
             .collect();
         RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
+    }
+
+    /// A window of a record conditions exactly as a record of its scans: the fused path
+    /// (windows of clean readings), the stage-by-stage path with a range violation (indexed
+    /// from the window's start), the whole record, and one conditioning buffer reused across
+    /// them. A window past the record's end is refused, naming it.
+    #[test]
+    fn a_window_conditions_as_a_record_of_its_scans() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let mechanics = Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
+        let config = ConditioningConfig::default();
+        let mut raw = volts_record(6000, &calibration, 11);
+        raw.start_time_s = 2.5;
+        // Far outside the probe's range (and finite): step 2 rejects it, by the stages one by one.
+        raw.columns[2][3500] = 1.0e3;
+        let mut work = Conditioned::default();
+        for window in [0..6000, 1000..4234, 2500..5000, 3766..6000, 1000..4234] {
+            let alone = RawRecord {
+                start_time_s: raw.start_time_s + window.start as f64 / raw.sample_rate_hz,
+                columns: raw.columns.iter().map(|c| c[window.clone()].to_vec()).collect(),
+                ..raw.clone()
+            };
+            let expected = condition(&alone, &calibration, &mechanics, &config).unwrap();
+            condition_window_into(&raw, window.clone(), &calibration, &mechanics, &config, &mut work).unwrap();
+            assert!(work == expected, "window {window:?}");
+            let flagged = window.contains(&3500);
+            assert_eq!(!work.range_violations.is_empty(), flagged, "window {window:?}");
+            if flagged {
+                assert_eq!(work.range_violations[0].index, 3500 - window.start);
+            }
+        }
+        let e = condition_window_into(&raw, 5000..7000, &calibration, &mechanics, &config, &mut work).unwrap_err().to_string();
+        assert!(e.contains("window") && e.contains("6000"), "{e}");
     }
 
     /// `condition_into` keeps the differentiator it designed for the next call: a call with
