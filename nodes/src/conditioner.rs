@@ -244,7 +244,7 @@ impl ConditionerCore {
     }
 
     fn push_samples(&mut self, frame: &DaqFrame, decoded: &mut Vec<f64>) -> Result<Vec<ConditionedFrame>, NodeError> {
-        let (kept, samples) = self.check(frame, decoded)?;
+        let kept = self.check(frame)?;
         let n_scans = frame.scan_count as usize;
         let channels: Vec<ChannelId> = kept.iter().map(|(_, id)| *id).collect();
         let offsets: Vec<f64> = kept.iter().map(|(c, _)| frame.channel_offsets_s[*c]).collect();
@@ -269,6 +269,8 @@ impl ConditionerCore {
         let Some(stream) = self.stream.as_mut() else { return Ok(Vec::new()) };
         let width = frame.channel_names.len();
         if let Some(c) = stream.causal.as_mut() {
+            let bad = |reason: String| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason };
+            let samples = frame.samples(decoded).map_err(bad)?;
             // The chain reads rows of the stream's channels in the frame's order (`kept` is
             // in frame order): when the frame holds only channels the chain uses (a DAQ
             // sending the paper's ten, in any order), its samples (`scan_count` whole rows,
@@ -306,9 +308,12 @@ impl ConditionerCore {
             }
             return Ok(out);
         }
-        for (col, (c, _)) in stream.raw.columns.iter_mut().zip(&kept) {
-            col.extend(samples[*c..].iter().step_by(width).take(n_scans));
-        }
+        // Straight from the frame's counts or values into the stream's columns (checked by
+        // `check`: the picks are the frame's channels, the samples consistent).
+        let picks: Vec<usize> = kept.iter().map(|(c, _)| *c).collect();
+        frame
+            .extend_columns(&picks, &mut stream.raw.columns)
+            .map_err(|reason| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason })?;
         let mut out = Vec::new();
         while let Some(stream) = self.stream.as_ref() {
             if stream.end_scan() < stream.next_out + (self.block + stream.edge) as u64 {
@@ -319,10 +324,10 @@ impl ConditionerCore {
         Ok(out)
     }
 
-    /// The channels the chain uses (position in the frame, id) and the samples (the frame's
-    /// values, or its counts in volts decoded into `decoded`; `scan_count` x channels of them),
-    /// or why the frame cannot be used.
-    fn check<'a>(&self, frame: &'a DaqFrame, decoded: &'a mut Vec<f64>) -> Result<(KeptChannels, &'a [f64]), NodeError> {
+    /// The channels the chain uses (position in the frame, id), once the frame's samples are
+    /// checked consistent (`scan_count` x channels of them, in the units it states), or why
+    /// the frame cannot be used.
+    fn check(&self, frame: &DaqFrame) -> Result<KeptChannels, NodeError> {
         let bad = |reason: String| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason };
         if !(frame.sample_rate_hz.is_finite() && frame.sample_rate_hz > 0.0) {
             return Err(bad(format!("sample_rate_hz must be finite and > 0, got {}", frame.sample_rate_hz)));
@@ -331,7 +336,7 @@ impl ConditionerCore {
         if frame.channel_offsets_s.len() != width {
             return Err(bad(format!("{} channel_offsets_s for {width} channel_names", frame.channel_offsets_s.len())));
         }
-        let samples = frame.samples(decoded).map_err(bad)?;
+        frame.check_samples().map_err(bad)?;
         if frame.rig != self.rig.name {
             return Err(bad(format!("frame from rig `{}`, but this conditioner has the calibration of rig `{}` (parameter `rig`)", frame.rig, self.rig.name)));
         }
@@ -346,7 +351,7 @@ impl ConditionerCore {
                 channels.push((c, id));
             }
         }
-        Ok((channels, samples))
+        Ok(channels)
     }
 
     fn start_stream(&mut self, frame: &DaqFrame, channels: Vec<ChannelId>, offsets_s: Vec<f64>, note: String) -> Result<(), NodeError> {

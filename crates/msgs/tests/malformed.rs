@@ -130,6 +130,42 @@ fn samples_decode_counts_and_name_what_is_inconsistent() {
     }
 }
 
+/// `extend_columns` appends what `samples` gives, channel by channel, for counts with one
+/// range or a range per channel and for values, over more scans than one tile, any picks in
+/// any order; a bad pick or an inconsistent frame is refused with nothing appended.
+#[test]
+fn extend_columns_appends_the_samples_of_the_picked_channels() {
+    let width = 3;
+    let scans = 600;
+    let names: Vec<String> = ["xa", "ya", "f1"].iter().map(|s| s.to_string()).collect();
+    let counts: Vec<i16> = (0..scans * width).map(|i| ((i * 7919) % 65_536) as i32 - 32_768).map(|q| q as i16).collect();
+    let base = DaqFrame { channel_names: names.clone(), channel_units: vec!["V".into(); width], channel_offsets_s: vec![0.0; width], scan_count: scans as u32, ..sample_counts() };
+    let frames = [
+        DaqFrame { units: DaqFrame::UNITS_COUNTS, counts: counts.clone(), volts_per_count: vec![3.0e-4; width], ..base.clone() },
+        DaqFrame { units: DaqFrame::UNITS_COUNTS, counts: counts.clone(), volts_per_count: vec![3.0e-4, 1.0e-3, 7.0e-5], ..base.clone() },
+        DaqFrame { units: DaqFrame::UNITS_VOLTS, counts: Vec::new(), volts_per_count: Vec::new(), values: counts.iter().map(|&q| f64::from(q) * 0.37).collect(), ..base.clone() },
+    ];
+    for frame in &frames {
+        let mut buf = Vec::new();
+        let all = frame.samples(&mut buf).expect("consistent").to_vec();
+        let picks = [2, 0];
+        let mut columns = vec![vec![-1.0], Vec::new()];
+        frame.extend_columns(&picks, &mut columns).expect("consistent");
+        for (k, &c) in picks.iter().enumerate() {
+            let want: Vec<f64> = all[c..].iter().step_by(width).copied().collect();
+            let got = if k == 0 { &columns[k][1..] } else { &columns[k][..] };
+            assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "units {} channel {c}", frame.units);
+        }
+        assert_eq!(columns[0][0], -1.0, "appended after what the column held");
+        let e = frame.extend_columns(&[0, 3], &mut columns).expect_err("no channel 3");
+        assert!(e.contains("channel 3") && e.contains("3 channels"), "{e}");
+        assert_eq!(columns[1].len(), scans, "nothing appended on error");
+    }
+    let ragged = DaqFrame { counts: vec![1; scans * width - 1], ..frames[0].clone() };
+    let e = ragged.extend_columns(&[0], &mut [Vec::new()]).expect_err("ragged");
+    assert!(e.contains("counts, but scan_count"), "{e}");
+}
+
 #[test]
 fn pack_counts_only_when_lossless() {
     let lsb = 2.0 * 10.0 / 65536.0;
