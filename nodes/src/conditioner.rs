@@ -3,12 +3,16 @@
 //! Zhou et al. 2004 section 3.1 steps 1-7).
 //!
 //! Streaming zero-phase filtering: the chain is non-causal (forward-backward low-pass,
-//! centred derivatives, de-skew interpolation), so each output block of `block_scans`
-//! samples is conditioned together with `edge` raw samples on either side, where `edge` is
-//! what the chain itself trims from a record ([`conditioning::edge_samples`]). Blocks sit at
-//! fixed scan indices of the stream, so the output depends only on the input scans, never on
-//! how they were cut into frames or when they arrived: live and replayed graphs give the
-//! same bits. Latency is one block plus `edge` scans.
+//! centred derivatives, de-skew interpolation), so an output block of `block_scans` samples
+//! is out once `edge` raw samples past it are in, where `edge` is what the chain itself trims
+//! from a record ([`conditioning::edge_samples`]). The front end and the low-pass's forward
+//! pass run once per scan, carried from frame to frame, and each block's backward pass starts
+//! on the forward output past it ([`conditioning::stream`], ADR 0019); a block whose window
+//! (`edge` scans on either side) holds a reading the front end cannot use is conditioned as
+//! that window of raw scans instead, which names the reading. Blocks sit at fixed scan
+//! indices of the stream, so the output depends only on the input scans, never on how they
+//! were cut into frames or when they arrived: live and replayed graphs give the same bits.
+//! Latency is one block plus `edge` scans.
 //!
 //! ## The causal chain (`chain: causal`, ADR 0014)
 //! The same steps run forward only, scan by scan, with their state carried across frames
@@ -35,6 +39,7 @@
 //! its flags; nothing is silently turned into numbers.
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
+use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
 use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
 use oilfilm_physics::daq::CHANNEL_COUNT;
 use oilfilm_identification::pipeline::{calibration_for, mechanics_of};
@@ -156,9 +161,10 @@ struct Stream {
     origin_scan: u64,
     origin_stamp: Stamp,
     /// The scans received and still needed, one column per channel in the stream's order
-    /// (channels and units fixed for the stream): each block is conditioned as a window of
-    /// it ([`conditioning::condition_window_into`]), not copied out. Scans no block needs
-    /// any more are dropped in batches (see [`ConditionerCore::condition_block`]).
+    /// (channels and units fixed for the stream): read by the zero-phase stream, and by the
+    /// windowed conditioning of a block the stream leaves to it
+    /// ([`conditioning::condition_window_into`], in place). Scans no block needs any more
+    /// are dropped in batches (see [`ConditionerCore::condition_block`]).
     raw: RawRecord,
     /// Next scan to publish.
     next_out: u64,
@@ -167,6 +173,9 @@ struct Stream {
     start_note: Option<String>,
     /// The causal chain's state (`chain: causal`); `raw` stays empty then.
     causal: Option<Box<CausalStream>>,
+    /// The zero-phase chain as a stream (ADR 0019), when it can run (`deskew` on, all ten
+    /// channels); a block it cannot condition is conditioned as a window of `raw`.
+    zero_phase: Option<Box<ZeroPhaseStream>>,
 }
 
 /// A stream through the causal chain.
@@ -314,6 +323,10 @@ impl ConditionerCore {
         frame
             .extend_columns(&picks, &mut stream.raw.columns)
             .map_err(|reason| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason })?;
+        if let Some(zp) = stream.zero_phase.as_mut() {
+            // The stream's record holds every scan from `first_needed` on (see `condition_block`).
+            zp.advance(&stream.raw, (stream.first_scan - stream.origin_scan) as usize)?;
+        }
         let mut out = Vec::new();
         while let Some(stream) = self.stream.as_ref() {
             if stream.end_scan() < stream.next_out + (self.block + stream.edge) as u64 {
@@ -363,8 +376,15 @@ impl ConditionerCore {
             columns: vec![Vec::new(); channels.len()],
         };
         let calibration = calibration_for(&self.rig, &probe, &offsets_s)?;
+        let units = if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts };
+        let mut zero_phase = None;
         let (edge, causal) = match self.chain {
-            Chain::ZeroPhase => (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None),
+            Chain::ZeroPhase => {
+                // A stream that cannot be set up (a channel missing, say) leaves every block
+                // to the windowed conditioning, which names what is wrong in each block.
+                zero_phase = ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().flatten().map(Box::new);
+                (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None)
+            }
             Chain::Causal => {
                 let mut columns = [usize::MAX; CHANNEL_COUNT];
                 for (k, c) in channels.iter().enumerate() {
@@ -377,7 +397,6 @@ impl ConditionerCore {
                         reason: format!("channel `{missing}` missing: conditioning needs all ten"),
                     });
                 }
-                let units = if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts };
                 let chain = CausalChain::new(&columns, channels.len(), units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config)?;
                 (chain.delays().delay_scans(), Some(Box::new(CausalStream { chain, pending: CausalOutput::default(), aligned: false, rows: Vec::new() })))
             }
@@ -401,7 +420,7 @@ impl ConditionerCore {
                 sample_rate_hz: frame.sample_rate_hz,
                 start_time_s: 0.0,
                 channels: channels.clone(),
-                units: if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
+                units,
                 columns: vec![Vec::new(); channels.len()],
             },
             channels,
@@ -409,6 +428,7 @@ impl ConditionerCore {
             edge,
             start_note: Some(note),
             causal,
+            zero_phase,
         });
         Ok(())
     }
@@ -473,43 +493,64 @@ impl ConditionerCore {
         frame
     }
 
-    /// Conditions the block at `next_out` (the caller checked the scans are there).
+    /// Conditions the block at `next_out` (the caller checked the scans are there): by the
+    /// zero-phase stream, or as a window of the stream's record when the stream cannot (a
+    /// reading it cannot use in the block's window, or no stream).
     fn condition_block(&mut self) -> ConditionedFrame {
         let block = self.block;
         // Checked by the caller.
         let Some(s) = self.stream.as_mut() else { return ConditionedFrame::default() };
-        let begin = (s.next_out - s.first_scan) as usize - s.edge;
-        let end = begin + block + 2 * s.edge;
+        let offset = (s.first_scan - s.origin_scan) as usize;
+        let start = (s.next_out - s.origin_scan) as usize;
         let stamp = s.origin_stamp.after_samples((s.next_out - s.origin_scan) as i64, s.rate_hz);
         let mut frame = Self::next_frame(&mut self.sequence, &self.config, stamp, s.next_out, s.rate_hz);
         if let Some(note) = s.start_note.take() {
             frame.flags.push(note);
         }
         let edge = s.edge;
-        match conditioning::condition_window_into(&s.raw, begin..end, &s.calibration, &self.mechanics, &self.config, &mut self.work) {
-            Ok(()) => {
+        let streamed = match s.zero_phase.as_mut() {
+            Some(zp) => zp.block(start, block, &s.raw, offset).transpose(),
+            None => None,
+        };
+        let outcome = streamed.unwrap_or_else(|| {
+            // The record holds the window (see the drop below); should it not, the window
+            // is refused with what is missing.
+            let begin = start.saturating_sub(edge + offset);
+            conditioning::condition_window_into(&s.raw, begin..start + block + edge - offset.min(start + block + edge), &s.calibration, &self.mechanics, &self.config, &mut self.work).map(|()| {
                 let w = &self.work;
                 let r = edge..edge + block;
                 if w.valid != r {
                     frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
                 }
                 let cut = |v: &[f64]| v[r.clone()].to_vec();
-                frame.x_m = cut(&w.x_m);
-                frame.y_m = cut(&w.y_m);
-                frame.x_dot_m_s = cut(&w.vx_m_s);
-                frame.y_dot_m_s = cut(&w.vy_m_s);
-                frame.x_ddot_m_s2 = cut(&w.ax_m_s2);
-                frame.y_ddot_m_s2 = cut(&w.ay_m_s2);
-                frame.fx_n = cut(&w.fx_n);
-                frame.fy_n = cut(&w.fy_n);
-                frame.bearing_temperature_degc = w.temperature_c[r.clone()].iter().sum::<f64>() / block as f64;
-                if w.range_violations.is_empty() {
-                    frame.valid = vec![true; block];
-                } else {
-                    frame.valid = vec![false; block];
-                    for v in &w.range_violations {
-                        frame.flags.push(format!("rejected (Zhou et al. step 2): {v}"));
-                    }
+                Block {
+                    x_m: cut(&w.x_m),
+                    y_m: cut(&w.y_m),
+                    vx_m_s: cut(&w.vx_m_s),
+                    vy_m_s: cut(&w.vy_m_s),
+                    ax_m_s2: cut(&w.ax_m_s2),
+                    ay_m_s2: cut(&w.ay_m_s2),
+                    fx_n: cut(&w.fx_n),
+                    fy_n: cut(&w.fy_n),
+                    temperature_c: cut(&w.temperature_c),
+                    range_violations: w.range_violations.clone(),
+                }
+            })
+        });
+        match outcome {
+            Ok(b) => {
+                frame.bearing_temperature_degc = b.temperature_c.iter().sum::<f64>() / block as f64;
+                frame.x_m = b.x_m;
+                frame.y_m = b.y_m;
+                frame.x_dot_m_s = b.vx_m_s;
+                frame.y_dot_m_s = b.vy_m_s;
+                frame.x_ddot_m_s2 = b.ax_m_s2;
+                frame.y_ddot_m_s2 = b.ay_m_s2;
+                frame.fx_n = b.fx_n;
+                frame.fy_n = b.fy_n;
+                frame.valid = vec![b.range_violations.is_empty(); block];
+                for v in &b.range_violations {
+                    frame.flags.push(format!("rejected (Zhou et al. step 2): {v}"));
                 }
             }
             Err(e) => {
@@ -528,10 +569,15 @@ impl ConditionerCore {
             }
         }
         s.next_out += block as u64;
-        // The next block needs `edge` scans before it; those before them are dropped once
-        // they are at least four times as many as the scans kept (a move of the kept scans
-        // every few blocks, not at every block; the windows conditioned are the same).
-        let keep_from = (s.next_out - s.first_scan) as usize - edge;
+        // The next block needs `edge` scans before it, and the zero-phase stream the scans
+        // its de-skew reaches back to; those before them are dropped once they are at least
+        // four times as many as the scans kept (a move of the kept scans every few blocks,
+        // not at every block; the windows conditioned are the same).
+        let mut keep_from = (s.next_out - s.first_scan) as usize - edge;
+        if let Some(zp) = s.zero_phase.as_mut() {
+            zp.release_before((s.next_out - s.origin_scan) as usize);
+            keep_from = keep_from.min(zp.first_needed() - offset);
+        }
         if keep_from >= 4 * (s.raw.len() - keep_from) {
             for c in &mut s.raw.columns {
                 c.drain(..keep_from);

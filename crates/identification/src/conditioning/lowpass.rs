@@ -181,6 +181,15 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
     }
 }
 
+/// The forward pass's state for a stream of eight lanes ([`Butterworth::forward_steady`],
+/// [`Butterworth::forward_run`]): each group of [`FUSED`] sections, and the lone last section
+/// of an odd count of them.
+#[derive(Clone)]
+pub(super) struct ForwardStream {
+    groups: Vec<[Lanes<8>; FUSED]>,
+    last: Option<[Lanes<8>; 1]>,
+}
+
 /// What [`Butterworth::filtfilt8_fed`] filters: `produce(a, b, cols)` writes samples `a..b`
 /// of the eight columns into `cols`, eight buffers of `b - a` values (sample `a + i` at index
 /// `i`; not the output columns). A trait with an `#[inline(always)]` method rather than a closure,
@@ -993,6 +1002,71 @@ impl Butterworth {
                 to_columns(&mut cols, 0, store);
                 consumer.consume(0, &mut cols)?;
                 Ok(true)
+            }
+        }
+    }
+
+    /// The forward pass of a stream (ADR 0019) in the state it has before its first input
+    /// `x0`: each group of sections in the DC steady state for its own first input, as
+    /// [`Butterworth::filtfilt8_fed`] starts them on its left reflection.
+    pub(super) fn forward_steady(&self, x0: [f64; 8]) -> ForwardStream {
+        let mut v = x0;
+        let mut groups = Vec::with_capacity(MAX_ORDER / FUSED);
+        let mut chunks = self.sections.chunks_exact(FUSED);
+        for g in &mut chunks {
+            if let Ok(g) = <&[Section; FUSED]>::try_from(g) {
+                let st = Cascade::steady(g, v);
+                v = { st }.step(v);
+                groups.push(st.lanes);
+            }
+        }
+        let last = chunks.remainder().first().map(|s| Cascade::steady(std::array::from_ref(s), v).lanes);
+        ForwardStream { groups, last }
+    }
+
+    /// The forward pass over `frames` (in place, in time order), its state carried in `st`:
+    /// frames fed in any cuts give the same outputs, bit for bit.
+    #[inline(always)]
+    pub(super) fn forward_run(&self, st: &mut ForwardStream, frames: &mut [[f64; 8]]) {
+        for (lanes, g) in st.groups.iter_mut().zip(self.sections.chunks_exact(FUSED)) {
+            if let Ok(sections) = <&[Section; FUSED]>::try_from(g) {
+                let mut c = Cascade { sections, lanes: *lanes };
+                for f in frames.iter_mut() {
+                    *f = c.step(*f);
+                }
+                *lanes = c.lanes;
+            }
+        }
+        if let (Some(lanes), Some(s)) = (st.last.as_mut(), self.sections.chunks_exact(FUSED).remainder().first()) {
+            let mut c = Cascade { sections: std::array::from_ref(s), lanes: *lanes };
+            for f in frames.iter_mut() {
+                *f = c.step(*f);
+            }
+            *lanes = c.lanes;
+        }
+    }
+
+    /// The backward pass over `frames` (in place, from the last to the first), each group of
+    /// sections started in the DC steady state for its first input (the last frame as the
+    /// previous group left it), as [`Butterworth::filtfilt8_fed`] starts it on its right
+    /// reflection; here the frames past a block stand in for the reflection.
+    #[inline(always)]
+    pub(super) fn backward_from_steady(&self, frames: &mut [[f64; 8]]) {
+        for g in self.sections.chunks(FUSED) {
+            let Some(&x0) = frames.last() else { return };
+            match <&[Section; FUSED]>::try_from(g) {
+                Ok(g) => {
+                    let mut c = Cascade::steady(g, x0);
+                    for f in frames.iter_mut().rev() {
+                        *f = c.step(*f);
+                    }
+                }
+                Err(_) => {
+                    let mut c = Cascade::steady(std::array::from_ref(&g[0]), x0);
+                    for f in frames.iter_mut().rev() {
+                        *f = c.step(*f);
+                    }
+                }
             }
         }
     }

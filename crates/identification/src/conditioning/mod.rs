@@ -76,6 +76,7 @@ pub mod film_force;
 pub mod kinematics;
 pub mod lowpass;
 pub mod range_check;
+pub mod stream;
 
 use std::ops::Range;
 
@@ -1246,7 +1247,7 @@ mod tests {
 
     /// A volts record of smooth motion plus noise, every reading inside its probe's linear
     /// range (so the fused front end runs), from a small deterministic generator.
-    fn volts_record(n: usize, calibration: &Calibration, seed: u64) -> RawRecord {
+    pub(super) fn volts_record(n: usize, calibration: &Calibration, seed: u64) -> RawRecord {
         let mut state = seed;
         let mut uniform = move || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);

@@ -1,0 +1,527 @@
+//! The zero-phase chain as a stream (ADR 0019): the front end (steps 3, 4, the mean and tilt
+//! of step 5, eq. 2's applied part) and the low-pass's forward pass run once per scan, their
+//! state carried from call to call; each block's backward pass, derivatives and eq. 2's
+//! inertial part run over the block and the low-pass's settling past it.
+//!
+//! [`super::condition_window_into`] conditions a block as a record of its own with the
+//! chain's edge on either side: per 1 000-scan block at the launch files' 55.5 Hz, 2 234
+//! scans through the front end and the forward pass (started on an odd reflection 617 scans
+//! before the block) and the backward pass (started on a reflection past the window). Here a
+//! scan goes through the front end and the forward pass once, and the backward pass of a
+//! block starts in its DC steady state on the forward output `settling` scans past the
+//! block (plus the differentiators' reach), where the reflection stood: the same filter, its
+//! start transient decayed to 1e-7 by the block either way. The forward pass starts once, at
+//! the stream's first scan, in its steady state (no reflection): what it differs by from
+//! [`super::condition_window_into`]'s is that start's transient, below 1e-7 once a block is
+//! reached. Outputs are bit for bit independent of how the scans are cut into calls.
+//!
+//! What stays the windowed conditioning's: a block whose window (the block and `edge` scans
+//! on either side) holds a reading the front end cannot turn into a finite value is not
+//! conditioned here ([`ZeroPhaseStream::block`] returns `None`; the caller conditions that
+//! window as a record, which names the reading), and the forward pass starts again in steady
+//! state after such a reading. The range check (step 2) is the windowed one, on the block's
+//! window of raw readings.
+
+use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
+
+use super::{deskew, differentiate, film_force, front_tile, lowpass, range_check, ConditioningConfig, FrontChannel, Mechanics, RangeViolation, RawRecord, RawUnits, TILE};
+use crate::IdentificationError;
+
+/// One channel's constants for the front end.
+struct Channel {
+    id: ChannelId,
+    offset: f64,
+    gain: f64,
+    lo: f64,
+    hi: f64,
+    delay: deskew::FractionalDelay,
+}
+
+/// A conditioned block ([`ZeroPhaseStream::block`]): the columns the estimator reads, one
+/// value per scan of the block, and the step-2 violations in the block's window (indices
+/// from the window's start, as [`super::condition_window_into`] gives them).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Block {
+    pub x_m: Vec<f64>,
+    pub y_m: Vec<f64>,
+    pub vx_m_s: Vec<f64>,
+    pub vy_m_s: Vec<f64>,
+    pub ax_m_s2: Vec<f64>,
+    pub ay_m_s2: Vec<f64>,
+    pub fx_n: Vec<f64>,
+    pub fy_n: Vec<f64>,
+    pub temperature_c: Vec<f64>,
+    pub range_violations: Vec<RangeViolation>,
+}
+
+/// The zero-phase chain over a stream of scans (see the module's documentation).
+pub struct ZeroPhaseStream {
+    units: RawUnits,
+    calibration: Calibration,
+    col_of: [usize; CHANNEL_COUNT],
+    channels: Vec<Channel>,
+    applied: film_force::Applied,
+    lp: lowpass::Butterworth,
+    sg: differentiate::SavitzkyGolayDerivative,
+    mass_kg: f64,
+    /// How far the de-skew stencils reach before and after their output scan.
+    lookback: usize,
+    lookahead: usize,
+    edge: usize,
+    /// The front end and the forward pass are done for stream scans `..produced`.
+    produced: usize,
+    /// Their outputs for scans `kept_from..produced`: the forward pass's eight lanes
+    /// `[x, y, tilt_x, tilt_y, X, Y, Fx, Fy]` and the de-skewed temperature.
+    kept_from: usize,
+    frames: Vec<[f64; 8]>,
+    temperature: Vec<f64>,
+    /// `None` until the next finite front-end output (at the start, and after one that is not).
+    forward: Option<lowpass::ForwardStream>,
+    /// Scans whose front-end output is not finite, ascending (dropped once no block's
+    /// window can reach them).
+    bad: Vec<usize>,
+    // Working memory, reused.
+    tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
+    input: Box<[f64; TILE + deskew::MAX_TAPS]>,
+    lanes: [Vec<f64>; 8],
+    load: Vec<f64>,
+    temp: Vec<f64>,
+    back: Vec<[f64; 8]>,
+    columns: [Vec<f64>; 8],
+    first: Vec<f64>,
+    second: Vec<f64>,
+}
+
+impl ZeroPhaseStream {
+    /// A stream of records whose columns are `channels` (each of the ten once, any order) in
+    /// `units` at `sample_rate_hz`. The chain needs de-skew (`config.deskew`); without it,
+    /// `Ok(None)`: condition windows instead.
+    pub fn new(
+        channels: &[ChannelId],
+        units: RawUnits,
+        sample_rate_hz: f64,
+        calibration: &Calibration,
+        mechanics: &Mechanics,
+        config: &ConditioningConfig,
+    ) -> Result<Option<Self>, IdentificationError> {
+        config.validate(sample_rate_hz)?;
+        mechanics.validate()?;
+        if !config.deskew {
+            return Ok(None);
+        }
+        let mut col_of = [usize::MAX; CHANNEL_COUNT];
+        for (k, c) in channels.iter().enumerate() {
+            col_of[c.index()] = k;
+        }
+        if let Some(missing) = ChannelId::ALL.iter().find(|c| col_of[c.index()] == usize::MAX) {
+            return Err(IdentificationError::BadInput {
+                what: format!("channel `{missing}`"),
+                reason: "missing from the stream; conditioning needs all ten channels".into(),
+            });
+        }
+        let (lp, sg) = config.designs(sample_rate_hz, None)?;
+        let (mut lookback, mut lookahead) = (0usize, 0usize);
+        let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+        for &id in &ChannelId::ALL {
+            let delay = deskew::FractionalDelay::for_offset(calibration.sample_offset_s(id)?, sample_rate_hz, config.deskew_taps)?;
+            let start = delay.stencil_start();
+            lookback = lookback.max((-start).max(0) as usize);
+            lookahead = lookahead.max((start + delay.taps() as isize - 1).max(0) as usize);
+            let (offset, gain, lo, hi) = match units {
+                RawUnits::Volts => {
+                    let c = calibration.channel(id)?;
+                    let (lo, hi) = range_check::volts_bounds(id, calibration)?;
+                    (c.offset_v, 1.0 / c.sensitivity_v_per_unit, lo, hi)
+                }
+                // SI readings go through the same stencils as they are: `(v - 0) * 1 = v`.
+                RawUnits::Si => (0.0, 1.0, f64::NEG_INFINITY, f64::INFINITY),
+            };
+            chans.push(Channel { id, offset, gain, lo, hi, delay });
+        }
+        let edge = super::edge_samples(calibration, config, sample_rate_hz)?;
+        Ok(Some(Self {
+            units,
+            calibration: calibration.clone(),
+            col_of,
+            channels: chans,
+            applied: film_force::Applied::new(mechanics),
+            lp,
+            sg,
+            mass_kg: mechanics.housing_mass_kg,
+            lookback,
+            lookahead,
+            edge,
+            produced: lookback,
+            kept_from: lookback,
+            frames: Vec::new(),
+            temperature: Vec::new(),
+            forward: None,
+            bad: Vec::new(),
+            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
+            input: Box::new([0.0; TILE + deskew::MAX_TAPS]),
+            lanes: std::array::from_fn(|_| vec![0.0; TILE]),
+            load: Vec::new(),
+            temp: Vec::new(),
+            back: Vec::new(),
+            columns: Default::default(),
+            first: Vec::new(),
+            second: Vec::new(),
+        }))
+    }
+
+    /// Scans a block needs on either side: [`super::edge_samples`].
+    pub fn edge(&self) -> usize {
+        self.edge
+    }
+
+    /// The first stream scan [`ZeroPhaseStream::advance`] still reads (the caller may drop
+    /// the scans before it, and those before its next block's window).
+    pub fn first_needed(&self) -> usize {
+        self.produced - self.lookback
+    }
+
+    /// Runs the front end and the forward pass over every scan whose de-skew stencils `raw`
+    /// covers; `raw.columns[*][0]` is stream scan `offset` (it must hold every scan from
+    /// [`ZeroPhaseStream::first_needed`] on).
+    pub fn advance(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature, which was checked on the line above.
+                return unsafe { self.advance_avx512(raw, offset) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: as above.
+                return unsafe { self.advance_avx2(raw, offset) };
+            }
+        }
+        self.advance_body(raw, offset)
+    }
+
+    /// [`ZeroPhaseStream::advance`] compiled for AVX2: the same operations in the same order
+    /// (no fused multiply-add), so the same result bit for bit.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn advance_avx2(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
+        self.advance_body(raw, offset)
+    }
+
+    /// [`ZeroPhaseStream::advance`] compiled for AVX-512, as above.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn advance_avx512(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
+        self.advance_body(raw, offset)
+    }
+
+    #[inline(always)]
+    fn advance_body(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
+        let end = (offset + raw.len()).saturating_sub(self.lookahead);
+        if self.produced < end && self.first_needed() < offset {
+            return Err(IdentificationError::BadInput {
+                what: "stream".into(),
+                reason: format!("scans from {} needed, the record starts at {offset}", self.first_needed()),
+            });
+        }
+        while self.produced < end {
+            let (p, q) = (self.produced, (self.produced + TILE).min(end));
+            let (w0, w1) = (p - self.lookback - offset, q + self.lookahead - offset);
+            let len = w1 - w0;
+            let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+            for c in &self.channels {
+                let column = raw.columns.get(self.col_of[c.id.index()]).and_then(|v| v.get(w0..w1)).ok_or_else(|| IdentificationError::BadInput {
+                    what: format!("column `{}`", c.id),
+                    reason: format!("scans {w0}..{w1} of the record missing"),
+                })?;
+                chans.push(FrontChannel { volts: column, offset: c.offset, gain: c.gain, lo: c.lo, hi: c.hi, delay: &c.delay, interior: c.delay.interior(len) });
+            }
+            let (o0, o1) = (self.lookback, self.lookback + (q - p));
+            self.load.resize(o1, 0.0);
+            self.temp.resize(o1, 0.0);
+            let mut lanes = self.lanes.each_mut().map(|l| &mut l[..]);
+            front_tile(&chans, &self.applied, len, o0, o0, o1, &mut self.tile, &mut self.input, &mut lanes, &mut self.load, &mut self.temp);
+            let new_from = self.frames.len();
+            for i in 0..q - p {
+                self.frames.push(std::array::from_fn(|l| self.lanes[l][i]));
+            }
+            self.temperature.extend_from_slice(&self.temp[o0..o1]);
+            self.forward_over(new_from, p);
+            self.produced = q;
+        }
+        Ok(())
+    }
+
+    /// The forward pass over `frames[from..]` (stream scans from `scan`), restarting in steady
+    /// state after any frame (or temperature) that is not finite.
+    #[inline(always)]
+    fn forward_over(&mut self, from: usize, scan: usize) {
+        let mut i = from;
+        while i < self.frames.len() {
+            // The run of finite outputs from `i`.
+            let mut j = i;
+            while j < self.frames.len() && self.frames[j].iter().fold(self.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
+                j += 1;
+            }
+            if j > i {
+                if self.forward.is_none() {
+                    self.forward = Some(self.lp.forward_steady(self.frames[i]));
+                }
+                if let Some(st) = self.forward.as_mut() {
+                    self.lp.forward_run(st, &mut self.frames[i..j]);
+                }
+            }
+            if j < self.frames.len() {
+                self.bad.push(scan + (j - from));
+                self.forward = None;
+                j += 1;
+            }
+            i = j;
+        }
+    }
+
+    /// The block of `len` scans from stream scan `start`, once the stream has been advanced
+    /// over its window (`start + len + edge` scans in); `raw` as for
+    /// [`ZeroPhaseStream::advance`], holding the window. `Ok(None)`: the front end could not
+    /// make every reading of the window finite (or the scans are not there yet); condition
+    /// the window as a record instead ([`super::condition_window_into`]).
+    pub fn block(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the only requirement of a `target_feature` function is that the CPU
+                // has the feature, which was checked on the line above.
+                return unsafe { self.block_avx512(start, len, raw, offset) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: as above.
+                return unsafe { self.block_avx2(start, len, raw, offset) };
+            }
+        }
+        self.block_body(start, len, raw, offset)
+    }
+
+    /// [`ZeroPhaseStream::block`] compiled for AVX2, as [`ZeroPhaseStream::advance_avx2`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn block_avx2(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
+        self.block_body(start, len, raw, offset)
+    }
+
+    /// [`ZeroPhaseStream::block`] compiled for AVX-512, as above.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn block_avx512(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
+        self.block_body(start, len, raw, offset)
+    }
+
+    #[inline(always)]
+    fn block_body(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
+        let m = self.sg.half_length();
+        let settle = self.lp.settling_samples();
+        let window = start.checked_sub(self.edge).map(|a| a..start + len + self.edge);
+        let back = start.checked_sub(2 * m).map(|a| a..start + len + 2 * m + settle);
+        let (Some(window), Some(back)) = (window, back) else { return Ok(None) };
+        if back.start < self.kept_from || back.end > self.produced || window.start < offset || window.end > offset + raw.len() {
+            return Ok(None);
+        }
+        // Any unusable reading the window's front end reads: the windowed conditioning says which.
+        let reach = window.start.saturating_sub(self.lookback)..window.end + self.lookahead;
+        if self.bad.iter().any(|b| reach.contains(b)) {
+            return Ok(None);
+        }
+        self.back.clear();
+        self.back.extend_from_slice(&self.frames[back.start - self.kept_from..back.end - self.kept_from]);
+        self.lp.backward_from_steady(&mut self.back);
+        let n = len + 4 * m;
+        for (l, col) in self.columns.iter_mut().enumerate() {
+            col.clear();
+            col.extend(self.back[..n].iter().map(|f| f[l]));
+        }
+        let out_range = 2 * m..2 * m + len;
+        let mut block = Block::default();
+        let [x, y, _, _, hx, hy, fx, fy] = &self.columns;
+        let (v, a) = (&mut self.first, &mut self.second);
+        v.resize(n, 0.0);
+        a.resize(n, 0.0);
+        self.sg.apply_twice_into(x, v, a)?;
+        block.vx_m_s = v[out_range.clone()].to_vec();
+        block.ax_m_s2 = a[out_range.clone()].to_vec();
+        self.sg.apply_twice_into(y, v, a)?;
+        block.vy_m_s = v[out_range.clone()].to_vec();
+        block.ay_m_s2 = a[out_range.clone()].to_vec();
+        // Eq. 2's inertial part, `F -= m X''`, as `subtract_inertia` does it.
+        let mass = self.mass_kg;
+        self.sg.apply_twice_into(hx, v, a)?;
+        block.fx_n = fx[out_range.clone()].to_vec();
+        for (f, &acc) in block.fx_n.iter_mut().zip(&a[out_range.clone()]) {
+            *f -= mass * acc;
+        }
+        self.sg.apply_twice_into(hy, v, a)?;
+        block.fy_n = fy[out_range.clone()].to_vec();
+        for (f, &acc) in block.fy_n.iter_mut().zip(&a[out_range.clone()]) {
+            *f -= mass * acc;
+        }
+        block.x_m = x[out_range.clone()].to_vec();
+        block.y_m = y[out_range].to_vec();
+        block.temperature_c = self.temperature[start - self.kept_from..start + len - self.kept_from].to_vec();
+        for c in &self.channels {
+            let column = &raw.columns[self.col_of[c.id.index()]][window.start - offset..window.end - offset];
+            if let Some(v) = range_check::check(c.id, column, self.units, &self.calibration)? {
+                block.range_violations.push(v);
+            }
+        }
+        Ok(Some(block))
+    }
+
+    /// Drops what no block from stream scan `next` on needs (in batches: a move of what is
+    /// kept every few blocks).
+    pub fn release_before(&mut self, next: usize) {
+        let keep = next.saturating_sub(2 * self.sg.half_length()).max(self.kept_from).min(self.produced);
+        let dead = keep - self.kept_from;
+        if dead > 0 && dead >= 4 * (self.produced - keep) {
+            self.frames.drain(..dead);
+            self.temperature.drain(..dead);
+            self.kept_from = keep;
+        }
+        let reach_from = next.saturating_sub(self.edge + self.lookback);
+        self.bad.retain(|&b| b >= reach_from);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::volts_record;
+    use super::super::{condition, condition_window_into, Conditioned};
+    use super::*;
+    use oilfilm_physics::daq::DaqConfig;
+
+    fn mechanics() -> Mechanics {
+        Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 }
+    }
+
+    /// The launch files' low-pass (55.5 Hz): the edge the node uses.
+    fn config() -> ConditioningConfig {
+        ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() }
+    }
+
+    /// Feeds `raw` to a fresh stream in cuts of `cut` scans (the stream's record keeps every
+    /// scan, as a node that never drops any), taking each block of `len` scans from `edge`
+    /// on as soon as its window is in; the blocks and their starts.
+    fn blocks(raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let mut zp = ZeroPhaseStream::new(&raw.channels, raw.units, raw.sample_rate_hz, &calibration, &mechanics(), &config()).unwrap().unwrap();
+        let mut fed = RawRecord { columns: vec![Vec::new(); raw.channels.len()], ..raw.clone() };
+        let mut next = zp.edge();
+        let mut out = Vec::new();
+        let mut at = 0;
+        while at < raw.len() {
+            let to = (at + cut).min(raw.len());
+            for (f, c) in fed.columns.iter_mut().zip(&raw.columns) {
+                f.extend_from_slice(&c[at..to]);
+            }
+            at = to;
+            zp.advance(&fed, 0).unwrap();
+            while next + len + zp.edge() <= fed.len() {
+                out.push((next, zp.block(next, len, &fed, 0).unwrap()));
+                next += len;
+                zp.release_before(next);
+            }
+        }
+        out
+    }
+
+    /// Largest difference of the block's columns from `reference`'s samples `at..` (the
+    /// windowed conditioning or the whole record's), relative to each column's largest value.
+    fn worst(b: &Block, reference: &Conditioned, at: usize) -> f64 {
+        let pairs: [(&[f64], &[f64]); 9] = [
+            (&b.x_m, &reference.x_m),
+            (&b.y_m, &reference.y_m),
+            (&b.vx_m_s, &reference.vx_m_s),
+            (&b.vy_m_s, &reference.vy_m_s),
+            (&b.ax_m_s2, &reference.ax_m_s2),
+            (&b.ay_m_s2, &reference.ay_m_s2),
+            (&b.fx_n, &reference.fx_n),
+            (&b.fy_n, &reference.fy_n),
+            (&b.temperature_c, &reference.temperature_c),
+        ];
+        pairs
+            .iter()
+            .map(|(got, want)| {
+                let want = &want[at..at + got.len()];
+                let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                got.iter().zip(want).fold(0.0f64, |m, (g, w)| m.max((g - w).abs())) / scale
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Every block agrees with the whole record's conditioning and with the windowed
+    /// conditioning of its window (what the node published before ADR 0019) to within the
+    /// filters' settling tolerance, and the blocks' bits do not depend on how the scans
+    /// came in (one at a time, 7, 500 or all at once).
+    #[test]
+    fn blocks_match_the_windowed_conditioning_and_do_not_depend_on_the_cuts() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let raw = volts_record(9_000, &calibration, 5);
+        let whole = condition(&raw, &calibration, &mechanics(), &config()).unwrap();
+        let reference = blocks(&raw, 500, 1_000);
+        assert!(reference.len() >= 6, "{} blocks", reference.len());
+        let mut window = Conditioned::default();
+        let (mut vs_whole, mut vs_window) = (0.0f64, 0.0f64);
+        for (start, b) in &reference {
+            let b = b.as_ref().expect("clean readings: every block from the stream");
+            assert!(b.range_violations.is_empty());
+            assert_eq!(b.x_m.len(), 1_000);
+            vs_whole = vs_whole.max(worst(b, &whole, *start));
+            let edge = whole.valid.start;
+            condition_window_into(&raw, start - edge..start + 1_000 + edge, &calibration, &mechanics(), &config(), &mut window).unwrap();
+            vs_window = vs_window.max(worst(b, &window, edge));
+        }
+        println!("largest relative difference: {vs_whole:.2e} from the whole record, {vs_window:.2e} from the windows");
+        assert!(vs_whole < 1e-6 && vs_window < 1e-6, "{vs_whole:e} {vs_window:e}");
+        // A stream that conditions nothing differently fails the first; the transients are
+        // not nothing either.
+        assert!(vs_window > 0.0);
+        for cut in [1, 7, 9_000] {
+            assert!(blocks(&raw, cut, 1_000) == reference, "cut {cut}");
+        }
+    }
+
+    /// A NaN reading: the blocks whose window holds it are left to the windowed conditioning
+    /// (`None`), and the forward pass starts again after it, so the blocks whose window
+    /// starts after it agree with the record's conditioning as before. An out-of-range
+    /// reading is reported by the blocks whose window holds it, as the windowed conditioning
+    /// reports it.
+    #[test]
+    fn a_nan_is_left_to_the_windows_and_a_range_violation_reported_as_they_report_it() {
+        let calibration = DaqConfig::zhou2004().calibration();
+        let clean = volts_record(12_000, &calibration, 9);
+        let whole = condition(&clean, &calibration, &mechanics(), &config()).unwrap();
+        let edge = whole.valid.start;
+        let mut raw = clean.clone();
+        raw.columns[3][4_321] = f64::NAN;
+        let mut window = Conditioned::default();
+        let mut after = 0;
+        for (start, b) in blocks(&raw, 500, 1_000) {
+            let reaches = start - edge <= 4_321 + 8 && 4_321 < start + 1_000 + edge + 8;
+            match b {
+                None => assert!(reaches, "block {start}: left to the windows without a NaN near"),
+                Some(b) => {
+                    assert!(!reaches || !(start - edge..start + 1_000 + edge).contains(&4_321), "block {start} conditioned across the NaN");
+                    let d = worst(&b, &whole, start);
+                    assert!(d < 1e-6, "block {start}: {d:e}");
+                    after += usize::from(start > 4_321);
+                }
+            }
+        }
+        assert!(after >= 3, "{after} blocks after the NaN");
+        let mut raw = clean;
+        raw.columns[0][6_100] = 1.0e3;
+        for (start, b) in blocks(&raw, 500, 1_000) {
+            let b = b.expect("finite readings");
+            let w = start - edge..start + 1_000 + edge;
+            condition_window_into(&raw, w.clone(), &calibration, &mechanics(), &config(), &mut window).unwrap();
+            assert_eq!(b.range_violations, window.range_violations, "block {start}");
+            assert_eq!(b.range_violations.is_empty(), !w.contains(&6_100), "block {start}");
+        }
+    }
+}
