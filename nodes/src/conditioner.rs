@@ -513,10 +513,15 @@ impl ConditionerCore {
             None => None,
         };
         let outcome = streamed.unwrap_or_else(|| {
-            // The record holds the window (see the drop below); should it not, the window
-            // is refused with what is missing.
-            let begin = start.saturating_sub(edge + offset);
-            conditioning::condition_window_into(&s.raw, begin..start + block + edge - offset.min(start + block + edge), &s.calibration, &self.mechanics, &self.config, &mut self.work).map(|()| {
+            // The record holds the window (`start >= edge`, and the drop below keeps `edge`
+            // scans before `next_out`); should it not, the window is refused, not sliced.
+            let Some(begin) = (start - edge).checked_sub(offset) else {
+                return Err(oilfilm_identification::IdentificationError::BadInput {
+                    what: "window".into(),
+                    reason: format!("scans from {} needed, the record starts at {offset}", start - edge),
+                });
+            };
+            conditioning::condition_window_into(&s.raw, begin..begin + block + 2 * edge, &s.calibration, &self.mechanics, &self.config, &mut self.work).map(|()| {
                 let w = &self.work;
                 let r = edge..edge + block;
                 if w.valid != r {
@@ -576,7 +581,7 @@ impl ConditionerCore {
         let mut keep_from = (s.next_out - s.first_scan) as usize - edge;
         if let Some(zp) = s.zero_phase.as_mut() {
             zp.release_before((s.next_out - s.origin_scan) as usize);
-            keep_from = keep_from.min(zp.first_needed() - offset);
+            keep_from = keep_from.min(zp.first_needed().saturating_sub(offset));
         }
         if keep_from >= 4 * (s.raw.len() - keep_from) {
             for c in &mut s.raw.columns {

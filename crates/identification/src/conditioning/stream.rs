@@ -94,8 +94,8 @@ pub struct ZeroPhaseStream {
 
 impl ZeroPhaseStream {
     /// A stream of records whose columns are `channels` (each of the ten once, any order) in
-    /// `units` at `sample_rate_hz`. The chain needs de-skew (`config.deskew`); without it,
-    /// `Ok(None)`: condition windows instead.
+    /// `units` at `sample_rate_hz`. The chain needs de-skew (`config.deskew`) and usable
+    /// calibrations; without them, `Ok(None)`: condition windows instead.
     pub fn new(
         channels: &[ChannelId],
         units: RawUnits,
@@ -130,8 +130,13 @@ impl ZeroPhaseStream {
             let (offset, gain, lo, hi) = match units {
                 RawUnits::Volts => {
                     let c = calibration.channel(id)?;
+                    let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
+                    if !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite()) {
+                        // Every reading would be unusable: the windowed conditioning says why.
+                        return Ok(None);
+                    }
                     let (lo, hi) = range_check::volts_bounds(id, calibration)?;
-                    (c.offset_v, 1.0 / c.sensitivity_v_per_unit, lo, hi)
+                    (offset, 1.0 / sensitivity, lo, hi)
                 }
                 // SI readings go through the same stencils as they are: `(v - 0) * 1 = v`.
                 RawUnits::Si => (0.0, 1.0, f64::NEG_INFINITY, f64::INFINITY),
