@@ -11,7 +11,8 @@
 //! block starts in its DC steady state on the forward output `settling` scans past the
 //! block (plus the differentiators' reach), where the reflection stood: the same filter, its
 //! start transient decayed to 1e-7 by the block either way. The forward pass starts once, at
-//! the stream's first scan, in its steady state (no reflection): what it differs by from
+//! the stream's first scan whose de-skew stencils are complete, in its steady state (no
+//! reflection): what it differs by from
 //! [`super::condition_window_into`]'s is that start's transient, below 1e-7 once a block is
 //! reached. Outputs are bit for bit independent of how the scans are cut into calls.
 //!
