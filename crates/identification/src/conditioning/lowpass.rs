@@ -1048,25 +1048,14 @@ impl Butterworth {
 
     /// The backward pass over `frames` (in place, from the last to the first), each group of
     /// sections started in the DC steady state for its first input (the last frame as the
-    /// previous group left it), as [`Butterworth::filtfilt8_fed`] starts it on its right
-    /// reflection; here the frames past a block stand in for the reflection.
+    /// previous group left it): [`backward_frames`] with no reflection, the frames past a
+    /// block standing in for it.
     #[inline(always)]
     pub(super) fn backward_from_steady(&self, frames: &mut [[f64; 8]]) {
         for g in self.sections.chunks(FUSED) {
-            let Some(&x0) = frames.last() else { return };
             match <&[Section; FUSED]>::try_from(g) {
-                Ok(g) => {
-                    let mut c = Cascade::steady(g, x0);
-                    for f in frames.iter_mut().rev() {
-                        *f = c.step(*f);
-                    }
-                }
-                Err(_) => {
-                    let mut c = Cascade::steady(std::array::from_ref(&g[0]), x0);
-                    for f in frames.iter_mut().rev() {
-                        *f = c.step(*f);
-                    }
-                }
+                Ok(g) => backward_frames(g, frames, &mut []),
+                Err(_) => backward_frames(std::array::from_ref(&g[0]), frames, &mut []),
             }
         }
     }
