@@ -1,9 +1,9 @@
 //! Throughput of the conditioning chain on a record the size of the paper's (50 000 scans of
 //! 10 channels at 5 kHz): each stage on its own, then the whole `condition` call.
 //!
-//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into|causal]`
+//! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into|causal|blocks]`
 //! (`into`: only the whole `condition_into`, `causal`: only the causal chain, e.g. under
-//! `perf record`)
+//! `perf record`; `blocks`: the whole record against `blocks::condition_by_block`, alternating)
 //!
 //! "samples" are channel samples: a 50 000-scan record has 500 000. Each figure is the best
 //! of `repeats` runs (default 15), to show the code's speed rather than the machine's load.
@@ -13,8 +13,9 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
+use oilfilm_identification::IdentificationError;
 use oilfilm_identification::conditioning::{
-    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
+    blocks, calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
     range_check, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -102,6 +103,35 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             black_box(&out);
         });
         report("condition_into (reusing the output buffers)", all, t);
+        return Ok(());
+    }
+
+    if only.as_deref() == Some("blocks") {
+        // `... [scans] [repeats] blocks`: the whole record against block by block (ADR 0020),
+        // in alternating rounds so that both see the same machine.
+        let mut whole = condition(&raw, &cal, &mech, &conf)?;
+        let mut out = whole.clone();
+        let sizes = [50_000usize, 25_000, 12_500, 10_000, 5_000];
+        let mut best = [f64::INFINITY; 6];
+        for _ in 0..repeats {
+            best[0] = best[0].min(best_of(1, || {
+                condition_into(&raw, &cal, &mech, &conf, &mut whole).unwrap(); // validated above
+                black_box(&whole);
+            }));
+            for (b, &size) in best[1..].iter_mut().zip(&sizes) {
+                *b = b.min(best_of(1, || {
+                    blocks::condition_by_block(&raw, &cal, &mech, &conf, size, &mut out, |_, c| -> Result<(), IdentificationError> {
+                        black_box(c);
+                        Ok(())
+                    })
+                    .unwrap(); // the same record conditions whole above
+                }));
+            }
+        }
+        report("condition_into, the whole record", all, best[0]);
+        for (b, size) in best[1..].iter().zip(sizes) {
+            report(&format!("condition_by_block, {size}-scan blocks"), all, *b);
+        }
         return Ok(());
     }
 

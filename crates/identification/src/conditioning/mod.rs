@@ -68,6 +68,7 @@
 //! AVX-512 derivative, in the same runs); the front end is now the largest part, then the
 //! zero-phase low-pass.
 
+pub mod blocks;
 pub mod calibrate;
 pub mod causal;
 pub mod deskew;
