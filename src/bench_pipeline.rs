@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use nalgebra::Matrix2;
 use oilfilm_identification::conditioning::{self, Conditioned};
 use oilfilm_identification::estimator::solve::ScaledFactor;
-use oilfilm_identification::estimator::window::BlockSummary;
+use oilfilm_identification::estimator::window::{BlockSummary, SummaryBuilder};
 use oilfilm_identification::estimator::{self, EstimatorConfig, Signals, Solver};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
@@ -23,6 +23,9 @@ use oilfilm_physics::config::RigConfig;
 use crate::records::Progress;
 
 const WINDOW: usize = 50_000;
+/// Scans per block of the block-by-block pipeline (ADR 0020); 10 000-25 000 measured best
+/// (3-7 MB conditioned per block). A divisor of [`WINDOW`], so that blocks are not split.
+const BLOCK: usize = 10_000;
 /// Runs per timed stage, the best kept, for oilfilm and (passed in meta.json) for Python
 /// alike. On a shared 2-core VM a run of ~20 ms is often hit by a neighbour's burst; the
 /// best of 15 (timeit's practice: the minimum is the least disturbed run) made the ratio
@@ -78,6 +81,43 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     let t_full_est = best_of(3, || black_box(estimator::estimate_windows(&signals, &est).is_ok()));
     let t_one_window = best_of(51, || black_box(factor(0)));
 
+    // 1b. The same work block by block (ADR 0020): the record conditioned in blocks of
+    //     BLOCK scans (each with the filters' edge on each side) into reused buffers, each
+    //     block's six columns pushed into its window's factor while they are in cache, and a
+    //     window solved when its last block is in. Its first window's kxx is printed beside
+    //     the whole record's.
+    let mut block_out = Conditioned::default();
+    let mut block_kxx = Vec::with_capacity(n_windows);
+    let edge = valid.start;
+    let mut by_block = |kxx: &mut Vec<f64>| {
+        kxx.clear();
+        let mut builder = SummaryBuilder::new(6);
+        conditioning::blocks::condition_by_block(&raw, &cal, &mech, &ccfg, BLOCK, &mut block_out, |range, c| -> Result<()> {
+            // The block's scans window by window (a block straddles a window's end when
+            // BLOCK does not divide the window); scans past the last whole window are
+            // conditioned, as above, and not solved.
+            let mut a = range.start;
+            while a < range.end && (a - edge) / window < n_windows {
+                let window_end = edge + ((a - edge) / window + 1) * window;
+                let b = range.end.min(window_end);
+                let rows = c.valid.start + (a - range.start)..c.valid.start + (b - range.start);
+                let view: Vec<&[f64]> = [&c.x_m, &c.y_m, &c.vx_m_s, &c.vy_m_s, &c.fx_n, &c.fy_n].iter().map(|col| &col[rows.clone()]).collect();
+                builder.push(&view);
+                if b == window_end {
+                    let summary = std::mem::replace(&mut builder, SummaryBuilder::new(6)).finish();
+                    let solution = ScaledFactor::new(&summary, 4).and_then(|f| f.solve(Solver::Qr));
+                    kxx.push(solution.context("a window does not solve")?.coef[0]);
+                }
+                a = b;
+            }
+            Ok(())
+        })
+    };
+    by_block(&mut block_kxx)?;
+    anyhow::ensure!(block_kxx.len() == n_windows, "{} windows solved block by block for {n_windows}", block_kxx.len());
+    let t_blocks = best_of(REPEATS, || black_box(by_block(&mut block_kxx).is_ok()));
+    let whole_kxx = factor(0).map(|s| s.coef[0]).unwrap_or(f64::NAN);
+
     // 2. Python: the same record through scipy/numpy.
     let py = python.unwrap_or_else(|| PathBuf::from(".venv/bin/python"));
     let py_result = run_python(&py, &rec, &rig, &raw, &ccfg, (out.valid.start, window), scans);
@@ -95,6 +135,13 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     row("least squares, QR per window", t_ls);
     row("conditioning + least squares", lean);
     row("conditioning + full estimator (lines, HAC errors, flags)", t_cond + t_full_est);
+    row(&format!("conditioning + least squares, block by block ({BLOCK}-scan blocks, ADR 0020)"), t_blocks);
+    println!(
+        "(block by block against the whole record: kxx of the first window {:.6e} against {:.6e} N/m, relative difference {:.1e})",
+        -block_kxx[0],
+        -whole_kxx,
+        ((block_kxx[0] - whole_kxx) / whole_kxx).abs()
+    );
     println!();
     match &py_result {
         Ok(p) => {
@@ -103,6 +150,7 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
             println!("|---|---|---|---|");
             println!("| conditioning | {:.1} ms | {:.2} ms | {:.1}x |", p.conditioning_s * 1e3, t_cond * 1e3, p.conditioning_s / t_cond);
             println!("| conditioning + least squares (whole pipeline) | {:.1} ms | {:.2} ms | {:.1}x |", p.pipeline_s * 1e3, lean * 1e3, p.pipeline_s / lean);
+            println!("| the same, oilfilm block by block | {:.1} ms | {:.2} ms | {:.1}x |", p.pipeline_s * 1e3, t_blocks * 1e3, p.pipeline_s / t_blocks);
             println!("| least squares, one {window} x 4 window, 2 right-hand sides | {:.3} ms (numpy.linalg.lstsq) | {:.3} ms | {:.1}x |", p.lstsq_window_s * 1e3, t_one_window * 1e3, p.lstsq_window_s / t_one_window);
             println!("(sanity: kxx of the first window, Python {:.4e} N/m)", p.kxx);
         }

@@ -8,7 +8,7 @@
 //! then reads its six columns back from memory. A block of 10 000-25 000 scans (3-7 MB
 //! conditioned) stays in cache from the front end to whatever the caller does with it, and the
 //! buffers are reused block after block, so memory no longer grows with the record. Measured
-//! on a 32 MB-L3 host (ADR 0020): 20-24 % less time than the whole record for the
+//! on a 32 MB-L3 host (ADR 0020): 19-24 % less time than the whole record for the
 //! conditioning alone, none for 50 000-scan blocks. The cost is the overlap (`2 edge` scans
 //! per block: 362 at the defaults) and the filters' edges: a block's samples differ from the
 //! whole record's by what the edge trim leaves of the start-up transients, within the
