@@ -117,6 +117,7 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     anyhow::ensure!(block_kxx.len() == n_windows, "{} windows solved block by block for {n_windows}", block_kxx.len());
     let t_blocks = best_of(REPEATS, || black_box(by_block(&mut block_kxx).is_ok()));
     let whole_kxx = factor(0).map(|s| s.coef[0]).unwrap_or(f64::NAN);
+    let first_block_kxx = block_kxx.first().copied().unwrap_or(f64::NAN);
 
     // 2. Python: the same record through scipy/numpy.
     let py = python.unwrap_or_else(|| PathBuf::from(".venv/bin/python"));
@@ -138,9 +139,9 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     row(&format!("conditioning + least squares, block by block ({BLOCK}-scan blocks, ADR 0020)"), t_blocks);
     println!(
         "(block by block against the whole record: kxx of the first window {:.6e} against {:.6e} N/m, relative difference {:.1e})",
-        -block_kxx[0],
+        -first_block_kxx,
         -whole_kxx,
-        ((block_kxx[0] - whole_kxx) / whole_kxx).abs()
+        ((first_block_kxx - whole_kxx) / whole_kxx).abs()
     );
     println!();
     match &py_result {

@@ -7,7 +7,8 @@
 //! the low-pass's forward frames, some 60 MB, which no cache holds, and a least-squares stage
 //! then reads its six columns back from memory. A block of 10 000-25 000 scans (3-7 MB
 //! conditioned) stays in cache from the front end to whatever the caller does with it, and the
-//! buffers are reused block after block, so memory no longer grows with the record. Measured
+//! buffers are reused block after block, so the conditioned data no longer grow with the
+//! record (the raw record is still read whole). Measured
 //! on a 32 MB-L3 host (ADR 0020): 19-24 % less time than the whole record for the
 //! conditioning alone, none for 50 000-scan blocks. The cost is the overlap (`2 edge` scans
 //! per block: 362 at the defaults) and the filters' edges: a block's samples differ from the
@@ -53,6 +54,8 @@ pub fn condition_by_block<E: From<IdentificationError>>(
     if block == 0 {
         return Err(IdentificationError::invalid("block", "0 scans; a block holds at least one").into());
     }
+    // A ragged record is the whole record's fault, not a block's: refused before the blocks.
+    raw.validate_shape()?;
     let edge = edge_samples(calibration, config, raw.sample_rate_hz)?;
     let n = raw.len();
     if n <= 2 * edge {
@@ -157,8 +160,9 @@ mod tests {
         assert!(differs && worst > 0.0, "the blocks must be conditioned apart from the whole record");
     }
 
-    /// A block of 0, a record with no valid scan and a NaN reading are refused; the NaN's
-    /// error names the window it is in, and the blocks before it were handed on.
+    /// A block of 0, a record with no valid scan, a ragged record and a NaN reading are
+    /// refused; only the NaN's error names the window it is in, and the blocks before it were
+    /// handed on.
     #[test]
     fn bad_blocks_and_bad_readings_are_refused_by_name() {
         let calibration = DaqConfig::zhou2004().calibration();
@@ -173,6 +177,11 @@ mod tests {
         let short = RawRecord { columns: raw.columns.iter().map(|c| c[..2 * edge].to_vec()).collect(), ..raw.clone() };
         let e = condition_by_block(&short, &calibration, &mechanics(), &config, 100, &mut out, ok).unwrap_err().to_string();
         assert!(e.contains("record length"), "{e}");
+
+        let mut ragged = raw.clone();
+        ragged.columns[3].pop();
+        let e = condition_by_block(&ragged, &calibration, &mechanics(), &config, 1000, &mut out, ok).unwrap_err().to_string();
+        assert!(!e.contains("block window") && e.contains(&format!("{}", ragged.channels[3])), "a whole-record fault: {e}");
 
         let mut bad = raw.clone();
         assert_eq!(bad.units, RawUnits::Volts);
