@@ -18,7 +18,9 @@ echo "== Rust tests (built optimised: see [profile.test] in Cargo.toml)"
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 mkdir -p target
 set +e
-cargo test --workspace --profile test -- --nocapture 2>&1 | tee target/test-output.txt
+# --no-fail-fast: a failing test binary must not keep the later ones from running (without it
+# a run once reported 235 passed and 1 failed, and never ran some 110 other tests).
+cargo test --workspace --profile test --no-fail-fast -- --nocapture 2>&1 | tee target/test-output.txt
 rust_status=${PIPESTATUS[0]}
 set -e
 read -r rp rf rs < <(grep -E "^test result:" target/test-output.txt | awk '
