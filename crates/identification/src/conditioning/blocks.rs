@@ -193,8 +193,8 @@ mod tests {
         })
         .unwrap_err()
         .to_string();
-        // Blocks of 1000 from `edge`: the NaN at 4000 lies in the fourth block's window (and the
-        // third's edge, when it reaches past 4000).
+        // Blocks of 1000 from `edge`: the first block whose window (the block and `edge` scans
+        // on either side) reaches scan 4000 is the first refused.
         let first_bad = block_ranges(6000, edge, 1000).position(|r| r.end + edge > 4000).unwrap();
         assert_eq!(seen.len(), first_bad);
         let start = block_ranges(6000, edge, 1000).nth(first_bad).unwrap().start - edge;
