@@ -65,6 +65,9 @@
 
 use oilfilm_physics::daq::ChannelId;
 
+#[cfg(target_arch = "x86_64")]
+mod pair_avx2;
+
 use super::first_non_finite;
 use crate::IdentificationError;
 
@@ -179,6 +182,38 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
         }
         v
     }
+}
+
+/// `st` over `frames` of eight lanes in place, from the first frame to the last or (with
+/// `reverse`) back, its state carried: the same outputs and state as `st.step` frame by
+/// frame. A group of two Butterworth sections on an AVX2 CPU without AVX-512 runs in
+/// [`pair_avx2`], which keeps their state in registers (same operations, same bits); the
+/// rest runs the generic step, on a local copy of the state (behind a reference the
+/// compiler kept it in memory, a load and a store per lane and sample).
+#[inline(always)]
+fn run8<const S: usize>(st: &mut Cascade<'_, 8, S>, frames: &mut [[f64; 8]], reverse: bool) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let sections: &[Section] = st.sections;
+        if let (Ok(sections), Ok(lanes)) = (<&[Section; 2]>::try_from(sections), <&mut [Lanes<8>; 2]>::try_from(&mut st.lanes[..])) {
+            if pair_avx2::applies(sections) {
+                // SAFETY: `applies` checked that the CPU has AVX2, `run`'s only requirement.
+                unsafe { pair_avx2::run(sections, lanes, frames, reverse) };
+                return;
+            }
+        }
+    }
+    let mut local = *st;
+    if reverse {
+        for f in frames.iter_mut().rev() {
+            *f = local.step(*f);
+        }
+    } else {
+        for f in frames.iter_mut() {
+            *f = local.step(*f);
+        }
+    }
+    *st = local;
 }
 
 /// The forward pass's state for a stream of eight lanes ([`Butterworth::forward_steady`],
@@ -500,9 +535,7 @@ fn backward_frames<const S: usize>(sections: &[Section; S], store: &mut [[f64; 8
     for f in right.iter_mut().rev() {
         *f = st.step(*f);
     }
-    for f in store.iter_mut().rev() {
-        *f = st.step(*f);
-    }
+    run8(&mut st, store, true);
 }
 
 /// The last group of sections backward over the frames kept by the forward pass, chunk by
@@ -527,9 +560,7 @@ fn backward_frames_consumed<const S: usize, C: Consume8>(
     while end > 0 {
         let start = end.saturating_sub(CONSUME_CHUNK);
         let chunk = &mut store[start..end];
-        for f in chunk.iter_mut().rev() {
-            *f = st.step(*f);
-        }
+        run8(&mut st, chunk, true);
         finite &= chunk.as_flattened().iter().fold(true, |ok, v| ok & v.is_finite());
         to_columns(cols, start, chunk);
         consumer.consume(start, cols)?;
@@ -938,21 +969,11 @@ impl Butterworth {
             }
             let range = &mut store[a..produced];
             to_frames(&mut fresh, 0, range);
-            // Each state copied into a local for the pass: behind the Vec's pointer the
-            // compiler kept it in memory, a load and a store per lane and sample.
             for st in states.iter_mut() {
-                let mut local = *st;
-                for f in range.iter_mut() {
-                    *f = local.step(*f);
-                }
-                *st = local;
+                run8(st, range, false);
             }
             if let Some(st) = last.as_mut() {
-                let mut local = *st;
-                for f in range.iter_mut() {
-                    *f = local.step(*f);
-                }
-                *st = local;
+                run8(st, range, false);
             }
             if produced == n {
                 break;
@@ -1031,9 +1052,7 @@ impl Butterworth {
         for (lanes, g) in st.groups.iter_mut().zip(self.sections.chunks_exact(FUSED)) {
             if let Ok(sections) = <&[Section; FUSED]>::try_from(g) {
                 let mut c = Cascade { sections, lanes: *lanes };
-                for f in frames.iter_mut() {
-                    *f = c.step(*f);
-                }
+                run8(&mut c, frames, false);
                 *lanes = c.lanes;
             }
         }
