@@ -1135,6 +1135,36 @@ fn overflow_in_the_filters_is_refused() {
     assert!(what.contains("conditioned") && reason.contains("overflowed"), "{what}: {reason}");
 }
 
+/// A calibration (deserialised, so not validated) whose linear range reaches readings that
+/// do not convert to a finite value: an in-range reading that overflows in the conversion is
+/// refused with its channel and sample, as a NaN would be. The front end skips the per-reading
+/// check of the converted value only where the range's ends convert finitely, which these
+/// do not.
+#[test]
+fn an_in_range_reading_that_overflows_in_the_conversion_is_refused_by_name() {
+    let cfg = quiet_daq_config();
+    let mut daq = Daq::new(&cfg, &Effects::default(), 1).unwrap(); // a valid configuration
+    let sc = Scenario::new();
+    let mut raw = RawRecord::from_scans(&sc.daq_scans(&mut daq, 2000), FS).unwrap(); // consecutive scans
+    let mut json = serde_json::to_value(daq.calibration()).unwrap(); // a Calibration serialises
+    let channels = json["channels"].as_array_mut().unwrap(); // a list of channel records
+    let by = channels.iter_mut().find(|c| c["channel"] == serde_json::json!(ChannelId::ProbeBY)).unwrap(); // every channel is there
+    // 1 V reads as 1e308 m; the linear range is widened to +-4 V, so +2 V is in range and
+    // converts to infinity.
+    by["sensitivity_v_per_unit"] = serde_json::json!(1.0e-308);
+    by["offset_v"] = serde_json::json!(0.0);
+    by["linear_range_v"] = serde_json::json!([-4.0, 4.0]);
+    let cal: Calibration = serde_json::from_value(json).unwrap(); // the same shape
+    let col = raw.channels.iter().position(|&c| c == ChannelId::ProbeBY).unwrap(); // in the record
+    for (i, v) in raw.columns[col].iter_mut().enumerate() {
+        *v = if i == 700 { 2.0 } else { 1.0e-3 * ((i % 7) as f64 - 3.0) };
+    }
+    let err = condition(&raw, &cal, &sc.mech, &ConditioningConfig::default()).unwrap_err();
+    let (what, reason) = bad_input(err);
+    assert!(what.contains("probe_b_y") && what.contains("700"), "{what}: {reason}");
+    assert!(reason.contains("does not convert to a finite"), "{what}: {reason}");
+}
+
 #[test]
 fn nan_sample_is_refused_naming_channel_and_index() {
     let (mut raw, cal) = small_si_record();

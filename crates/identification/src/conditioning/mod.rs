@@ -545,8 +545,19 @@ struct FrontChannel<'a> {
     /// Readings `v` with `v > lo && v < hi` are in the linear range.
     lo: f64,
     hi: f64,
+    /// Every reading in the linear range converts to a finite value: the conversion
+    /// `(v - offset) gain` is monotone in `v` (rounding is), so its values there lie between
+    /// those at `lo` and `hi`, and those are finite. The per-reading check of the converted
+    /// value is then skipped (it cannot fail).
+    si_bounded: bool,
     delay: &'a deskew::FractionalDelay,
     interior: Range<usize>,
+}
+
+/// [`FrontChannel::si_bounded`]: both ends of the linear range `(lo, hi)` convert to finite
+/// values, so every reading between them does.
+fn conversion_bounded(offset: f64, gain: f64, lo: f64, hi: f64) -> bool {
+    ((lo - offset) * gain).is_finite() && ((hi - offset) * gain).is_finite()
 }
 
 /// Steps 3, 2, 4, the linear combinations of steps 5 and 7 and step 1 (the low-pass) for a
@@ -667,12 +678,14 @@ fn front_end_body(
             return Ok(None);
         }
         let (lo, hi) = range_check::volts_bounds(ch, calibration)?;
+        let gain = 1.0 / sensitivity;
         chans.push(FrontChannel {
             volts,
             offset,
-            gain: 1.0 / sensitivity,
+            gain,
             lo,
             hi,
+            si_bounded: conversion_bounded(offset, gain, lo, hi),
             delay,
             interior: delay.interior(len),
         });
@@ -869,8 +882,14 @@ fn front_tile(
         // `&` and `|`, not `&&`: no branch per reading, so the count vectorises. A plain
         // loop: the iterator's `sum` became a call of its own (`fold`) compiled without the
         // caller's AVX2 once the low-pass was fed from here.
-        for &v in &c.volts[o0..o1] {
-            bad += (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize;
+        if c.si_bounded {
+            for &v in &c.volts[o0..o1] {
+                bad += !((v > lo) & (v < hi)) as usize;
+            }
+        } else {
+            for &v in &c.volts[o0..o1] {
+                bad += (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize;
+            }
         }
         // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
         // a >= interior.start and b <= interior.end).

@@ -35,6 +35,8 @@ struct Channel {
     gain: f64,
     lo: f64,
     hi: f64,
+    /// Every in-range reading converts to a finite value (`super::FrontChannel::si_bounded`).
+    si_bounded: bool,
     delay: deskew::FractionalDelay,
 }
 
@@ -142,7 +144,8 @@ impl ZeroPhaseStream {
                 // SI readings go through the same stencils as they are: `(v - 0) * 1 = v`.
                 RawUnits::Si => (0.0, 1.0, f64::NEG_INFINITY, f64::INFINITY),
             };
-            chans.push(Channel { id, offset, gain, lo, hi, delay });
+            let si_bounded = super::conversion_bounded(offset, gain, lo, hi);
+            chans.push(Channel { id, offset, gain, lo, hi, si_bounded, delay });
         }
         let edge = super::edge_samples(calibration, config, sample_rate_hz)?;
         Ok(Some(Self {
@@ -239,7 +242,7 @@ impl ZeroPhaseStream {
                     what: format!("column `{}`", c.id),
                     reason: format!("scans {w0}..{w1} of the record missing"),
                 })?;
-                chans.push(FrontChannel { volts: column, offset: c.offset, gain: c.gain, lo: c.lo, hi: c.hi, delay: &c.delay, interior: c.delay.interior(len) });
+                chans.push(FrontChannel { volts: column, offset: c.offset, gain: c.gain, lo: c.lo, hi: c.hi, si_bounded: c.si_bounded, delay: &c.delay, interior: c.delay.interior(len) });
             }
             let (o0, o1) = (self.lookback, self.lookback + (q - p));
             self.load.resize(o1, 0.0);
