@@ -45,7 +45,7 @@
 
 use oilfilm_physics::daq::ChannelId;
 
-use super::first_non_finite;
+use super::{all_finite, first_non_finite};
 use crate::IdentificationError;
 
 /// Degree of the least-squares polynomial.
@@ -487,7 +487,6 @@ impl SavitzkyGolayDerivative {
         if first.len() != len || second.len() != len || len < width {
             return None;
         }
-        let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
         let st = state.at_length(len, m);
         let from = from.min(len);
         // First derivative: output i reads input[i - M ..= i + M].
@@ -576,7 +575,6 @@ impl SavitzkyGolayDerivative {
     ) -> Result<bool, IdentificationError> {
         let len = input.len();
         let m = self.half_length;
-        let all_finite = |x: &[f64]| x.iter().fold(true, |ok, v| ok & v.is_finite());
         if first.len() != len || second.len() != len || len < 2 * m + 1 {
             // The one-pass path reports the mismatch.
             self.apply_into(input, first)?;

@@ -68,7 +68,7 @@ use oilfilm_physics::daq::ChannelId;
 #[cfg(target_arch = "x86_64")]
 mod pair_avx2;
 
-use super::first_non_finite;
+use super::{all_finite, first_non_finite};
 use crate::IdentificationError;
 
 /// Highest order accepted (the default is 4; beyond 12 nothing useful is gained and the
@@ -278,7 +278,7 @@ fn cascade_pass<const L: usize, const S: usize>(
                 *f = st.step(*f);
             }
         }
-        finite &= frames.as_flattened().iter().fold(true, |ok, v| ok & v.is_finite());
+        finite &= all_finite(frames.as_flattened());
         to_columns(cols, start, frames);
         done += t;
     }
@@ -561,7 +561,7 @@ fn backward_frames_consumed<const S: usize, C: Consume8>(
         let start = end.saturating_sub(CONSUME_CHUNK);
         let chunk = &mut store[start..end];
         run8(&mut st, chunk, true);
-        finite &= chunk.as_flattened().iter().fold(true, |ok, v| ok & v.is_finite());
+        finite &= all_finite(chunk.as_flattened());
         to_columns(cols, start, chunk);
         consumer.consume(start, cols)?;
         end = start;

@@ -510,6 +510,26 @@ impl Conditioned {
     }
 }
 
+/// Whether every value of `x` is finite, branch-free: `v - v` is 0 for a finite `v` and NaN
+/// for an infinite or NaN one, and a NaN stays in a sum. Two adds per vector of values; the
+/// compare-and-mask form (`ok & v.is_finite()`) took five instructions, packing each mask to
+/// a byte, and was a few percent of the conditioning.
+#[inline(always)]
+pub(crate) fn all_finite(x: &[f64]) -> bool {
+    let (chunks, rest) = x.as_chunks::<8>();
+    let mut acc = [0.0f64; 8];
+    for c in chunks {
+        for l in 0..8 {
+            acc[l] += c[l] - c[l];
+        }
+    }
+    let mut sum = acc.iter().sum::<f64>();
+    for v in rest {
+        sum += v - v;
+    }
+    sum == 0.0
+}
+
 /// Index of the first non-finite value, by a branch-free scan (vectorisable) and, only when
 /// one exists, a second search for its position.
 pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
@@ -1291,6 +1311,25 @@ mod tests {
             })
             .collect();
         RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
+    }
+
+    /// `all_finite` against the definition, on lengths that cut its chunks of eight, with the
+    /// extremes that `v - v` must still take to 0 (the largest finite, subnormals, -0) and each
+    /// kind of non-finite value at each position.
+    #[test]
+    fn all_finite_agrees_with_the_definition() {
+        for n in [0, 1, 7, 8, 9, 16, 21] {
+            let clean: Vec<f64> = (0..n).map(|i| [f64::MAX, -f64::MAX, 5e-324, -0.0, 1.5, -2.5e-300, f64::MIN_POSITIVE][i % 7]).collect();
+            assert!(all_finite(&clean), "{n} finite values");
+            for at in 0..n {
+                for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN, -f64::NAN] {
+                    let mut x = clean.clone();
+                    x[at] = bad;
+                    assert!(!all_finite(&x), "{bad} at {at} of {n}");
+                    assert_eq!(first_non_finite(&x), Some(at));
+                }
+            }
+        }
     }
 
     /// A window of a record conditions exactly as a record of its scans: the fused path
