@@ -159,9 +159,9 @@ pub struct SavitzkyGolayDerivative {
 
 /// The interior of [`SavitzkyGolayDerivative::interior_block`] for one x86 vector width: a
 /// dispatcher on the half-length `M` and a kernel with `M` known at compile time, `W` outputs
-/// per vector. Per output: two unaligned loads, a subtract, a multiply and an add per tap,
-/// summed in the order of [`interior_point`] (no fused multiply-add), so the same bits as
-/// the plain sum.
+/// per vector, four vectors per step sharing their loads. Per output: a subtract, a multiply
+/// and an add per tap, summed in the order of [`interior_point`] (no fused multiply-add), so
+/// the same bits as the plain sum.
 #[cfg(target_arch = "x86_64")]
 macro_rules! interior_kernels {
     (
@@ -192,8 +192,35 @@ macro_rules! interior_kernels {
             let x = &input[start - M..end + M];
             let dst = &mut out[start..end];
             let cv: [$vec; M] = std::array::from_fn(|k| $set1(c[k]));
-            let body = dst.len() / $w * $w;
+            // Four vectors of outputs per step: outputs j + 4w.. read x from j + 4w - M + W
+            // ... ; one load per distinct offset, shared by the outputs that read it (4 W
+            // outputs read 4 W + 2 M - 1 shifted vectors, 23 loads for 16 outputs at M = 5,
+            // where one vector at a time loaded 2 M per vector, 40). Each output's sum is
+            // formed in the same order as below, so the same bits.
+            let wide = dst.len() / (4 * $w) * (4 * $w);
             let mut j = 0;
+            while j < wide {
+                // SAFETY: j + 4 W <= wide <= dst.len(), and the loads read x[j + M + s ..
+                // j + M + s + W] for -M <= s <= 3 W + M, inside x[0 .. dst.len() + 2M] = x[..].
+                unsafe {
+                    // Vector q's outputs are centred on x[j + M + q W ..]; `d(q, k)` is its
+                    // k-th difference. The compiler loads each address once (the same
+                    // pointer arithmetic, and `dst` cannot alias `x`).
+                    let p = x.as_ptr().add(j + M);
+                    let d = |q: usize, k: usize| $sub($load(p.add(q * $w + k)), $load(p.add(q * $w).sub(k)));
+                    let mut acc: [$vec; 4] = std::array::from_fn(|q| $mul(cv[0], d(q, 1)));
+                    for k in 2..M + 1 {
+                        for q in 0..4 {
+                            acc[q] = $add(acc[q], $mul(cv[k - 1], d(q, k)));
+                        }
+                    }
+                    for q in 0..4 {
+                        $store(dst.as_mut_ptr().add(j + q * $w), acc[q]);
+                    }
+                }
+                j += 4 * $w;
+            }
+            let body = dst.len() / $w * $w;
             while j < body {
                 // SAFETY: j + W <= body <= dst.len(), and the loads read x[j + M - k .. j + M +
                 // k + W] for 1 <= k <= M, inside x[0 .. dst.len() + 2M] = x[..].
