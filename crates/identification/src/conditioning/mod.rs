@@ -868,8 +868,10 @@ fn prefetch(x: &[f64], range: Range<usize>) {
     let _ = r;
 }
 
-/// One tile `o0..o1` (at most [`TILE`] scans) of [`front_end`] before the low-pass: the
-/// number of readings that are out of range or not finite.
+/// One tile `o0..o1` (at most [`TILE`] scans) of [`front_end`] before the low-pass: how many
+/// readings it found out of range or not finite, zero exactly when every reading of the tile
+/// is usable (a reading just past the tile, which its stencil reads, may be counted too: it
+/// is in the record, and its own tile counts it again; the callers only ask for zero).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn front_tile(
@@ -899,30 +901,43 @@ fn front_tile(
         };
         let (offset, gain, lo, hi) = (c.offset, c.gain, c.lo, c.hi);
         let si = |v: f64| (v - offset) * gain;
-        // `&` and `|`, not `&&`: no branch per reading, so the count vectorises. A plain
-        // loop: the iterator's `sum` became a call of its own (`fold`) compiled without the
-        // caller's AVX2 once the low-pass was fed from here.
-        if c.si_bounded {
-            for &v in &c.volts[o0..o1] {
-                bad += !((v > lo) & (v < hi)) as usize;
-            }
-        } else {
-            for &v in &c.volts[o0..o1] {
-                bad += (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize;
-            }
-        }
         // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record:
         // a >= interior.start and b <= interior.end).
         let a = o0.max(c.interior.start).min(o1);
         let b = o1.min(c.interior.end).max(a);
+        let (w, taps) = (c.delay.weights(), c.delay.taps());
+        let i0 = (a as isize + c.delay.stencil_start()).max(0) as usize;
+        let i1 = i0 + (b - a) + taps - 1;
+        // Where the stencil's readings cover the tile's (every tile but those at the record's
+        // ends), the range check runs in the loop that converts them: one pass over the
+        // readings instead of two. Else (or where a converted value could overflow) the
+        // tile's readings are checked on their own. `&` and `|`, not `&&`: no branch per
+        // reading, so the count vectorises. Plain loops: the iterator's `sum` became a call
+        // of its own (`fold`) compiled without the caller's AVX2 once the low-pass was fed
+        // from here.
+        let check_while_converting = c.si_bounded && a == o0 && b == o1 && i0 <= o0 && i1 >= o1;
+        if !check_while_converting {
+            if c.si_bounded {
+                for &v in &c.volts[o0..o1] {
+                    bad += !((v > lo) & (v < hi)) as usize;
+                }
+            } else {
+                for &v in &c.volts[o0..o1] {
+                    bad += (!((v > lo) & (v < hi)) | !si(v).is_finite()) as usize;
+                }
+            }
+        }
         if a < b {
-            let w = c.delay.weights();
-            let taps = w.len();
-            let i0 = (a as isize + c.delay.stencil_start()) as usize;
-            let i1 = i0 + (b - a) + taps - 1;
             let x = &mut input[..i1 - i0];
-            for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
-                *x = si(v);
+            if check_while_converting {
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                    bad += !((v > lo) & (v < hi)) as usize;
+                }
+            } else {
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                }
             }
             let dst = &mut t[a - o0..b - o0];
             match taps {
