@@ -499,6 +499,7 @@ impl SavitzkyGolayDerivative {
     /// returns whether the outputs of `second` computed in this call are finite. The three
     /// columns must have the same length, at least `2M + 1`; else nothing is computed and
     /// `None` returned (the caller then uses the one-pass form, which reports the mismatch).
+    #[inline(always)]
     pub(crate) fn twice_descending(
         &self,
         state: &mut TwiceDescending,
