@@ -492,13 +492,18 @@ impl SavitzkyGolayDerivative {
     /// [`SavitzkyGolayDerivative::apply_twice_each`] fed from the end of the record towards
     /// its start, as a backward pass makes `input` final: `input[from..]` is final, `from`
     /// decreasing from call to call and 0 in the last. Computes every output of `first` and
-    /// `second` whose inputs are final and that is not computed yet, and calls `each(range,
-    /// block)` on each range of `second` that became final (the ranges cover the column once
-    /// when `from` has reached 0). Each output is computed by the same kernel as in
-    /// [`SavitzkyGolayDerivative::apply_twice_each`], so the same result bit for bit;
-    /// returns whether the outputs of `second` computed in this call are finite. The three
+    /// `second` whose inputs are final and that is not computed yet. Returns whether the
+    /// outputs of `second` computed in this call are finite, and their range: one range
+    /// (possibly empty), just below the previous call's, so that the ranges cover the column
+    /// once when `from` has reached 0. Each output is computed by the same kernel as in
+    /// [`SavitzkyGolayDerivative::apply_twice_each`], so the same result bit for bit. The three
     /// columns must have the same length, at least `2M + 1`; else nothing is computed and
     /// `None` returned (the caller then uses the one-pass form, which reports the mismatch).
+    ///
+    /// The caller works on the returned range itself (eq. 2's inertial part), rather than
+    /// passing a closure: a closure that is not inlined is compiled without the target
+    /// features of the front end this is inlined into (ADR 0016, amendment 1), and perf showed
+    /// the inertial subtraction as such a closure.
     #[inline(always)]
     pub(crate) fn twice_descending(
         &self,
@@ -507,8 +512,7 @@ impl SavitzkyGolayDerivative {
         input: &[f64],
         first: &mut [f64],
         second: &mut [f64],
-        mut each: impl FnMut(std::ops::Range<usize>, &[f64]),
-    ) -> Option<bool> {
+    ) -> Option<(bool, std::ops::Range<usize>)> {
         let len = input.len();
         let m = self.half_length;
         let width = 2 * m + 1;
@@ -539,30 +543,30 @@ impl SavitzkyGolayDerivative {
             (true, true) if st.first_lo <= m => 0,
             (true, _) => st.first_lo,
         };
-        // Second derivative, from `first` in the same way.
-        let mut finite = true;
+        // Second derivative, from `first` in the same way: the right edge, the interior below
+        // what is done, the left edge, each only once its inputs are, so each piece ends where
+        // the one before it (in this call or the last) starts.
+        let mut made = st.made_to..st.made_to;
         if !st.second_right && ready <= len - width {
             self.edge_right(first, second);
-            finite &= all_finite(&second[len - m..]);
-            each(len - m..len, &second[len - m..]);
+            made.start = len - m;
             st.second_right = true;
         }
         if ready < len {
             let lo = (ready + m).clamp(m, st.second_lo);
             if lo < st.second_lo {
                 self.interior_block(first, second, lo..st.second_lo);
-                finite &= all_finite(&second[lo..st.second_lo]);
-                each(lo..st.second_lo, &second[lo..st.second_lo]);
+                made.start = lo;
                 st.second_lo = lo;
             }
         }
         if ready == 0 && !st.second_left {
             self.edge_left(first, second);
-            finite &= all_finite(&second[..m]);
-            each(0..m, &second[..m]);
+            made.start = 0;
             st.second_left = true;
         }
-        Some(finite)
+        st.made_to = made.start;
+        Some((all_finite(&second[made.clone()]), made))
     }
 
     /// Differentiates `input` twice, as the paper does: `first` is its derivative and
@@ -654,6 +658,8 @@ pub(crate) struct TwiceDescending {
     second_lo: usize,
     second_right: bool,
     second_left: bool,
+    /// `second[made_to..]` has been handed on (returned as made).
+    made_to: usize,
 }
 
 impl TwiceDescending {
@@ -664,6 +670,7 @@ impl TwiceDescending {
                 shape: Some((len, m)),
                 first_lo: len - m,
                 second_lo: len - m,
+                made_to: len,
                 ..Self::default()
             };
         }
@@ -723,13 +730,12 @@ mod tests {
                 while from > 0 {
                     let step = [1, 3, 512, 17, 2 * m + 1][(uniform() * 5.0) as usize % 5];
                     from = from.saturating_sub(step);
-                    let ok = sg.twice_descending(&mut st, from, &x, &mut f2, &mut s2, |r, b| {
-                        assert_eq!(r.len(), b.len());
-                        for i in r {
-                            seen[i] += 1;
-                        }
-                    });
-                    assert_eq!(ok, Some(true), "M {m}, len {len}, from {from}");
+                    let (ok, made) = sg.twice_descending(&mut st, from, &x, &mut f2, &mut s2).expect("same lengths");
+                    assert!(ok, "M {m}, len {len}, from {from}");
+                    for i in made {
+                        seen[i] += 1;
+                        assert!(!s2[i].is_nan(), "M {m}, len {len}: sample {i} handed on before it was computed");
+                    }
                 }
                 let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert!(bits(&f1) == bits(&f2), "first, M {m}, len {len}");
@@ -740,6 +746,6 @@ mod tests {
         // Mismatched lengths are refused, not half computed.
         let sg = SavitzkyGolayDerivative::new(5, 5000.0).unwrap();
         let mut st = TwiceDescending::default();
-        assert_eq!(sg.twice_descending(&mut st, 0, &[0.0; 20], &mut [0.0; 19], &mut [0.0; 20], |_, _| {}), None);
+        assert_eq!(sg.twice_descending(&mut st, 0, &[0.0; 20], &mut [0.0; 19], &mut [0.0; 20]), None);
     }
 }

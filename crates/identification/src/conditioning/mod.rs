@@ -793,14 +793,20 @@ impl lowpass::Consume8 for Derivatives<'_> {
         let m = self.mass_kg;
         let mut force_finite = true;
         let results = [
-            sg.twice_descending(sx, from, x, vx, ax, |_, _| {}),
-            sg.twice_descending(sy, from, y, vy, ay, |_, _| {}),
-            sg.twice_descending(shx, from, hx, hvx, hax, |range, a| force_finite &= subtract_inertia(&mut fx[range], a, m)),
-            sg.twice_descending(shy, from, hy, hvy, hay, |range, a| force_finite &= subtract_inertia(&mut fy[range], a, m)),
+            sg.twice_descending(sx, from, x, vx, ax),
+            sg.twice_descending(sy, from, y, vy, ay),
+            sg.twice_descending(shx, from, hx, hvx, hax),
+            sg.twice_descending(shy, from, hy, hvy, hay),
         ];
+        // Eq. 2's inertial part on the housing accelerations made final just now.
+        for (result, force, acc) in [(&results[2], &mut **fx, &**hax), (&results[3], &mut **fy, &**hay)] {
+            if let Some((_, made)) = result {
+                force_finite &= subtract_inertia(&mut force[made.clone()], &acc[made.clone()], m);
+            }
+        }
         self.refused |= results.iter().any(Option::is_none);
-        self.finite[0] &= results[0].unwrap_or(false);
-        self.finite[1] &= results[1].unwrap_or(false);
+        self.finite[0] &= results[0].as_ref().is_some_and(|r| r.0);
+        self.finite[1] &= results[1].as_ref().is_some_and(|r| r.0);
         self.finite[2] &= force_finite;
         self.complete = from == 0;
         Ok(())
