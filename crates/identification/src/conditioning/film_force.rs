@@ -138,12 +138,8 @@ pub fn eq2(
     Ok((fx, fy))
 }
 
-/// The static film force: the mean of `fx`, `fy` over `range` (non-empty, inside both).
-pub fn static_part(
-    fx: &[f64],
-    fy: &[f64],
-    range: Range<usize>,
-) -> Result<[f64; 2], IdentificationError> {
+/// [`static_part`]'s check of its window: non-empty, inside both columns.
+pub(crate) fn check_static_window(fx: &[f64], fy: &[f64], range: &Range<usize>) -> Result<(), IdentificationError> {
     if range.is_empty() || range.end > fx.len() || range.end > fy.len() {
         return Err(IdentificationError::BadInput {
             what: "static film force window".into(),
@@ -154,6 +150,16 @@ pub fn static_part(
             ),
         });
     }
+    Ok(())
+}
+
+/// The static film force: the mean of `fx`, `fy` over `range` (non-empty, inside both).
+pub fn static_part(
+    fx: &[f64],
+    fy: &[f64],
+    range: Range<usize>,
+) -> Result<[f64; 2], IdentificationError> {
+    check_static_window(fx, fy, &range)?;
     let k = range.len() as f64;
     // Both sums in one loop: each is still added up in index order from -0.0 (as `Iterator::
     // sum` of f64 does: the same result, bit for bit), and the two chains of dependent adds

@@ -813,6 +813,69 @@ impl lowpass::Consume8 for Derivatives<'_> {
     }
 }
 
+/// Eq. 2's static part ([`film_force::static_part`], whose checks `valid` has passed) and
+/// the scans' times, `t[i] = t0 + i / fs`, in one pass. The static part's two sums are
+/// chains of dependent adds in index order, bound by an add's latency per sample; the
+/// times' divisions, four at a time, run beside them in the pipes the chains leave idle
+/// (apart, they were a pass of their own, 2-3 % of the conditioning). The same operations
+/// in the same order as `static_part` and a plain loop over the times, so the same bits
+/// (`static_part_and_times_equals_the_two_loops`).
+fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the only requirement of a `target_feature` function is that the CPU has
+            // the feature, which was checked on the line above.
+            return unsafe { static_part_and_times_avx2(fx, fy, valid, t0, fs, t) };
+        }
+    }
+    static_part_and_times_body(fx, fy, valid, t0, fs, t)
+}
+
+/// [`static_part_and_times`] compiled for AVX2 (four divisions per instruction; no fused
+/// multiply-add, so the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn static_part_and_times_avx2(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
+    static_part_and_times_body(fx, fy, valid, t0, fs, t)
+}
+
+#[inline(always)]
+fn static_part_and_times_body(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
+    #[inline(always)]
+    fn times(t: &mut [f64], from: usize, t0: f64, fs: f64) {
+        for (i, t) in t.iter_mut().enumerate() {
+            *t = t0 + (from + i) as f64 / fs;
+        }
+    }
+    let (a, b) = (valid.start.min(t.len()), valid.end.min(t.len()).max(valid.start.min(t.len())));
+    let (fx, fy) = (&fx[a..b], &fy[a..b]);
+    let (before, rest) = t.split_at_mut(a);
+    let (inside, after) = rest.split_at_mut(b - a);
+    times(before, 0, t0, fs);
+    // From -0.0, as `Iterator::sum` (and `static_part`).
+    let (mut sx, mut sy) = (-0.0, -0.0);
+    let (tc, tr) = inside.as_chunks_mut::<4>();
+    let (xc, xr) = fx.as_chunks::<4>();
+    let (yc, yr) = fy.as_chunks::<4>();
+    for (q, ((tq, xq), yq)) in tc.iter_mut().zip(xc).zip(yc).enumerate() {
+        let i = a + 4 * q;
+        *tq = std::array::from_fn(|l| t0 + (i + l) as f64 / fs);
+        for l in 0..4 {
+            sx += xq[l];
+            sy += yq[l];
+        }
+    }
+    times(tr, a + 4 * tc.len(), t0, fs);
+    for (&x, &y) in xr.iter().zip(yr) {
+        sx += x;
+        sy += y;
+    }
+    times(after, b, t0, fs);
+    let k = (b - a) as f64;
+    [sx / k, sy / k]
+}
+
 /// Eq. 2's inertial part on a block, `f -= m a`; whether every result is finite.
 #[inline(always)]
 fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
@@ -1213,7 +1276,7 @@ pub fn condition_window_into(
             [ax_finite, ay_finite, force_finite]
         }
     };
-    let static_force_n = film_force::static_part(&fx_n, &fy_n, valid.clone())?;
+    film_force::check_static_window(&fx_n, &fy_n, &valid)?;
 
     // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
     // non-finite number on. The stages checked their final outputs as they wrote them (the
@@ -1244,9 +1307,7 @@ pub fn condition_window_into(
     }
 
     let t0 = raw.start_time_s + window.start as f64 / fs;
-    for (i, t) in t_s.iter_mut().enumerate() {
-        *t = t0 + i as f64 / fs;
-    }
+    let static_force_n = static_part_and_times(&fx_n, &fy_n, valid.clone(), t0, fs, &mut t_s);
     debug_assert_eq!(used, COLUMNS);
     work.differentiator = Some(sg);
     work.velocity = housing_vy;
@@ -1332,6 +1393,37 @@ mod tests {
             })
             .collect();
         RawRecord { sample_rate_hz: fs, start_time_s: 0.0, channels: ChannelId::ALL.to_vec(), units: RawUnits::Volts, columns }
+    }
+
+    /// The fused static part and times against `film_force::static_part` and the plain loop,
+    /// bit for bit, on lengths and windows that cut its chunks of four anywhere.
+    #[test]
+    fn static_part_and_times_equals_the_two_loops() {
+        let mut state = 7u64;
+        let mut uniform = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (t0, fs) = (12.345_678_9, 5000.0);
+        let mut checked = 0;
+        for n in [1, 2, 5, 8, 9, 31, 1000] {
+            let fx: Vec<f64> = (0..n).map(|_| 1e3 * uniform()).collect();
+            let fy: Vec<f64> = (0..n).map(|_| 8e3 + 1e2 * uniform()).collect();
+            for (a, b) in [(0, n), (0, 1), (n - 1, n), (n / 3, n - n / 4), (1.min(n - 1), n)] {
+                if a >= b {
+                    continue;
+                }
+                let mut t = vec![f64::NAN; n];
+                let fused = static_part_and_times(&fx, &fy, a..b, t0, fs, &mut t);
+                let reference = film_force::static_part(&fx, &fy, a..b).unwrap();
+                assert_eq!(fused.map(f64::to_bits), reference.map(f64::to_bits), "n {n}, {a}..{b}");
+                for (i, &ti) in t.iter().enumerate() {
+                    assert_eq!(ti.to_bits(), (t0 + i as f64 / fs).to_bits(), "n {n}, {a}..{b}, time {i}");
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked >= 30, "{checked} cases");
     }
 
     /// `all_finite` against the definition, on lengths that cut its chunks of eight, with the
