@@ -51,7 +51,8 @@
 //! one backward), so sixteen independent recursions overlap and each sample is read and
 //! written once per direction; the columns go through the recursion in L1-resident tiles of
 //! interleaved lanes, compiled for AVX2 when the CPU has it (same operations, same result bit
-//! for bit). Moving eight columns into and out of the interleaved lanes was a third of the
+//! for bit); on an AVX2 CPU without AVX-512 a pair of sections runs in an intrinsics kernel
+//! that keeps their state in registers ([`pair_avx2`], ADR 0016 amendment 4). Moving eight columns into and out of the interleaved lanes was a third of the
 //! time when done sample by sample (sixteen scalar loads and stores per sample and pass); with
 //! AVX2 it is done by 4 x 4 register transposes ([`transpose8`]). Ten columns of 300 000
 //! samples: 7.4-8.0 ms against 8.9-9.8 ms sample by sample, in the same run on the shared

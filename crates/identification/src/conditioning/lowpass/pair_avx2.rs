@@ -11,9 +11,13 @@
 //! - `b2 x[n-1]` is the product `b0 x[n-1]` formed one sample earlier, when `b2 == b0`
 //!   bit for bit (every Butterworth section: `b = [g, 2 g, g]`): the same operation on the
 //!   same operands, so the same value, carried as `p` in place of `x[n-1]`. One multiply
-//!   fewer per section and lane (four instead of five), and no more state.
-//! - The coefficients are read from memory as operands (pre-broadcast vectors), so the
-//!   twelve state vectors stay in registers.
+//!   fewer per section and lane (four instead of five).
+//! - `p` goes through memory (volatile accesses, which the compiler keeps there): it is
+//!   formed from the input and used a sample later, off the recursion's loop-carried path.
+//!   With it out of the way, `y[n-1]` and `q` of the four (section, lane group) pairs, eight
+//!   vectors, stay in registers beside the coefficients; left to itself the compiler spilled
+//!   some of those instead (the attempts in ADR 0016, amendments 1 and 3). The assembly's only
+//!   stack traffic in the loop is the four products and the coefficients' loads.
 //!
 //! Every output is `(b0 x + q) - a1 y[n-1]` and every `q` is `(b1 x + b2 x[n-1]) - a2
 //! y[n-1]`, as in [`super::Lanes::step`]: the same operations in the same order, so the same
