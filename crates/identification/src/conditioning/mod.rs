@@ -516,6 +516,7 @@ impl Conditioned {
 /// a byte, and was a few percent of the conditioning. Sixteen partial sums (four AVX2
 /// vectors), so that the adds' latency is hidden.
 #[inline(always)]
+#[allow(clippy::eq_op)] // `v - v` is the point: 0 or NaN, never folded for floats.
 pub(crate) fn all_finite(x: &[f64]) -> bool {
     let (chunks, rest) = x.as_chunks::<16>();
     let mut acc = [0.0f64; 16];
