@@ -192,11 +192,11 @@ macro_rules! interior_kernels {
             let x = &input[start - M..end + M];
             let dst = &mut out[start..end];
             let cv: [$vec; M] = std::array::from_fn(|k| $set1(c[k]));
-            // Four vectors of outputs per step: outputs j + 4w.. read x from j + 4w - M + W
-            // ... ; one load per distinct offset, shared by the outputs that read it (4 W
-            // outputs read 4 W + 2 M - 1 shifted vectors, 23 loads for 16 outputs at M = 5,
-            // where one vector at a time loaded 2 M per vector, 40). Each output's sum is
-            // formed in the same order as below, so the same bits.
+            // Four vectors of outputs per step, one load per distinct shift shared by the
+            // outputs that read it: 4 W outputs read the 3 W + 2 M + 1 vectors x[j + M + s
+            // ..][..W], -M <= s <= 3 W + M (23 loads for 16 outputs at W = 4, M = 5, where one
+            // vector at a time loaded 2 M per vector, 40). Each output's sum is formed in the
+            // same order as below, so the same bits.
             let wide = dst.len() / (4 * $w) * (4 * $w);
             let mut j = 0;
             while j < wide {
@@ -546,7 +546,15 @@ impl SavitzkyGolayDerivative {
         // Second derivative, from `first` in the same way: the right edge, the interior below
         // what is done, the left edge, each only once its inputs are, so each piece ends where
         // the one before it (in this call or the last) starts.
-        let mut made = st.made_to..st.made_to;
+        // second[done..] was handed on by earlier calls.
+        let done = if st.second_left {
+            0
+        } else if st.second_right {
+            st.second_lo
+        } else {
+            len
+        };
+        let mut made = done..done;
         if !st.second_right && ready <= len - width {
             self.edge_right(first, second);
             made.start = len - m;
@@ -565,7 +573,6 @@ impl SavitzkyGolayDerivative {
             made.start = 0;
             st.second_left = true;
         }
-        st.made_to = made.start;
         Some((all_finite(&second[made.clone()]), made))
     }
 
@@ -658,8 +665,6 @@ pub(crate) struct TwiceDescending {
     second_lo: usize,
     second_right: bool,
     second_left: bool,
-    /// `second[made_to..]` has been handed on (returned as made).
-    made_to: usize,
 }
 
 impl TwiceDescending {
@@ -670,7 +675,6 @@ impl TwiceDescending {
                 shape: Some((len, m)),
                 first_lo: len - m,
                 second_lo: len - m,
-                made_to: len,
                 ..Self::default()
             };
         }

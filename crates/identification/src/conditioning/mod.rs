@@ -532,14 +532,13 @@ pub(crate) fn all_finite(x: &[f64]) -> bool {
     sum == 0.0
 }
 
-/// Index of the first non-finite value, by a branch-free scan (vectorisable) and, only when
-/// one exists, a second search for its position.
+/// Index of the first non-finite value, by a branch-free scan ([`all_finite`]) and, only
+/// when one exists, a second search for its position.
 pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
-    let any = x.iter().fold(false, |acc, v| acc | !v.is_finite());
-    if any {
-        x.iter().position(|v| !v.is_finite())
-    } else {
+    if all_finite(x) {
         None
+    } else {
+        x.iter().position(|v| !v.is_finite())
     }
 }
 
@@ -850,7 +849,10 @@ fn static_part_and_times_body(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f
             *t = t0 + (from + i) as f64 / fs;
         }
     }
-    let (a, b) = (valid.start.min(t.len()), valid.end.min(t.len()).max(valid.start.min(t.len())));
+    // `valid` lies inside the columns (checked by the caller); clamped anyway, so that a
+    // wrong range cannot index out of them.
+    let b = valid.end.min(t.len()).min(fx.len()).min(fy.len());
+    let a = valid.start.min(b);
     let (fx, fy) = (&fx[a..b], &fy[a..b]);
     let (before, rest) = t.split_at_mut(a);
     let (inside, after) = rest.split_at_mut(b - a);
