@@ -19,7 +19,7 @@ use std::ops::Range;
 
 use oilfilm_physics::daq::Calibration;
 
-use super::{condition_window_into, edge_samples, Conditioned, ConditioningConfig, Mechanics, RawRecord};
+use super::{condition_window_into, edge_samples, too_short, Conditioned, ConditioningConfig, Mechanics, RawRecord};
 use crate::IdentificationError;
 
 /// The blocks [`condition_by_block`] conditions: the valid scans of the whole record
@@ -59,12 +59,8 @@ pub fn condition_by_block<E: From<IdentificationError>>(
     let edge = edge_samples(calibration, config, raw.sample_rate_hz)?;
     let n = raw.len();
     if n <= 2 * edge {
-        // As `condition` refuses it (the same edge).
-        return Err(IdentificationError::BadInput {
-            what: "record length".into(),
-            reason: format!("{n} scans; the filters' edge effects need {edge} at each end, so at least {} scans", 2 * edge + 1),
-        }
-        .into());
+        // As `condition` refuses it (the same edge, the same error).
+        return Err(too_short(n, edge).into());
     }
     for range in block_ranges(n, edge, block) {
         let window = range.start - edge..range.end + edge;

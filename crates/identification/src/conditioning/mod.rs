@@ -532,6 +532,15 @@ pub(crate) fn all_finite(x: &[f64]) -> bool {
     sum == 0.0
 }
 
+/// The refusal of a record of `n` scans that has no valid scan once the filters' `edge` is
+/// trimmed at each end (`n <= 2 edge`).
+pub(super) fn too_short(n: usize, edge: usize) -> IdentificationError {
+    IdentificationError::BadInput {
+        what: "record length".into(),
+        reason: format!("{n} scans; the filters' edge effects need {edge} at each end, so at least {} scans", 2 * edge + 1),
+    }
+}
+
 /// Index of the first non-finite value, by a branch-free scan ([`all_finite`]) and, only
 /// when one exists, a second search for its position.
 pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
@@ -1175,13 +1184,7 @@ pub fn condition_window_into(
     }
     let trim = deskew_trim + lp.settling_samples() + 2 * sg.half_length();
     if n <= 2 * trim {
-        return Err(IdentificationError::BadInput {
-            what: "record length".into(),
-            reason: format!(
-                "{n} scans; the filters' edge effects need {trim} at each end, so at least {} scans",
-                2 * trim + 1
-            ),
-        });
+        return Err(too_short(n, trim));
     }
     let valid = trim..n - trim;
 
