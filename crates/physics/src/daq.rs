@@ -31,9 +31,12 @@
 //! Channel `k` of the scan order is sampled at `scan_start_s + k * channel_interval_s`
 //! (the nominal schedule, [`DaqConfig::sample_offset_s`]). Then:
 //!
-//! 1. **True value** from the caller's `signals(t)`; a channel with an injected
-//!    [`ChannelDelay`](crate::effects::ChannelDelay) is asked for `t - delay_s`, i.e. it
-//!    reports the signal from `delay_s` earlier than the schedule says.
+//! 1. **True value** from the caller's `signals(t)`. A channel with an injected
+//!    [`ChannelDelay`](crate::effects::ChannelDelay) is sampled `delay_s` later than its slot:
+//!    its reading leads the other channels' by `delay_s` (a negative `delay_s` lags). The
+//!    chain cannot read the future, so for a lead every other channel is asked for
+//!    `t - delay_s` instead (the whole record's time base moves by `delay_s`, which no record
+//!    can observe); for a lag the delayed channel is asked for `t + delay_s`.
 //! 2. **Synchronous runout** (bearing probes only, if injected): the four bearing probes add a
 //!    forward 1X orbit `amplitude * (cos, sin)(phi + phase)` to their (x, y) readings, `phi` the
 //!    shaft angle at that sample's time. Frame probes, forces and temperature are untouched.
@@ -834,9 +837,15 @@ impl Daq {
                 }),
                 _ => None,
             };
+            // How much earlier than its slot each channel reads the signal. A channel sampled
+            // `d > 0` later than its slot leads the others by `d`; the chain has no future to
+            // read, so the others read `d` earlier instead (the record's time base moves by
+            // `d`, which no record can observe). A channel with `d < 0` lags: it reads `-d`
+            // earlier itself.
             let extra_delay_s = match delay {
-                Some((ch, d)) if ch == c.channel => d,
-                _ => 0.0,
+                Some((ch, d)) if ch == c.channel => (-d).max(0.0),
+                Some((_, d)) => d.max(0.0),
+                None => 0.0,
             };
             slots.push(Slot {
                 channel: c.channel,
@@ -858,7 +867,7 @@ impl Daq {
             lsb_v: lsb_v(config.full_scale_v, config.adc_bits),
             code_min: -half_codes as i32,
             code_max: (half_codes - 1) as i32,
-            max_delay_s: delay.map_or(0.0, |(_, d)| d),
+            max_delay_s: delay.map_or(0.0, |(_, d)| d.abs()),
             max_schedule_s: config.channel_interval_s * (config.channels.len() as f64 - 1.0),
             base_rng: ChaCha8Rng::seed_from_u64(seed),
             non_finite_samples: 0,
@@ -867,8 +876,8 @@ impl Daq {
     }
 
     /// Samples one scan starting at `scan_start_s`: channel `k` in scan order is converted at
-    /// `scan_start_s + k * channel_interval_s`; a channel with an injected delay reports the
-    /// signal of `delay_s` earlier. `signals(t)` must return the true physical values at `t`
+    /// `scan_start_s + k * channel_interval_s`; with an injected channel delay the delayed
+    /// channel's reading leads the others' by `delay_s` (lags for a negative one). `signals(t)` must return the true physical values at `t`
     /// (the caller interpolates its simulation); it is called once per channel, in scan order.
     /// The result depends only on the configuration, effects, seed, `scan_index`,
     /// `scan_start_s` and what `signals` returns.

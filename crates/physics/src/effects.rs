@@ -8,7 +8,7 @@
 //! | `fluid_inertia` | film force gains `-M_a r''` (isotropic added mass) | `added_mass_kg` |
 //! | `thermal_drift` | bearing temperature ramps; viscosity follows the oil law | `heating_rate_c_per_s` |
 //! | `synchronous_runout` | bearing probes see a 1X orbit with no force cause | `amplitude_m` |
-//! | `channel_delay` | one channel lags beyond the multiplex schedule | `delay_s` on `channel` |
+//! | `channel_delay` | one channel is sampled `delay_s` later than its multiplexer slot (its reading leads by `delay_s`; negative: it lags, as an amplifier's phase) | `delay_s` on `channel` |
 //! | `probe_saturation` | one probe clips at a smaller range than calibrated | `limit_m` on `channel` |
 //! | `support_friction` | Coulomb friction in the support rollers on the housing | `friction_force_n` |
 //! | `housing_mass_mismatch` | true housing mass differs from the configured one | `mass_error_kg` |
@@ -49,8 +49,10 @@ pub struct SynchronousRunout {
     pub phase_deg: f64,
 }
 
-/// One channel sampled `delay_s` later than the multiplex schedule says (e.g. an
-/// unmodelled anti-alias filter group delay).
+/// One channel sampled `delay_s` later than its slot in the multiplex schedule (a mislabelled
+/// multiplexer order): its reading leads the signal by `delay_s`. A negative `delay_s` is a
+/// channel that lags (an amplifier's phase, an unmodelled anti-alias filter's group delay).
+/// The diagnosis reports a found delay in the same convention.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelDelay {
@@ -170,7 +172,7 @@ impl Effects {
             check("synchronous_runout.phase_deg", e.phase_deg, true)?;
         }
         if let Some(e) = &self.channel_delay {
-            check("channel_delay.delay_s", e.delay_s, false)?;
+            check("channel_delay.delay_s", e.delay_s, true)?;
         }
         if let Some(e) = &self.probe_saturation {
             check("probe_saturation.limit_m", e.limit_m, false)?;

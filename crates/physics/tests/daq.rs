@@ -594,9 +594,10 @@ fn phase_of(t: &[f64], y: &[f64], w: f64) -> (f64, f64) {
 }
 
 #[test]
-fn channel_delay_shifts_the_phase_by_two_pi_f_tau() {
+fn channel_delay_shifts_the_phase_against_the_other_channels_by_two_pi_f_tau() {
     let cfg = DaqConfig::zhou2004();
-    for (f_hz, tau) in [(50.0, 200.0e-6), (80.0, 1.0e-3), (20.0, 3.0e-3)] {
+    // delay_s > 0: sampled later than its slot, the reading leads; < 0: it lags.
+    for (f_hz, tau) in [(50.0, 200.0e-6), (80.0, 1.0e-3), (20.0, 3.0e-3), (50.0, -200.0e-6), (20.0, -3.0e-3)] {
         let w = 2.0 * PI * f_hz;
         let effects = Effects {
             channel_delay: Some(ChannelDelay {
@@ -607,7 +608,7 @@ fn channel_delay_shifts_the_phase_by_two_pi_f_tau() {
         };
         let mut plain = Daq::new(&cfg, &no_effects(), 3).unwrap();
         let mut delayed = Daq::new(&cfg, &effects, 3).unwrap();
-        assert_eq!(delayed.max_lookback_s(), tau);
+        assert_eq!(delayed.max_lookback_s(), f64::abs(tau));
         let mut earliest: f64 = 0.0;
         let mut sig = |t: f64, start: f64| {
             earliest = earliest.min(t - start);
@@ -628,25 +629,36 @@ fn channel_delay_shifts_the_phase_by_two_pi_f_tau() {
             b.push(delayed.scan(i, start, &mut |t| sig(t, start)));
         }
         assert!(
-            earliest >= -tau - 1e-12,
+            earliest >= -f64::abs(tau) - 1e-12,
             "asked {earliest} s before the scan start"
         );
+        // Phases of f1 against f2 (same frequency, f2 on its own schedule) in each record.
         let (t, ya) = series(&plain, &a, ChannelId::F1);
         let (_, yb) = series(&delayed, &b, ChannelId::F1);
+        let (_, ra2) = series(&plain, &a, ChannelId::F2);
+        let (_, rb2) = series(&delayed, &b, ChannelId::F2);
         let (pa, ra) = phase_of(&t, &ya, w);
         let (pb, rb) = phase_of(&t, &yb, w);
-        let shift = pa - pb;
+        let (pa2, _) = phase_of(&t, &ra2, w);
+        let (pb2, _) = phase_of(&t, &rb2, w);
+        // y = R sin(w t + phase): a reading that leads by tau has its phase larger by w tau.
+        let shift = (pb - pb2) - (pa - pa2);
         let expected = w * tau;
         println!(
-            "f = {f_hz} Hz, tau = {:.0} us: phase undelayed {pa:.6} rad, delayed {pb:.6} rad, shift {shift:.6} (expected {expected:.6}, rel. error {:.2e}); amplitudes {ra:.2}/{rb:.2} N",
+            "f = {f_hz} Hz, tau = {:+.0} us: f1 against f2 moved {shift:+.6} rad (expected {expected:+.6}, rel. error {:.2e}); amplitudes {ra:.2}/{rb:.2} N",
             tau * 1e6,
-            (shift - expected).abs() / expected
+            (shift - expected).abs() / expected.abs()
         );
-        assert!((shift - expected).abs() < 0.01 * expected);
-        // Only the named channel moves.
+        assert!((shift - expected).abs() < 0.01 * expected.abs());
         for (x, y) in a.iter().zip(&b) {
-            for c in ChannelId::ALL.iter().filter(|&&c| c != ChannelId::F1) {
-                assert_eq!(x.count_of(*c), y.count_of(*c));
+            if tau < 0.0 {
+                // A lag moves the named channel alone.
+                for c in ChannelId::ALL.iter().filter(|&&c| c != ChannelId::F1) {
+                    assert_eq!(x.count_of(*c), y.count_of(*c));
+                }
+            } else {
+                // A lead keeps the named channel on its schedule and moves the others.
+                assert_eq!(x.count_of(ChannelId::F1), y.count_of(ChannelId::F1));
             }
         }
     }

@@ -100,20 +100,30 @@ fn synchronous_runout_appears_at_1x_in_the_bearing_probes_with_no_force_cause() 
 }
 
 #[test]
-fn a_channel_delay_shifts_that_channels_phase_by_omega_tau() {
+fn a_channel_delay_shifts_that_channels_phase_against_the_others_by_omega_tau() {
+    // delay_s > 0: f1 is sampled later than its slot, so it leads the other channels; < 0: it
+    // lags them. Either way its phase against a channel at its own schedule moves by w tau.
     let mut c = config();
     let base = record(&c, 1.0);
-    let tau = 3.0e-4;
-    c.effects.channel_delay = Some(ChannelDelay { channel: "f1".into(), delay_s: tau });
-    let with = record(&c, 1.0);
-    let t: Vec<f64> = with.iter().map(|s| s.scan.scan_start_s).collect();
-    let (_, p_base) = tone(&t, &channel(&c, &base, ChannelId::F1), 23.0);
-    let (_, p_with) = tone(&t, &channel(&c, &with, ChannelId::F1), 23.0);
-    let shift = p_with - p_base;
-    let expected = 2.0 * std::f64::consts::PI * 23.0 * tau;
-    println!("f1 phase lag {shift:.6} rad, expected omega tau = {expected:.6} rad");
-    assert!((shift - expected).abs() < 0.01 * expected);
-    assert_eq!(channel(&c, &base, ChannelId::F2), channel(&c, &with, ChannelId::F2), "other channels are untouched");
+    let t: Vec<f64> = base.iter().map(|s| s.scan.scan_start_s).collect();
+    let relative = |c: &RigConfig, rec: &[SimulatedScan]| {
+        let (_, p1) = tone(&t, &channel(c, rec, ChannelId::F1), 23.0);
+        let (_, pr) = tone(&t, &channel(c, rec, ChannelId::ProbeAX), 23.0);
+        p1 - pr
+    };
+    let before = relative(&c, &base);
+    for tau in [3.0e-4, -3.0e-4] {
+        c.effects.channel_delay = Some(ChannelDelay { channel: "f1".into(), delay_s: tau });
+        let with = record(&c, 1.0);
+        // y ~ A cos(w t - phi): a reading that leads by tau has phi smaller by w tau.
+        let shift = relative(&c, &with) - before;
+        let expected = -2.0 * std::f64::consts::PI * 23.0 * tau;
+        println!("tau {:+.0} us: f1 phase against probe_a_x moved {shift:+.6} rad, expected {expected:+.6} rad", tau * 1e6);
+        assert!((shift - expected).abs() < 0.01 * expected.abs());
+        if tau < 0.0 {
+            assert_eq!(channel(&c, &base, ChannelId::F2), channel(&c, &with, ChannelId::F2), "a lag moves the delayed channel alone");
+        }
+    }
 }
 
 #[test]
