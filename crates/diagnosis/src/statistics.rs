@@ -179,6 +179,20 @@ fn off_lines(lines: &[f64], duration_s: f64, nyquist_hz: f64) -> Option<Vec<f64>
 /// `motion` = `[x, y, x', y']`, `force` = `[f_x, f_y]`, all detrended, sampled at `t`.
 /// `exclude_hz` are frequencies (shaft 1X, 2X) no off-line probe may sit within two DFT bins of.
 pub fn line_structure(motion: [&[f64]; 4], force: [&[f64]; 2], t: &[f64], lines_hz: &[f64], nyquist_hz: f64, exclude_hz: &[f64]) -> Option<LineStructure> {
+    line_structure_normed(motion, force, force, t, lines_hz, nyquist_hz, exclude_hz)
+}
+
+/// [`line_structure`] of a residual `force` (what a model left of the film force), with the
+/// relative amplitude taken against the film force `norm` at the lines.
+pub fn line_structure_normed(
+    motion: [&[f64]; 4],
+    force: [&[f64]; 2],
+    norm: [&[f64]; 2],
+    t: &[f64],
+    lines_hz: &[f64],
+    nyquist_hz: f64,
+    exclude_hz: &[f64],
+) -> Option<LineStructure> {
     let mut lines: Vec<f64> = lines_hz.iter().copied().filter(|f| *f > 0.0 && *f < nyquist_hz).collect();
     lines.sort_by(f64::total_cmp);
     lines.dedup();
@@ -239,7 +253,10 @@ pub fn line_structure(motion: [&[f64]; 4], force: [&[f64]; 2], t: &[f64], lines_
         // The fit used 4 of the 2L line equations: scale its residual back to per-line noise.
         res_on += residual_power(&on) * rows as f64 / (rows - 4) as f64;
         res_off += residual_power(&offp);
-        force_on += on.iter().map(|p| p[4 + axis].0.powi(2) + p[4 + axis].1.powi(2)).sum::<f64>() / on.len() as f64;
+        force_on += lines.iter().map(|&f| {
+            let (re, im) = phasor(norm[axis], t, f);
+            re * re + im * im
+        }).sum::<f64>() / lines.len() as f64;
     }
     if !(res_off > 0.0 && force_on > 0.0) {
         return None;
