@@ -7,7 +7,6 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use oilfilm_diagnosis::{diagnose, show, Diagnosis, DiagnosisOptions, ShowConfig};
-use oilfilm_identification::ascii;
 use oilfilm_identification::conditioning::{RawRecord, RawUnits};
 use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_identification::simulate;
@@ -45,21 +44,31 @@ struct Loaded {
     speed_source: SpeedSource,
 }
 
-fn load_ascii(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
+fn load_ascii(args: &DiagnoseArgs) -> Result<(Loaded, RigConfig, String)> {
     let name = args.input.display().to_string();
-    let text = std::fs::read_to_string(&args.input).with_context(|| format!("cannot read {name}"))?;
-    let record = ascii::read(&text, &name)?;
-    let raw = simulate::raw_from_ascii(&record)?;
+    let input = crate::ascii_input::load(&args.input, args.source.path())?;
+    let record = &input.record;
+    let rig = nominal(input.rig);
+    let raw = simulate::raw_from_ascii(record)?;
     let offsets: Vec<f64> = (0..record.header.channels.len())
         .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
         .collect::<Result<_>>()?;
-    let calibration = pipeline::calibration_for(rig, &raw, &offsets).with_context(|| format!("{name}: the rig's calibration on the record's schedule"))?;
+    let calibration = pipeline::calibration_for(&rig, &raw, &offsets).with_context(|| format!("{name}: the rig's calibration on the record's schedule"))?;
     let (speed_rpm, speed_source) = match (args.speed_rpm, record.header.speed_rpm) {
         (Some(v), _) => (v, SpeedSource::User),
         (None, Some(v)) => (v, SpeedSource::Record),
         (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    Ok(Loaded { raw, calibration, speed_rpm, speed_source })
+    Ok((Loaded { raw, calibration, speed_rpm, speed_source }, rig, input.rig_source))
+}
+
+/// The rig as the diagnosis reads it: its nominal description, injected effects cleared.
+fn nominal(mut rig: RigConfig) -> RigConfig {
+    if !rig.effects.is_none() {
+        eprintln!("note: the rig file injects effects; they belong to simulations, the diagnosis reads only the rig's nominal description");
+    }
+    rig.effects = Default::default();
+    rig
 }
 
 /// The bag's DAQ frames, in order, as one raw record; they must be consecutive (a gap is an
@@ -122,21 +131,21 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
 }
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
-    let rig = args.source.load()?;
-    if !rig.effects.is_none() {
-        eprintln!("note: the rig file injects effects; they belong to simulations, the diagnosis reads only the rig's nominal description");
-    }
-    let mut nominal = rig.clone();
-    nominal.effects = Default::default();
     let name = args.input.display().to_string();
-    let loaded = if args.input.is_dir() { load_bag(args, &nominal)? } else { load_ascii(args, &nominal)? };
-    let d = diagnose(&loaded.raw, &loaded.calibration, &nominal, loaded.speed_rpm, loaded.speed_source, &DiagnosisOptions::default())
+    let (loaded, rig, rig_source) = if args.input.is_dir() {
+        let rig = nominal(args.source.load()?);
+        let source = args.source.path().map_or("built-in zhou2004".to_string(), |p| format!("{} (--rig)", p.display()));
+        (load_bag(args, &rig)?, rig, source)
+    } else {
+        load_ascii(args)?
+    };
+    let d = diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &DiagnosisOptions::default())
         .with_context(|| format!("diagnosing {name}"))?;
     let value = serde_json::to_value(&d)?;
     let mut written = Vec::new();
     if !args.no_report {
         let config = ShowConfig { window_s: Some(1.0), ..ShowConfig::default() };
-        match show(&loaded.raw, &loaded.calibration, &nominal, loaded.speed_rpm, loaded.speed_source, &config) {
+        match show(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &config) {
             Ok(s) => written = crate::diagnose_report::write_report(&args.out, &name, &s, Some(&value))?,
             Err(e) => eprintln!("note: no report: the simulation against the measurement failed: {e}"),
         }
@@ -144,7 +153,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
-        print_diagnosis(&name, &d);
+        print_diagnosis(&name, &rig_source, &d);
         if let Some(report) = written.iter().find(|p| p.extension().is_some_and(|e| e == "md")) {
             println!("report: {} ({} files in {})", report.display(), written.len(), args.out.display());
         }
@@ -152,35 +161,81 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_diagnosis(name: &str, d: &Diagnosis) {
+fn matrix(m: &nalgebra::Matrix2<f64>) -> String {
+    format!("[[{:.4e}, {:.4e}], [{:.4e}, {:.4e}]]", m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)])
+}
+
+fn print_diagnosis(name: &str, rig_source: &str, d: &Diagnosis) {
     println!("record: {name}");
+    println!("rig: {rig_source}");
     println!("frame: {}", d.frame);
-    println!("cause: {}", d.cause);
+    let also = if d.also.is_empty() { String::new() } else { format!(" (also: {})", d.also.iter().map(|c| c.name()).collect::<Vec<_>>().join(", ")) };
+    println!("cause: {}{also}", d.cause);
     println!("why: {}", d.reason);
     if let (Some(b), Some(e), Some(g)) = (d.baseline_heldout_nrmse, d.extended_heldout_nrmse, d.gain) {
-        println!("held-out NRMSE: linear K-C {b:.4}, extended {e:.4} (gain {:.1} %)", 100.0 * g);
+        println!("held-out NRMSE: linear K-C {b:.4}, chosen model {e:.4} (gain {:.1} %)", 100.0 * g);
     }
     for (k, v) in &d.parameters {
         let se = d.standard_errors.get(k).map_or(String::new(), |s| format!(" (SE {s:.3e})"));
         println!("  {k} = {v}{se}");
     }
-    if !d.candidates.is_empty() {
-        println!("{:<24} {:>9} {:>9} {:>10} {:>9} {:>6}  note", "candidate", "score", "NRMSE", "p", "dBIC", "earns");
-        for c in &d.candidates {
+    if !d.steps.is_empty() {
+        println!("forward selection (each candidate judged on held-out blocks against the model of its step):");
+        for (i, st) in d.steps.iter().enumerate() {
+            let tried: Vec<String> = st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
             println!(
-                "{:<24} {:>8.2}% {:>9.4} {:>10.2e} {:>9.1} {:>6}  {}",
-                c.name.name(),
-                100.0 * c.score.unwrap_or(f64::NAN),
-                c.heldout_nrmse.unwrap_or(f64::NAN),
-                c.p_value.unwrap_or(f64::NAN),
-                c.delta_bic.unwrap_or(f64::NAN),
-                if c.earns { "yes" } else { "no" },
-                c.note.clone().unwrap_or_default()
+                "  step {}: {} (NRMSE {:.4}) -> {}; tried {}",
+                i + 1,
+                st.model,
+                st.heldout_nrmse,
+                st.chosen.map_or("nothing earns".to_string(), |c| format!("adds {c}")),
+                tried.join(", ")
             );
         }
     }
+    if let Some(a) = &d.amplitude {
+        println!(
+            "amplitude: d = {:.3}; coefficients vary by {:.1} +- {:.1} % (largest direct term; named above {:.0} % beyond two SE){}",
+            a.d,
+            100.0 * a.largest_direct,
+            100.0 * a.largest_direct_se,
+            100.0 * a.threshold,
+            a.film_model_largest_direct.map_or(String::new(), |m| format!("; the film model predicts {:.1} %", 100.0 * m))
+        );
+    }
+    for st in &d.structure {
+        println!("structure {}: {:+.2} % on held-out blocks{}", st.name.name(), 100.0 * st.score.unwrap_or(f64::NAN), if st.remains { " -- REMAINS" } else { "" });
+        if st.remains {
+            println!("  {}", st.description);
+        }
+    }
+    if let Some(c) = &d.coefficients {
+        println!("coefficients of the chosen model (small amplitude, corrected data; dF = -(K r + C r')):");
+        println!("  K = {} N/m (SE {})", matrix(&c.stiffness_n_m), matrix(&c.stiffness_se));
+        println!("  C = {} N s/m (SE {})", matrix(&c.damping_n_s_m), matrix(&c.damping_se));
+        if let (Some(k), Some(cc)) = (&c.stiffness_at_start_n_m, &c.damping_at_start_n_s_m) {
+            println!("  at the record's start (drift trend): K = {}, C = {}", matrix(k), matrix(cc));
+        }
+        println!("  linear K-C fit as measured: K = {}, C = {}", matrix(&c.linear_stiffness_n_m), matrix(&c.linear_damping_n_s_m));
+    }
+    if let Some(u) = &d.model_update {
+        println!(
+            "model update: {} with clearance {:.2} um (SE {:.2}; nominal {:.2}) and viscosity {:.5} Pa s (SE {:.5}; nominal {:.5}{}); motion predicted on held-out blocks: NRMSE {:.3} nominal, {:.3} updated ({:.1}x better)",
+            u.theory,
+            u.clearance_m * 1e6,
+            u.clearance_se_m * 1e6,
+            u.nominal_clearance_m * 1e6,
+            u.viscosity_pa_s,
+            u.viscosity_se_pa_s,
+            u.nominal_viscosity_pa_s,
+            u.temperature_offset_c.map_or(String::new(), |t| format!(", as if the film ran {t:+.1} C from the thermocouple")),
+            u.nominal_heldout_nrmse,
+            u.updated_heldout_nrmse,
+            u.improvement_factor
+        );
+    }
     for a in &d.aliases {
-        println!("alias {} / {}: {} — {}", a.pair[0], a.pair[1], if a.separable { "separated" } else { "NOT separable here" }, a.evidence);
+        println!("alias {} / {}: {} -- {}", a.pair[0], a.pair[1], if a.separable { "separated" } else { "NOT separable here" }, a.evidence);
     }
     for n in &d.notes {
         println!("note: {n}");

@@ -14,6 +14,7 @@ mod campaign;
 mod figures;
 mod report;
 mod bench_diagnose;
+mod ascii_input;
 mod diagnose;
 mod diagnose_report;
 
@@ -117,6 +118,11 @@ pub struct RigSource {
 }
 
 impl RigSource {
+    /// The `--rig` file, if one was given.
+    pub fn path(&self) -> Option<&std::path::Path> {
+        self.rig.as_deref()
+    }
+
     pub fn load(&self) -> Result<RigConfig> {
         match &self.rig {
             None => Ok(RigConfig::zhou2004()?),

@@ -1,0 +1,75 @@
+//! An ASCII record as a command reads it: plain or gzip-compressed (`.gz`, recognised by its
+//! magic bytes, not its name), and the rig it was measured on. The rig is `--rig FILE` when
+//! given; otherwise the one the record's header names (`# rig: rig.toml`, resolved beside the
+//! record), or the built-in rig when the header names that; a header naming neither is warned
+//! about and the built-in rig is used.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use oilfilm_identification::ascii::{self, Record};
+use oilfilm_physics::config::RigConfig;
+
+/// The text of a record file, decompressed if it is gzip.
+pub fn read_text(path: &Path) -> Result<String> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {name}"))?;
+    if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut text = String::new();
+        flate2::read::MultiGzDecoder::new(bytes.as_slice())
+            .read_to_string(&mut text)
+            .with_context(|| format!("{name}: not a valid gzip stream of UTF-8 text"))?;
+        Ok(text)
+    } else {
+        String::from_utf8(bytes).map_err(|e| anyhow::anyhow!("{name}: byte {} is not UTF-8 text", e.utf8_error().valid_up_to()))
+    }
+}
+
+/// A parsed record and the rig it is analysed with.
+pub struct AsciiInput {
+    pub record: Record,
+    pub rig: RigConfig,
+    /// Where the rig came from, for the output.
+    pub rig_source: String,
+}
+
+/// Reads `path` and resolves its rig (`explicit` is `--rig`).
+pub fn load(path: &Path, explicit: Option<&Path>) -> Result<AsciiInput> {
+    let name = path.display().to_string();
+    let text = read_text(path)?;
+    let record = ascii::read(&text, &name)?;
+    let named = record.header.rig.trim().to_string();
+    let beside = |n: &str| -> Option<PathBuf> {
+        let p = Path::new(n);
+        let candidate = if p.is_absolute() { p.to_path_buf() } else { path.parent().unwrap_or(Path::new(".")).join(p) };
+        candidate.is_file().then_some(candidate)
+    };
+    let read_rig = |p: &Path| -> Result<RigConfig> {
+        let text = std::fs::read_to_string(p).with_context(|| format!("cannot read rig file {}", p.display()))?;
+        Ok(RigConfig::from_toml_str(&text, &p.display().to_string())?)
+    };
+    let (rig, rig_source) = match explicit {
+        Some(p) => {
+            if let Some(h) = beside(&named).filter(|h| h.canonicalize().ok() != p.canonicalize().ok()) {
+                eprintln!("note: {name} names rig file {}, --rig {} was given and is used", h.display(), p.display());
+            }
+            (read_rig(p)?, format!("{} (--rig)", p.display()))
+        }
+        None => {
+            let builtin = RigConfig::zhou2004()?;
+            match beside(&named) {
+                Some(h) => (read_rig(&h).with_context(|| format!("{name} names its rig `{named}`"))?, format!("{} (named by the record)", h.display())),
+                None if named.is_empty() || named == builtin.name => (builtin, "built-in zhou2004".into()),
+                None => {
+                    eprintln!(
+                        "warning: {name} names rig `{named}`, which is neither a file beside it nor the built-in rig `{}`; the built-in rig is used (give --rig FILE)",
+                        builtin.name
+                    );
+                    (builtin, format!("built-in zhou2004 (the record names `{named}`, not found)"))
+                }
+            }
+        }
+    };
+    Ok(AsciiInput { record, rig, rig_source })
+}
