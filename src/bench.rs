@@ -47,12 +47,16 @@ enum BenchWhat {
     /// The diagnosis catalog on a 10 s, 5 kHz record (target: under 5 s on one core), and
     /// the show (model against measurement) beside it.
     Diagnose {
-        /// Repeats per record (the median is reported).
+        /// Repeats per record (the median is reported; for the outside records, the best).
         #[arg(long, default_value_t = 3)]
         repeats: usize,
-        /// Seconds of record.
+        /// Seconds of the simulated records.
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
+        /// Directory of outside records (`case-NN/record.txt.gz` with `rig.toml`); default
+        /// `tests/data/measured-records`.
+        #[arg(long, value_name = "DIR")]
+        records: Option<std::path::PathBuf>,
     },
     /// rosbag2 bags: record throughput (MB/s, msgs/s; zstd, lz4, none) of the simulated rig's
     /// DAQ frames and whole graph, and `oilfilm identify BAG` speed as a multiple of real time.
@@ -81,7 +85,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
         BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
         BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
-        BenchWhat::Diagnose { repeats, seconds } => crate::bench_diagnose::run(repeats, seconds),
+        BenchWhat::Diagnose { repeats, seconds, ref records } => crate::bench_diagnose::run(repeats, seconds, records.as_deref()),
         BenchWhat::Bag { seconds, zstd_sweep } => crate::bench_bag::run(seconds, zstd_sweep),
     }
 }

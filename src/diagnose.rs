@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use oilfilm_diagnosis::{diagnose, show, Diagnosis, DiagnosisOptions, ShowConfig};
+use oilfilm_diagnosis::{diagnose, diagnose_prepared, evidence, show, Diagnosis, DiagnosisOptions, ShowConfig};
 use oilfilm_identification::conditioning::{RawRecord, RawUnits};
 use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_identification::simulate;
@@ -139,15 +139,26 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     } else {
         load_ascii(args)?
     };
-    let d = diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &DiagnosisOptions::default())
-        .with_context(|| format!("diagnosing {name}"))?;
+    let options = DiagnosisOptions::default();
+    // Conditioned once: the diagnosis and the report share the prepared record.
+    let (d, prepared) = match evidence::prepare(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options.prepare).with_context(|| format!("diagnosing {name}"))? {
+        Ok(p) => {
+            let mut d = diagnose_prepared(&p, &rig, &options).with_context(|| format!("diagnosing {name}"))?;
+            if loaded.speed_source == SpeedSource::RigFile {
+                d.notes.push("the record states no speed: the rig file's was assumed (1X runout is looked for at that speed)".into());
+            }
+            (d, Some(p))
+        }
+        // Too short or too poorly excited: the library's verdict says why.
+        Err(_) => (diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options).with_context(|| format!("diagnosing {name}"))?, None),
+    };
     let value = serde_json::to_value(&d)?;
     let mut written = Vec::new();
     if !args.no_report {
-        let config = ShowConfig { window_s: Some(1.0), ..ShowConfig::default() };
-        match show(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &config) {
-            Ok(s) => written = crate::diagnose_report::write_report(&args.out, &name, &s, Some(&value))?,
-            Err(e) => eprintln!("note: no report: the simulation against the measurement failed: {e}"),
+        match prepared.as_ref().map(|p| show(p, &rig, d.model_update.as_ref(), &ShowConfig::default())) {
+            Some(Ok(s)) => written = crate::diagnose_report::write_report(&args.out, &name, &s, Some(&d))?,
+            Some(Err(e)) => eprintln!("note: no report: the model against the measurement failed: {e}"),
+            None => eprintln!("note: no report: {}", d.reason),
         }
     }
     if args.json {

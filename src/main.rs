@@ -17,6 +17,7 @@ mod bench_diagnose;
 mod ascii_input;
 mod diagnose;
 mod diagnose_report;
+mod identify_corrected;
 
 use std::path::PathBuf;
 

@@ -233,6 +233,14 @@ pub struct IdentifyArgs {
     /// Print JSON instead of tables.
     #[arg(long)]
     json: bool,
+    /// Diagnose the record and report the coefficients a user can keep (corrected for a
+    /// measurement effect, an added mass or friction separated, at the start for a drift)
+    /// even when no window is refused (a refused window always does this).
+    #[arg(long, conflicts_with = "no_correct")]
+    correct: bool,
+    /// Never diagnose: the windows as the estimator gives them.
+    #[arg(long)]
+    no_correct: bool,
 }
 
 pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
@@ -240,10 +248,9 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
         return identify_bag(args);
     }
     anyhow::ensure!(args.params.is_none(), "--params applies to bags (the node parameters); an ASCII record takes --window, --hop, --model, --solver");
-    let rig = args.source.load()?;
     let name = args.file.display().to_string();
-    let text = std::fs::read_to_string(&args.file).with_context(|| format!("cannot read {name}"))?;
-    let record = ascii::read(&text, &name)?;
+    let input = crate::ascii_input::load(&args.file, args.source.path())?;
+    let (record, rig) = (input.record, input.rig);
     let raw = simulate::raw_from_ascii(&record)?;
     let offsets: Vec<f64> = (0..record.header.channels.len())
         .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
@@ -269,15 +276,32 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
     };
     config.conditioning.deskew = !args.no_deskew;
     let id = pipeline::identify(&raw, &calibration, &rig, speed_rpm, source, &config).with_context(|| format!("identifying {name}"))?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&id)?);
+    let correction = if args.no_correct {
+        None
     } else {
-        print_identification(&name, &id);
+        crate::identify_corrected::correct(&raw, &calibration, &rig, speed_rpm, source, &config, &id, args.correct).with_context(|| format!("correcting {name}"))?
+    };
+    if args.json {
+        let mut value = serde_json::to_value(&id)?;
+        if let (Some(c), Some(map)) = (&correction, value.as_object_mut()) {
+            map.insert("correction".into(), serde_json::to_value(c)?);
+        }
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        let drift = correction.as_ref().and_then(|c| c.relative_drift_per_s).map(|r| {
+            let names = ["kxx", "kxy", "cxx", "cxy", "kyx", "kyy", "cyx", "cyy"];
+            let direct: Vec<String> = [0usize, 5, 2, 7].iter().map(|&k| format!("{} {:+.2} %/s", names[k], 100.0 * r[k])).collect();
+            format!("the coefficients drift during the record ({}), not the excitation", direct.join(", "))
+        });
+        print_identification(&name, &id, drift.as_deref());
+        if let Some(c) = &correction {
+            crate::identify_corrected::print(c);
+        }
     }
     Ok(())
 }
 
-fn print_identification(name: &str, id: &Identification) {
+fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
     println!("record: {name} ({} scans, {} usable after filter edges), rig `{}`", id.samples, id.valid[1] - id.valid[0], id.rig);
     println!("frame: {}", id.frame);
     println!("conditioning low-pass: {:.1} Hz (adapted to the excitation lines)", id.lowpass_cutoff_hz);
@@ -298,7 +322,10 @@ fn print_identification(name: &str, id: &Identification) {
         let e = &w.estimate;
         println!("  condition {:.2}, rank {}, residual rms [{:.3}, {:.3}] N, lines {:?} Hz", e.condition_number, e.rank, e.residual_rms_n[0], e.residual_rms_n[1], e.frequencies_hz.iter().map(|f| (f * 100.0).round() / 100.0).collect::<Vec<_>>());
         match &e.result {
-            Err(r) => println!("  REFUSED: {r}"),
+            Err(r) => match drift {
+                Some(d) => println!("  REFUSED: {d} (the estimator: {r})"),
+                None => println!("  REFUSED: {r}"),
+            },
             Ok(c) => {
                 let names = ["xx", "xy", "yx", "yy"];
                 println!("  {:<6} {:>14} {:>12} {:>9} | {:>14} {:>12} {:>9}", "", "K (N/m)", "SE", "Zhou K", "C (N s/m)", "SE", "Zhou D");

@@ -196,16 +196,20 @@ fn diagnose_names_a_hidden_runout_prints_the_contract_and_writes_a_report() {
 #[test]
 fn diagnose_reads_a_bag_of_the_node_graph() {
     // The reference bag: DAQ frames of the sim-rig graph under a multisine, and its rig status
-    // (which states the speed). Its excitation is strong enough for the film's own
-    // nonlinearity to show, and the diagnosis says so.
+    // (which states the speed). The film's own nonlinearity shows (its terms earn on held-out
+    // data) but does not matter at this amplitude: the coefficients vary by a few per cent,
+    // below the threshold the verdict names it at, and the diagnosis says so.
     let bag = concat!(env!("CARGO_MANIFEST_DIR"), "/bags/sim_rig_multisine");
     let out = oilfilm(&["diagnose", bag, "--json", "--no-report"]);
     assert!(out.status.success(), "diagnose failed: {}", String::from_utf8_lossy(&out.stderr));
     let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     assert!(d["evidence"]["samples"].as_u64().expect("samples") > 10_000, "{}", d["evidence"]);
     assert!(d["evidence"]["excitation_lines_hz"].as_array().expect("lines").len() > 10, "a multisine's lines: {}", d["evidence"]);
-    assert_eq!(d["cause"], "amplitude_nonlinearity", "{}", d["reason"]);
-    assert!(d["gain"].as_f64().expect("gain") > 0.0);
+    assert_eq!(d["cause"], "none", "{}", d["reason"]);
+    assert!(d["gain"].as_f64().expect("gain") > 0.0, "the nonlinear terms are in the chosen model: {}", d["steps"]);
+    let a = &d["amplitude"];
+    assert!(a["largest_direct"].as_f64().expect("RV") < a["threshold"].as_f64().expect("threshold"), "{a}");
+    assert!(a["film_model_largest_direct"].as_f64().is_some(), "the film model's RV on the same orbit: {a}");
     let notes = d["notes"].as_array().expect("notes");
     assert!(!notes.iter().any(|n| n.as_str().unwrap_or("").contains("rig file's was assumed")), "the bag's rig status states the speed: {notes:?}");
 }

@@ -427,6 +427,8 @@ pub struct Context<'a> {
 pub struct Drift {
     /// Smooth temperature minus its mean, at the picks, C.
     pub delta_t_c: Vec<f64>,
+    /// The same at the record's first scan (the smooth trend extended there), C.
+    pub delta_t_start_c: f64,
     /// Linear rise of the measured temperature over the whole record, C.
     pub rise_c: f64,
     /// The film model's `dln |coef| / dln mu` at the record's point, K-C column order.
@@ -537,7 +539,9 @@ impl<'a> Context<'a> {
             _ => return Ok(Err("the film model has no equilibrium at the record's operating point: the viscosity's pattern cannot be formed".into())),
         };
         let delta_t_c = smooth.iter().map(|v| v - mean).collect();
-        Ok(Ok(Drift { delta_t_c, rise_c, sensitivity, oil_slope_per_c }))
+        let u0 = 2.0 * (p.raw.start_time_s - t0) / span - 1.0;
+        let delta_t_start_c = (0..4).map(|j| fit.theta[j] * u0.powi(j as i32)).sum::<f64>() - mean;
+        Ok(Ok(Drift { delta_t_c, delta_t_start_c, rise_c, sensitivity, oil_slope_per_c }))
     }
 
     fn set_up_saturation(&self) -> Result<Result<Saturation, String>, DiagnosisError> {
@@ -906,7 +910,7 @@ impl<'a> Context<'a> {
                 Part::Named(Cause::AmplitudeNonlinearity) => 2 * NONLINEAR_TERMS,
                 Part::Named(Cause::FluidInertia) if !force_generic => 1,
                 Part::Named(Cause::SupportFriction) => 1,
-                Part::Named(Cause::ThermalDrift) if drift.is_some() => 8,
+                Part::Named(Cause::ThermalDrift) if drift.is_some() => 16,
                 Part::Generic(Generic::FrequencyDependence) => 8,
                 Part::Generic(Generic::TimeDrift) => 8,
                 _ => 0,
@@ -931,14 +935,17 @@ impl<'a> Context<'a> {
                 }
                 Part::Named(Cause::SupportFriction) => p.set_column(&mut m, col, &view.friction[0], &view.friction[1]),
                 Part::Named(Cause::ThermalDrift) => {
-                    // Column k: K-C column k (axis k / 4, motion k % 4) times dT: every
-                    // coefficient may change with the measured temperature (the film's own
-                    // pattern is what the named slope is fitted to, see `judge`). The motion is
-                    // taken about the (drifting) equilibrium: detrended before dT scales it.
+                    // Column k < 8: K-C column k (axis k / 4, motion k % 4) times dT; k >= 8:
+                    // column k - 8 times dT^2. Every coefficient may change with the measured
+                    // temperature, and not in a straight line (the viscosity falls
+                    // exponentially); the film's own pattern is what the named slope is
+                    // fitted to, see `judge`. The motion is taken about the (drifting)
+                    // equilibrium: detrended before dT scales it.
                     let Some(d) = drift else { continue };
-                    let motion_d = p.detrended(motion[k % 4]);
-                    let v: Vec<f64> = motion_d.iter().zip(&d.delta_t_c).map(|(a, t)| a * t).collect();
-                    p.set_axis_column(&mut m, col, k / 4, &v);
+                    let (j, power) = (k % 8, if k < 8 { 1 } else { 2 });
+                    let motion_d = p.detrended(motion[j % 4]);
+                    let v: Vec<f64> = motion_d.iter().zip(&d.delta_t_c).map(|(a, t)| a * t.powi(power)).collect();
+                    p.set_axis_column(&mut m, col, j / 4, &v);
                 }
                 Part::Generic(Generic::TimeDrift) => {
                     let motion_d = p.detrended(motion[k % 4]);

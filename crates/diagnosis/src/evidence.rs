@@ -225,10 +225,21 @@ pub struct PrepareOptions {
 impl Default for PrepareOptions {
     fn default() -> Self {
         let mut pipeline = PipelineConfig::default();
-        // 2 s windows: the per-window trends need several windows in a 10 s record.
-        pipeline.estimator.window = 10_000;
-        pipeline.estimator.hop = 10_000;
+        // 1 s windows at 5 kHz: the per-window trends of the report need several windows in a
+        // 10 s record.
+        pipeline.estimator.window = 5_000;
+        pipeline.estimator.hop = 5_000;
         Self { pipeline, folds: 10, min_seconds: 2.0 }
+    }
+}
+
+impl PrepareOptions {
+    /// The identification's windows as long as the pipeline's own (one window for a record of
+    /// that length or shorter): no per-window trends.
+    pub fn prepare_whole_windows(&mut self) {
+        let d = PipelineConfig::default();
+        self.pipeline.estimator.window = d.estimator.window;
+        self.pipeline.estimator.hop = d.estimator.hop;
     }
 }
 

@@ -250,8 +250,8 @@ fn coefficients_at(t: &Table, op: &Operating, c: f64, mu: f64) -> (Matrix2<f64>,
 }
 
 /// The motion the linear rig predicts from the measured applied force, at full rate over the
-/// judging band's valid range.
-struct Predictor {
+/// judging band's valid range (the force's spectrum taken once, any coefficients after).
+pub struct Predictor {
     /// Spectra of the applied force (x, y), zero-padded.
     fx: Vec<Complex<f64>>,
     fy: Vec<Complex<f64>>,
@@ -261,7 +261,7 @@ struct Predictor {
 }
 
 impl Predictor {
-    fn new(p: &Prepared) -> Self {
+    pub fn new(p: &Prepared) -> Self {
         let c = &p.narrow;
         let v = c.valid.clone();
         let m = p.mechanics.housing_mass_kg;
@@ -281,7 +281,7 @@ impl Predictor {
     }
 
     /// Predicted `r` (x, y) over the valid range for coefficients `(K, C)`.
-    fn predict(&self, k: &Matrix2<f64>, c: &Matrix2<f64>, len: usize) -> [Vec<f64>; 2] {
+    pub fn predict(&self, k: &Matrix2<f64>, c: &Matrix2<f64>, len: usize) -> [Vec<f64>; 2] {
         let n = self.n;
         let mut rx = vec![Complex::new(0.0, 0.0); n];
         let mut ry = vec![Complex::new(0.0, 0.0); n];

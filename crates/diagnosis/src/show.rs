@@ -3,10 +3,12 @@
 //! [`show`] takes a measured record and the rig it came from and puts the film model next to
 //! the measurement four ways:
 //!
-//! 1. **Motion.** The rig is simulated through the film model, driven by the *measured*
-//!    forces, at the *measured* operating point, and its relative motion `r = (x, y)` is
-//!    compared with the measured one in time (NRMSE per axis) and at the excitation lines
-//!    (amplitude ratio and phase difference), with both spectra for plotting.
+//! 1. **Motion.** The linear rig (housing mass on the film's K and C at the measured
+//!    operating point, journal fixed) is driven by the *measured* applied forces and its
+//!    relative motion `r = (x, y)` compared with the measured one in time (NRMSE per axis)
+//!    and at the excitation lines (amplitude ratio and phase difference), with both spectra
+//!    for plotting; the nominal film model and, when given, the updated one
+//!    ([`crate::model_update`]).
 //! 2. **Coefficients.** Per accepted window of the identification ([`pipeline::identify`]),
 //!    the identified K and C with their standard errors next to the film model's linear
 //!    coefficients at that window's operating point (speed, temperature, static load).
@@ -17,23 +19,16 @@
 //!    the strongest lines (intermodulation), the shaft's 1X and the broadband floor, in dB
 //!    above the floor.
 //!
-//! ## How the simulation is driven (and what it assumes)
-//! * The applied forces are taken from the conditioned record: eq. 2 solved for
-//!   `F_exc + (f3 - m g) e_y = F_film + m X''`, i.e. the exciters' and the bellows' force
-//!   sensors after the same deskew and low-pass as the motion. The bellows' mean sets the
-//!   static load `W = mean(f3) - m g` of the simulated rig (the rig's own pneumatic ripple is
-//!   switched off); everything else — exciter forces, the measured bellows ripple — is resolved
-//!   onto the two exciter axes and fed to the rig as exciter inputs, so the rig feels exactly
-//!   the measured forces.
-//! * Speed is the given one; the temperature is the record's mean bearing temperature, held
-//!   constant (the baseline model's assumption: a drift during the record shows up as
-//!   disagreement, which is the point). Injected effects are cleared; the journal's configured
-//!   1X orbit (a property of the shaft) is kept. The rig simulation has no sensor noise.
-//! * **Start-up.** The simulated rig starts at static equilibrium at the first valid sample
-//!   with its exciters at rest (the first step ramps them to the measured force), while the
-//!   real one was already moving. The difference decays as the linear film's
-//!   slowest mode; `settle_time_constants` of its time constants are discarded before any
-//!   comparison (reported as `transient_discarded_s`).
+//! ## How the prediction is driven (and what it assumes)
+//! * The applied forces are taken from the record's one conditioning ([`crate::evidence`]):
+//!   eq. 2 solved for `F_app = F_exc + (f3 - m g) e_y = F_film + m X''`, in the judging band.
+//!   With the journal fixed, `X = -r` and `F_app(w) = -(K + i w C - m w^2) r(w)`, solved for
+//!   `r` bin by bin (zero-padded FFT: the response is causal, starting from rest).
+//! * The film's K and C are the model's at the measured speed, mean bearing temperature and
+//!   static load. A drift during the record shows up as disagreement, which is the point.
+//! * **Start-up.** The prediction starts from rest at the first valid sample while the real
+//!   rig was already moving; `settle_time_constants` of the linear film's slowest decay are
+//!   discarded before any comparison (reported as `transient_discarded_s`).
 //! * Comparisons are on the dynamic parts (each signal minus its own mean over the compared
 //!   span); the static positions are reported separately, since a probe's zero is rarely
 //!   known to the micrometre.
@@ -44,18 +39,17 @@ mod spectra;
 mod stats;
 
 use nalgebra::{Matrix2, Vector2};
-use oilfilm_identification::conditioning::{self, Conditioned, RawRecord};
+use oilfilm_identification::conditioning::Conditioned;
 use oilfilm_identification::estimator::{self, Coefficients, Signals};
-use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
+use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::daq::Calibration;
 use oilfilm_physics::dimensionless;
-use oilfilm_physics::effects::Effects;
 use oilfilm_physics::film::Running;
 use oilfilm_physics::operating_point::{self, EquilibriumOptions};
-use oilfilm_physics::rig::{Rig, RigInput};
 use serde::{Deserialize, Serialize};
 
+use crate::evidence::Prepared;
+use crate::model_update::{self, ModelUpdate};
 use crate::error::DiagnosisError;
 use spectra::{phasor, segment_len, welch, wrap_deg, Welch};
 
@@ -67,14 +61,8 @@ pub const COEFFICIENT_NAMES: [&str; 8] = ["kxx", "kxy", "kyx", "kyy", "cxx", "cx
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ShowConfig {
-    /// The identification's settings (default: the pipeline's).
-    pub pipeline: PipelineConfig,
-    /// Window (and hop) length of the identification in seconds, overriding
-    /// `pipeline.estimator.window`/`hop`; trends need several windows. `None` keeps the
-    /// pipeline's (one 10 s window for a 10 s record).
-    pub window_s: Option<f64>,
     /// Time constants of the linear film's slowest mode discarded at the start of the
-    /// simulation (10: the start-up error falls to 5e-5 of its size).
+    /// prediction (10: the start-up error falls to 5e-5 of its size).
     pub settle_time_constants: f64,
     /// Length of the time-series excerpt kept for plotting, s (taken at the end of the record).
     pub plot_seconds: f64,
@@ -91,27 +79,13 @@ pub struct ShowConfig {
 
 impl Default for ShowConfig {
     fn default() -> Self {
-        Self {
-            pipeline: PipelineConfig::default(),
-            window_s: Some(1.0),
-            settle_time_constants: 10.0,
-            plot_seconds: 0.25,
-            plot_points: 1500,
-            spectrum_segment: 16_384,
-            spectrum_max_hz: None,
-            max_lines: 12,
-        }
+        Self { settle_time_constants: 10.0, plot_seconds: 0.25, plot_points: 1500, spectrum_segment: 16_384, spectrum_max_hz: None, max_lines: 40 }
     }
 }
 
 impl ShowConfig {
     /// Checks every field; the error names it.
     pub fn validate(&self) -> Result<(), DiagnosisError> {
-        if let Some(w) = self.window_s {
-            if !(w.is_finite() && w > 0.0) {
-                return Err(DiagnosisError::invalid("window_s", format!("must be finite and > 0, got {w}")));
-            }
-        }
         if !(self.settle_time_constants.is_finite() && self.settle_time_constants >= 0.0) {
             return Err(DiagnosisError::invalid("settle_time_constants", format!("must be finite and >= 0, got {}", self.settle_time_constants)));
         }
@@ -186,7 +160,7 @@ pub struct MeasuredOperatingPoint {
 /// Predicted against measured relative motion.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MotionComparison {
-    /// The simulation starts here (first valid sample), s.
+    /// The prediction starts here (first valid sample), s.
     pub simulated_from_s: f64,
     /// The linear film's slowest decay rate, 1/s (`None`: the linear model does not decay).
     pub slowest_decay_rate_per_s: Option<f64>,
@@ -211,6 +185,9 @@ pub struct AxisComparison {
     /// Static (mean) positions over the compared span, m.
     pub measured_mean_m: f64,
     pub predicted_mean_m: f64,
+    /// The updated film model's NRMSE and RMS, when an update was given.
+    pub updated_nrmse: Option<f64>,
+    pub updated_rms_m: Option<f64>,
     pub lines: Vec<LineComparison>,
 }
 
@@ -227,6 +204,12 @@ pub struct LineComparison {
     pub predicted_phase_deg: f64,
     /// predicted - measured, wrapped to (-180, 180].
     pub phase_difference_deg: f64,
+    /// The updated model's amplitude and its ratio to the measured one, when given.
+    pub updated_amplitude_m: Option<f64>,
+    pub updated_amplitude_ratio: Option<f64>,
+    /// Whether this axis moves at this line (at least a tenth of its strongest line): an axis
+    /// that is not excited there has no ratio worth reading.
+    pub excited: bool,
 }
 
 /// An excerpt of the motion for plotting: measured and predicted, x and y, absolute (m).
@@ -237,6 +220,9 @@ pub struct TimeSeries {
     pub measured_y_m: Vec<f64>,
     pub predicted_x_m: Vec<f64>,
     pub predicted_y_m: Vec<f64>,
+    /// The updated model's prediction (empty without an update).
+    pub updated_x_m: Vec<f64>,
+    pub updated_y_m: Vec<f64>,
 }
 
 /// Welch amplitude spectra (`sqrt(2 P)` per bin, m) of the dynamic motion.
@@ -248,6 +234,8 @@ pub struct MotionSpectrum {
     pub measured_y_m: Vec<f64>,
     pub predicted_x_m: Vec<f64>,
     pub predicted_y_m: Vec<f64>,
+    pub updated_x_m: Vec<f64>,
+    pub updated_y_m: Vec<f64>,
 }
 
 /// Identified against modelled coefficients, per window.
@@ -440,83 +428,43 @@ fn rms_about_mean(v: &[f64]) -> f64 {
     (v.iter().map(|a| (a - m) * (a - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// The show of one record. `calibration` carries the record's schedule
-/// ([`pipeline::calibration_for`]); `speed_rpm` the shaft speed and where it came from.
-pub fn show(
-    raw: &RawRecord,
-    calibration: &Calibration,
-    rig: &RigConfig,
-    speed_rpm: f64,
-    speed_source: SpeedSource,
-    config: &ShowConfig,
-) -> Result<Show, DiagnosisError> {
+/// The show of a prepared record (its one conditioning and identification, shared with the
+/// diagnosis), against the rig's film model and, when given, the updated one.
+pub fn show(p: &Prepared, rig: &RigConfig, update: Option<&ModelUpdate>, config: &ShowConfig) -> Result<Show, DiagnosisError> {
     config.validate()?;
-    if !(speed_rpm.is_finite() && speed_rpm > 0.0) {
-        return Err(DiagnosisError::invalid("speed_rpm", format!("must be finite and > 0, got {speed_rpm}")));
-    }
-    raw.validate_shape()?;
+    let raw = &p.raw;
     let fs = raw.sample_rate_hz;
     let mut notes = Vec::new();
-
-    // Identification, windows as configured.
-    let mut pcfg = config.pipeline.clone();
-    if let Some(w) = config.window_s {
-        let n = ((w * fs).round() as usize).max(1);
-        pcfg.estimator.window = n;
-        pcfg.estimator.hop = n;
-    }
-    let identification = pipeline::identify(raw, calibration, rig, speed_rpm, speed_source, &pcfg)?;
-    let mechanics = pipeline::mechanics_of(rig);
-    // Wide band (the configured cutoff): motion and residual spectra, so that harmonics of the
-    // excitation are not filtered away. Narrow band (the identification's adapted cutoff):
-    // the baseline fit, free of the errors-in-variables bias of a wide band.
-    let wide = conditioning::condition(raw, calibration, &mechanics, &pcfg.conditioning)?;
-    let narrow = if identification.lowpass_cutoff_hz < pcfg.conditioning.lowpass_cutoff_hz {
-        let mut c = pcfg.conditioning.clone();
-        c.lowpass_cutoff_hz = identification.lowpass_cutoff_hz;
-        Some(conditioning::condition(raw, calibration, &mechanics, &c)?)
-    } else {
-        None
-    };
-    let narrow_ref = narrow.as_ref().unwrap_or(&wide);
+    let wide = &p.wide;
     if !wide.range_violations.is_empty() {
         notes.push(format!(
             "a probe left its linear range ({}): the identification refused the record; the motion comparison still runs but clipped samples disagree by construction",
             wide.range_violations.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
         ));
     }
-    // The simulation runs where both conditionings are free of edge effects.
-    let valid = wide.valid.start.max(narrow_ref.valid.start)..wide.valid.end.min(narrow_ref.valid.end);
+    let valid = p.narrow.valid.clone();
     if valid.len() < 64 {
         return Err(DiagnosisError::bad_input("record", format!("only {} samples survive the filters' edge trimming; at least 64 are needed", valid.len())));
     }
-
-    // Applied forces: F_exc + (f3 - m g) e_y = F_film + m X'', in the wide band. (Not the
-    // narrow one: its cutoff sits at 1.5x the top line, where the Butterworth's droop, which
-    // cancels in the identification, would shrink the simulated motion by a few per cent.
-    // The price: the force sensors' noise in the wide band drives the simulation too, about
-    // 1 % NRMSE on the Zhou rig.)
     let m = rig.housing.mass_kg;
     let applied: [Vec<f64>; 2] = [
         wide.fx_n.iter().zip(&wide.housing_ax_m_s2).map(|(f, a)| f + m * a).collect(),
         wide.fy_n.iter().zip(&wide.housing_ay_m_s2).map(|(f, a)| f + m * a).collect(),
     ];
-    let lines = strongest_lines(&pipeline::excitation_lines(raw)?, &applied[0][valid.clone()], &applied[1][valid.clone()], fs, config.max_lines);
+    let lines = strongest_lines(&p.lines_hz, &applied[0][valid.clone()], &applied[1][valid.clone()], fs, config.max_lines);
     if lines.is_empty() {
         notes.push("no excitation line found in the applied forces: no line-by-line comparison".into());
     }
-
-    let operating = measured_operating_point(&wide, rig, speed_rpm)?;
-    let motion = motion_comparison(&wide, valid, &applied, rig, &operating, &lines, config, &mut notes)?;
-    let coefficients = coefficient_comparison(&identification, rig, &mut notes)?;
+    let operating = measured_operating_point(wide, rig, p.speed_rpm)?;
+    let motion = motion_comparison(p, rig, &operating, update, &lines, config, &mut notes)?;
+    let coefficients = coefficient_comparison(&p.identification, rig, &mut notes)?;
     let trends = trends(&coefficients.windows, &mut notes);
-    let residual = residual_spectra(&wide, narrow_ref, &pcfg, &lines, speed_rpm, config, &mut notes)?;
-
+    let residual = residual_spectra(wide, &p.narrow, p.wide_config.lowpass_cutoff_hz, &lines, p.speed_rpm, config, &mut notes)?;
     Ok(Show {
         rig: rig.name.clone(),
         frame: pipeline::FRAME.to_string(),
-        speed_rpm,
-        speed_source,
+        speed_rpm: p.speed_rpm,
+        speed_source: p.identification.speed_source,
         sample_rate_hz: fs,
         samples: raw.len(),
         duration_s: raw.len() as f64 / fs,
@@ -587,52 +535,29 @@ fn measured_operating_point(c: &Conditioned, rig: &RigConfig, speed_rpm: f64) ->
     })
 }
 
-/// Simulates the rig driven by the measured forces and compares the motion.
-#[allow(clippy::too_many_arguments)]
+/// The linear rig driven by the measured forces, against the measured motion.
 fn motion_comparison(
-    c: &Conditioned,
-    valid: std::ops::Range<usize>,
-    applied: &[Vec<f64>; 2],
+    p: &Prepared,
     rig: &RigConfig,
     op: &MeasuredOperatingPoint,
+    update: Option<&ModelUpdate>,
     lines: &[f64],
     config: &ShowConfig,
     notes: &mut Vec<String>,
 ) -> Result<MotionComparison, DiagnosisError> {
-    let fs = 1.0 / (c.t_s[1] - c.t_s[0]);
-    let mut cfg = rig.clone();
-    cfg.effects = Effects::default();
-    cfg.static_load.ripple_fraction = 0.0;
-    cfg.operating.speed_rpm = op.speed_rpm;
-    cfg.operating.bearing_temperature_c = op.temperature_c;
-    if op.bellows_load_n.is_nan() || op.bellows_load_n <= 0.0 {
-        return Err(DiagnosisError::bad_input(
-            "f3",
-            format!("the bellows carry {:.1} N, less than the housing's weight: the static load f3 - m g = {:.1} N must be positive", op.bellows_mean_n, op.bellows_load_n),
-        ));
-    }
-    cfg.operating.bearing_load_n = op.bellows_load_n;
-    let dir = |deg: f64| Vector2::new(deg.to_radians().cos(), deg.to_radians().sin());
-    let d = Matrix2::from_columns(&[dir(rig.housing.exciter_angles_deg[0]), dir(rig.housing.exciter_angles_deg[1])]);
-    // The rig file's validation keeps the two exciter axes independent (|sin| >= 0.1).
-    let d_inv = d.try_inverse().ok_or_else(|| DiagnosisError::invalid("housing.exciter_angles_deg", "the exciter axes are parallel"))?;
-
-    let start = valid.start;
-    let mut sim = Rig::new(&cfg, c.t_s[start], 0.0)?;
-    let eq = sim.operating_point().journal;
-    let rate = stats::slowest_decay_rate(&sim.operating_point().coefficients.stiffness_n_m, &sim.operating_point().coefficients.damping_n_s_m, rig.housing.mass_kg);
+    let c = &p.narrow;
+    let fs = p.raw.sample_rate_hz;
+    let valid = c.valid.clone();
     let n_valid = valid.len();
-    let mut predicted = [vec![0.0; n_valid], vec![0.0; n_valid]];
-    predicted[0][0] = eq.x_m;
-    predicted[1][0] = eq.y_m;
-    for (j, i) in (start + 1..valid.end).enumerate() {
-        let net = d_inv * Vector2::new(applied[0][i], applied[1][i] - op.bellows_load_n);
-        let sample = sim.step(&RigInput { exciter_n: [net.x, net.y] }, c.t_s[i]).map_err(|e| {
-            DiagnosisError::bad_input("simulation", format!("the rig driven by the measured forces failed at t = {:.4} s: {e}", c.t_s[i]))
-        })?;
-        predicted[0][j + 1] = sample.relative_m.x;
-        predicted[1][j + 1] = sample.relative_m.y;
-    }
+    let running = Running::from_rpm(op.speed_rpm, op.viscosity_pa_s);
+    let mut film = rig.film()?;
+    let load = -Vector2::new(op.static_force_n[0], op.static_force_n[1]);
+    let nominal = operating_point::solve(film.as_mut(), &running, load, &EquilibriumOptions::default())?;
+    let (k, cc) = (nominal.coefficients.stiffness_n_m, nominal.coefficients.damping_n_s_m);
+    let rate = stats::slowest_decay_rate(&k, &cc, rig.housing.mass_kg);
+    let predictor = model_update::Predictor::new(p);
+    let predicted = predictor.predict(&k, &cc, n_valid);
+    let updated = update.map(|u| predictor.predict(&u.updated_stiffness_n_m, &u.updated_damping_n_s_m, n_valid));
 
     // Start-up transient.
     let record_s = n_valid as f64 / fs;
@@ -649,23 +574,31 @@ fn motion_comparison(
     }
     let skip = (discard_s * fs).ceil() as usize;
     let cmp = skip..n_valid;
+    let start = valid.start;
     let t0 = c.t_s[start + cmp.start];
     let t1 = c.t_s[start + n_valid - 1];
 
     let measured = [&c.x_m[valid.clone()], &c.y_m[valid.clone()]];
+    let nrmse_of = |meas: &[f64], pred: &[f64]| -> (f64, f64) {
+        let (mm, pm) = (mean(meas), mean(pred));
+        let err: Vec<f64> = meas.iter().zip(pred).map(|(u, v)| (v - pm) - (u - mm)).collect();
+        let e = (err.iter().map(|e| e * e).sum::<f64>() / err.len() as f64).sqrt();
+        (e, e / rms_about_mean(meas))
+    };
     let mut axes = Vec::new();
     for (a, name) in ["x", "y"].iter().enumerate() {
         let meas = &measured[a][cmp.clone()];
         let pred = &predicted[a][cmp.clone()];
-        let (mm, pm) = (mean(meas), mean(pred));
-        let err: Vec<f64> = meas.iter().zip(pred).map(|(u, v)| (v - pm) - (u - mm)).collect();
-        let error_rms_m = (err.iter().map(|e| e * e).sum::<f64>() / err.len() as f64).sqrt();
+        let upd = updated.as_ref().map(|u| &u[a][cmp.clone()]);
+        let (error_rms_m, nrmse) = nrmse_of(meas, pred);
         let measured_rms_m = rms_about_mean(meas);
+        let strongest = lines.iter().map(|&f| phasor(meas, f, fs).0).fold(0.0, f64::max);
         let line_cmp = lines
             .iter()
             .map(|&f| {
                 let (am, phm) = phasor(meas, f, fs);
                 let (ap, php) = phasor(pred, f, fs);
+                let updated_amplitude_m = upd.map(|u| phasor(u, f, fs).0);
                 LineComparison {
                     frequency_hz: f,
                     measured_amplitude_m: am,
@@ -674,23 +607,27 @@ fn motion_comparison(
                     measured_phase_deg: phm,
                     predicted_phase_deg: php,
                     phase_difference_deg: wrap_deg(php - phm),
+                    updated_amplitude_m,
+                    updated_amplitude_ratio: updated_amplitude_m.map(|u| u / am),
+                    excited: am >= 0.1 * strongest,
                 }
             })
             .collect();
         axes.push(AxisComparison {
             axis: name.to_string(),
-            nrmse: error_rms_m / measured_rms_m,
+            nrmse,
             measured_rms_m,
             predicted_rms_m: rms_about_mean(pred),
             error_rms_m,
-            measured_mean_m: mm,
-            predicted_mean_m: pm,
+            measured_mean_m: mean(meas),
+            predicted_mean_m: op.model_position_m[a],
+            updated_nrmse: upd.map(|u| nrmse_of(meas, u).1),
+            updated_rms_m: upd.map(rms_about_mean),
             lines: line_cmp,
         });
     }
 
-    // Time-series excerpt: the last `plot_seconds` of the compared span. `cmp` holds at least
-    // half of the >= 64 valid samples, so the clamp's bounds are ordered.
+    // Time-series excerpt: the last `plot_seconds` of the compared span.
     let len = ((config.plot_seconds * fs).round() as usize).clamp(2, cmp.len());
     let from = n_valid - len;
     let stride = len.div_ceil(config.plot_points).max(1);
@@ -701,12 +638,19 @@ fn motion_comparison(
         measured_y_m: pick(measured[1]),
         predicted_x_m: pick(&predicted[0]),
         predicted_y_m: pick(&predicted[1]),
+        updated_x_m: updated.as_ref().map_or(Vec::new(), |u| pick(&u[0])),
+        updated_y_m: updated.as_ref().map_or(Vec::new(), |u| pick(&u[1])),
     };
 
     // Spectra of the dynamic motion.
-    let max_hz = spectrum_band_top(lines, op.speed_rpm, config, fs);
+    let max_hz = spectrum_band_top(lines, op.speed_rpm, p.cutoff_hz, config, fs);
     let seg = segment_len(cmp.len(), config.spectrum_segment);
-    let w = welch(&[&measured[0][cmp.clone()], &measured[1][cmp.clone()], &predicted[0][cmp.clone()], &predicted[1][cmp.clone()]], seg, fs);
+    let mut signals: Vec<&[f64]> = vec![&measured[0][cmp.clone()], &measured[1][cmp.clone()], &predicted[0][cmp.clone()], &predicted[1][cmp.clone()]];
+    if let Some(u) = &updated {
+        signals.push(&u[0][cmp.clone()]);
+        signals.push(&u[1][cmp.clone()]);
+    }
+    let w = welch(&signals, seg, fs);
     let bins = w[0].power.len().min(((max_hz / w[0].resolution_hz).floor() as usize) + 1);
     let amp = |s: &Welch| -> Vec<f64> { s.power[..bins.min(s.power.len())].iter().map(|p| (2.0 * p).sqrt()).collect() };
     let spectrum = MotionSpectrum {
@@ -716,6 +660,8 @@ fn motion_comparison(
         measured_y_m: amp(&w[1]),
         predicted_x_m: amp(&w[2]),
         predicted_y_m: amp(&w[3]),
+        updated_x_m: w.get(4).map_or(Vec::new(), amp),
+        updated_y_m: w.get(5).map_or(Vec::new(), amp),
     };
     Ok(MotionComparison {
         simulated_from_s: c.t_s[start],
@@ -730,8 +676,7 @@ fn motion_comparison(
 
 /// Top of the spectra: configured, or 3.5x the highest line / shaft 1X (at least 20 Hz),
 /// below the wide low-pass cutoff and Nyquist.
-fn spectrum_band_top(lines: &[f64], speed_rpm: f64, config: &ShowConfig, fs: f64) -> f64 {
-    let cutoff = config.pipeline.conditioning.lowpass_cutoff_hz;
+fn spectrum_band_top(lines: &[f64], speed_rpm: f64, cutoff: f64, config: &ShowConfig, fs: f64) -> f64 {
     let top = config.spectrum_max_hz.unwrap_or_else(|| {
         let highest = lines.iter().copied().fold(speed_rpm / 60.0, f64::max);
         (3.5 * highest).max(20.0).min(cutoff)
@@ -845,11 +790,10 @@ fn trends(windows: &[WindowComparison], notes: &mut Vec<String>) -> Vec<Trend> {
     out
 }
 
-#[allow(clippy::too_many_arguments)]
 fn residual_spectra(
     wide: &Conditioned,
     narrow: &Conditioned,
-    pcfg: &PipelineConfig,
+    wide_cutoff_hz: f64,
     lines: &[f64],
     speed_rpm: f64,
     config: &ShowConfig,
@@ -868,7 +812,7 @@ fn residual_spectra(
         fx_n: &narrow.fx_n[v.clone()],
         fy_n: &narrow.fy_n[v.clone()],
     };
-    let mut est = pcfg.estimator.clone();
+    let mut est = estimator::EstimatorConfig::default();
     est.model = estimator::ModelOrder::Kc;
     est.sample_rate_hz = fs;
     est.window = v.len();
@@ -909,7 +853,7 @@ fn residual_spectra(
     let seg = segment_len(res[0].len(), config.spectrum_segment);
     let spectra = welch(&[&res[0], &res[1]], seg, fs);
     let df = spectra[0].resolution_hz;
-    let top = spectrum_band_top(lines, speed_rpm, config, fs);
+    let top = spectrum_band_top(lines, speed_rpm, wide_cutoff_hz, config, fs);
     let band = [2.0 * df * spectra::LOBE as f64, top];
 
     // Named components.

@@ -58,8 +58,8 @@ pub const FRICTION_OVER_NONLINEARITY_GAIN: f64 = 0.05;
 /// The chosen model's residual is locked to the excitation lines when its line test gives a
 /// p-value below this and a ratio (line residual over the floor between the lines) above
 /// [`LINE_LOCKED_RATIO`].
-pub const LINE_LOCKED_P: f64 = 1e-6;
-pub const LINE_LOCKED_RATIO: f64 = 1.5;
+pub const LINE_LOCKED_P: f64 = 1e-2;
+pub const LINE_LOCKED_RATIO: f64 = 1.2;
 /// At most this many effects are selected into one model.
 pub const MAX_STEPS: usize = 4;
 
@@ -85,7 +85,7 @@ impl Default for DiagnosisOptions {
         Self {
             prepare: PrepareOptions::default(),
             significance: 1e-4,
-            min_gain: 0.01,
+            min_gain: 0.005,
             min_fold_fraction: 0.7,
             structure_gain: 0.06,
             model_update: true,
@@ -167,13 +167,17 @@ pub struct CoefficientReport {
     pub damping_n_s_m: Matrix2<f64>,
     pub stiffness_se: Matrix2<f64>,
     pub damping_se: Matrix2<f64>,
-    /// With a thermal drift in the model: the coefficients at the record's first sample (the
+    /// With a thermal drift in the model: the coefficients at the record's first scan (the
     /// fitted trend there), else `null`.
     pub stiffness_at_start_n_m: Option<Matrix2<f64>>,
     pub damping_at_start_n_s_m: Option<Matrix2<f64>>,
     /// What the chosen model changed: `(chosen - linear) / |linear|`, element by element.
     pub stiffness_relative_change: Matrix2<f64>,
     pub damping_relative_change: Matrix2<f64>,
+    /// How fast each coefficient drifts during the record, relative change per second (order
+    /// kxx, kxy, cxx, cxy, kyx, kyy, cyx, cyy): from the thermal drift when it is in the
+    /// model, else from the time-drift extension when it earns; `null` when neither.
+    pub relative_drift_per_s: Option<[f64; 8]>,
 }
 
 /// How the record was judged.
@@ -503,7 +507,14 @@ pub fn diagnose_prepared(p: &Prepared, rig: &RigConfig, options: &DiagnosisOptio
     }
     let remaining_structure: Vec<&StructureTest> = structure.iter().filter(|s| s.remains).collect();
 
-    let coefficients = coefficient_report(&ctx, &baseline, &chosen);
+    let mut coefficients = coefficient_report(&ctx, &baseline, &chosen);
+    let seconds = p.series.t_s.last().copied().unwrap_or(0.0) - p.series.t_s.first().copied().unwrap_or(0.0);
+    if coefficients.relative_drift_per_s.is_none() && seconds > 0.0 {
+        if let Some(t) = structure.iter().find(|t| t.name == Generic::TimeDrift && t.earns_at_min_gain) {
+            let rel: Option<Vec<f64>> = t.parameters.get("relative_change_over_record").and_then(|v| serde_json::from_value(v.clone()).ok());
+            coefficients.relative_drift_per_s = rel.filter(|r| r.len() == 8).map(|r| std::array::from_fn(|k| r[k] / seconds));
+        }
+    }
     let model_update = if options.model_update {
         match model_update::update(&ctx, &chosen, rig) {
             Ok(u) => Some(u),
@@ -691,16 +702,22 @@ fn coefficient_report(ctx: &Context, linear: &Judged, chosen: &Judged) -> Coeffi
     let se = chosen.kc_se;
     let rel = |a: &Matrix2<f64>, b: &Matrix2<f64>| Matrix2::from_fn(|i, j| (a[(i, j)] - b[(i, j)]) / b[(i, j)].abs());
     let (mut k_start, mut c_start) = (None, None);
+    let mut drift_per_s = None;
     if chosen.spec.has(Cause::ThermalDrift) {
         if let Some(d) = ctx.drift() {
             // The fitted trend of every coefficient, at the first judged sample.
             let slopes = chosen.part_theta(Part::Named(Cause::ThermalDrift));
-            if slopes.len() == 8 {
-                let dt0 = d.delta_t_c.first().copied().unwrap_or(0.0);
-                let at: [f64; 8] = std::array::from_fn(|i| chosen.kc[i] + slopes[i] * dt0);
+            if slopes.len() == 16 {
+                let dt0 = d.delta_t_start_c;
+                let at: [f64; 8] = std::array::from_fn(|i| chosen.kc[i] + slopes[i] * dt0 + slopes[8 + i] * dt0 * dt0);
                 let (ks, cs) = catalog::coefficients_of(&at);
                 k_start = Some(ks);
                 c_start = Some(cs);
+                // Per second, at the mean temperature: the slope per C times the temperature's
+                // rate over the record.
+                let p = ctx.p;
+                let seconds = p.raw.len() as f64 / p.raw.sample_rate_hz;
+                drift_per_s = Some(std::array::from_fn(|i| slopes[i] / chosen.kc[i] * d.rise_c / seconds));
             }
         }
     }
@@ -715,6 +732,7 @@ fn coefficient_report(ctx: &Context, linear: &Judged, chosen: &Judged) -> Coeffi
         damping_at_start_n_s_m: c_start,
         stiffness_relative_change: rel(&k, &k0),
         damping_relative_change: rel(&c, &c0),
+        relative_drift_per_s: drift_per_s,
     }
 }
 

@@ -139,6 +139,22 @@ fn run_all(cases: Vec<(String, u64, Case)>) -> Vec<(String, u64, Truth, Diagnosi
     out
 }
 
+/// Each selection step's candidates and their held-out gains, and the structure tests, for a
+/// failure's message.
+fn selection_text(d: &Diagnosis) -> String {
+    let steps: Vec<String> = d
+        .steps
+        .iter()
+        .map(|st| {
+            let tried: Vec<String> = st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
+            format!("[{}: {}]", st.model, tried.join(", "))
+        })
+        .collect();
+    let structure: Vec<String> = d.structure.iter().map(|s| format!("{} {:+.2}%{}", s.name.name(), 100.0 * s.score.unwrap_or(f64::NAN), if s.earns_at_min_gain { "*" } else { "" })).collect();
+    let lines = d.residual_structure.map_or("no line test".to_string(), |r| format!("residual at the lines {:.2}x the floor, p = {:.1e}", r.ratio, r.p_value));
+    format!("{} structure [{}], {lines}", steps.join(" "), structure.join(", "))
+}
+
 #[test]
 fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_better() {
     let cases: Vec<(String, u64, Case)> =
@@ -157,7 +173,9 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
         matrix[row][col] += 1;
         let mut param_text = String::new();
         if let Some((key, hidden)) = truth.parameter {
-            let found = d.parameters.get(key).and_then(|v| v.as_f64());
+            // The injected clip level is a distance from the probe's zero; the diagnosis
+            // reports the probe's own reading there (signed) and the side.
+            let found = d.parameters.get(key).and_then(|v| v.as_f64()).map(|f| if key == "saturation_limit_m" { f.abs() } else { f });
             param_text = format!("{key}: {hidden:.4e} -> {}", found.map_or("missing".into(), |f| format!("{f:.4e} ({:+.1} %)", 100.0 * (f / hidden - 1.0))));
             if d.cause.name() == truth.effect {
                 match found {
@@ -185,7 +203,7 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
             100.0 * d.gain.unwrap_or(f64::NAN)
         );
         if d.cause.name() != truth.effect {
-            failures.push(format!("{class} seed {seed}: named {} ({})", d.cause.name(), d.reason));
+            failures.push(format!("{class} seed {seed}: named {} ({}); {}", d.cause.name(), d.reason, selection_text(d)));
         } else if Cause::CATALOG.contains(&d.cause) {
             // The named extension must predict held-out data better than the linear model.
             let (b, e) = (d.baseline_heldout_nrmse.unwrap_or(f64::NAN), d.extended_heldout_nrmse.unwrap_or(f64::NAN));
@@ -294,7 +312,7 @@ fn aliases_are_reported_an_added_mass_and_a_wrong_housing_mass_cannot_be_told_ap
     let (mut rig, speed_rpm, load_n) = base_case(&mut r, 404);
     rig.effects.housing_mass_mismatch = Some(HousingMassMismatch { mass_error_kg: 90.0 });
     let d = run(&Case { rig, truth: Truth { effect: "fluid_inertia", parameter: None, channel: None, speed_rpm, load_n }, seconds: SECONDS, plan: multisine(RMS_N) });
-    println!("housing 90 kg heavier than configured: {} | {}", d.cause, d.reason);
+    println!("housing 90 kg heavier than configured: {} | {} {}", d.cause, d.reason, selection_text(&d));
     for a in &d.aliases {
         println!("  alias {:?} separable {}: {}", a.pair, a.separable, a.evidence);
     }

@@ -6,8 +6,11 @@
 //! 0.02 um rms noise (about 40 dB below the motion); force, load and temperature sensors keep
 //! the rig file's noise.
 
+use oilfilm_diagnosis::evidence::{self, PrepareOptions};
 use oilfilm_diagnosis::show::{TrendVariable, COEFFICIENT_NAMES};
-use oilfilm_diagnosis::{show, DiagnosisError, Show, ShowConfig};
+use oilfilm_diagnosis::{DiagnosisError, Show, ShowConfig};
+use oilfilm_identification::conditioning::RawRecord;
+use oilfilm_physics::daq::Calibration;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_identification::simulate::{self, SimulateOptions};
@@ -15,6 +18,18 @@ use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::effects::{FluidInertia, ThermalDrift};
 
 const SECONDS: f64 = 10.0;
+
+/// The show as `oilfilm diagnose` makes it: the record prepared (conditioned once), then shown
+/// against the rig's film model.
+fn show(raw: &RawRecord, cal: &Calibration, rig: &RigConfig, speed_rpm: f64, source: SpeedSource, config: &ShowConfig) -> Result<Show, DiagnosisError> {
+    show_with(raw, cal, rig, speed_rpm, source, &PrepareOptions::default(), config)
+}
+
+fn show_with(raw: &RawRecord, cal: &Calibration, rig: &RigConfig, speed_rpm: f64, source: SpeedSource, prepare: &PrepareOptions, config: &ShowConfig) -> Result<Show, DiagnosisError> {
+    config.validate()?;
+    let p = evidence::prepare(raw, cal, rig, speed_rpm, source, prepare)?.map_err(|e| DiagnosisError::bad_input("record", e.0))?;
+    oilfilm_diagnosis::show(&p, rig, None, config)
+}
 
 fn rig() -> RigConfig {
     let mut rig = RigConfig::zhou2004().unwrap();
@@ -66,9 +81,10 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     let rig = rig();
     let (s, secs) = run(&rig, &rig);
     summary("no effect", &s, secs);
-    // Measured: NRMSE 0.0052 (x), 0.0072 (y): probe noise and the force sensors' noise that
-    // drives the simulation. Bound with ~3x margin.
-    assert!(worst_nrmse(&s) < 0.02, "NRMSE {:.4} exceeds 0.02", worst_nrmse(&s));
+    // The prediction is the linear rig: what the nonlinear film adds to the motion (the
+    // two-tone's intermodulation at 14 and 60 Hz, its 2x lines) is not in it, nor the probe
+    // and force-sensor noise. Measured: NRMSE 0.023 (x), 0.017 (y). Bound with ~2x margin.
+    assert!(worst_nrmse(&s) < 0.05, "NRMSE {:.4} exceeds 0.05", worst_nrmse(&s));
     for a in &s.motion.axes {
         for l in &a.lines {
             // Measured: within 0.3 % and 0.7 deg (the weak 3 Hz bellows ripple is the worst).
@@ -94,6 +110,16 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
     assert!(json.contains("\"excitation\"") && json.contains("\"broadband\""));
 }
 
+/// Largest complex relative error of the predicted motion at an excitation line, either axis.
+fn worst_line_error(s: &Show) -> f64 {
+    s.motion
+        .axes
+        .iter()
+        .flat_map(|a| a.lines.iter().filter(|l| l.excited))
+        .map(|l| (l.amplitude_ratio - 1.0).hypot(l.phase_difference_deg.to_radians()))
+        .fold(0.0, f64::max)
+}
+
 /// Largest |mean relative difference| of the direct stiffnesses kxx, kyy.
 fn direct_stiffness_gap(s: &Show) -> f64 {
     let m = s.coefficients.mean_relative_difference.unwrap();
@@ -113,7 +139,9 @@ fn fluid_inertia_makes_the_prediction_worse_and_the_stiffness_disagree() {
     hidden.effects.fluid_inertia = Some(FluidInertia { added_mass_kg: 80.0 });
     let (s, secs) = run_plan(&hidden, &model, &plan);
     summary("fluid inertia 80 kg, 41/73 Hz", &s, secs);
-    assert!(worst_nrmse(&s) > 2.0 * worst_nrmse(&base), "NRMSE {:.4} vs {:.4} without the effect", worst_nrmse(&s), worst_nrmse(&base));
+    // At the lines the linear model's error (the nonlinear film's intermodulation is not
+    // there) grows with the hidden mass, most at the high line.
+    assert!(worst_line_error(&s) > 2.0 * worst_line_error(&base), "line error {:.4} vs {:.4} without the effect", worst_line_error(&s), worst_line_error(&base));
     // The K-C fit absorbs -w^2 M_a into the stiffness: identified kxx, kyy fall below the model.
     assert!(direct_stiffness_gap(&base) < 0.02, "without the effect: {:.2} %", 100.0 * direct_stiffness_gap(&base));
     assert!(direct_stiffness_gap(&s) > 0.04, "with 80 kg: {:.2} %", 100.0 * direct_stiffness_gap(&s));
@@ -189,10 +217,13 @@ fn one_window_gives_no_trends_and_says_why() {
     let raw = rec.raw().unwrap();
     let cal = pipeline::calibration_for(&r, &raw, &pipeline::rig_offsets(&r, &raw).unwrap()).unwrap();
     // The pipeline's own window (50 000 samples) is longer than the record: one window.
-    let s = show(&raw, &cal, &r, rec.speed_rpm, SpeedSource::Record, &ShowConfig { window_s: None, ..ShowConfig::default() }).unwrap();
+    let mut whole = PrepareOptions::default();
+    whole.prepare_whole_windows();
+    let s = show_with(&raw, &cal, &r, rec.speed_rpm, SpeedSource::Record, &whole, &ShowConfig::default()).unwrap();
     assert_eq!(s.coefficients.windows.len(), 1);
     assert!(s.trends.is_empty());
     assert!(s.notes.iter().any(|n| n.contains("trends need at least 3")), "{:?}", s.notes);
-    // The short film is the rig's own film here, so the prediction still matches.
-    assert!(worst_nrmse(&s) < 0.02, "NRMSE {}", worst_nrmse(&s));
+    // The short film is the rig's own film here, so the prediction still matches (the linear
+    // rig against the nonlinear film's motion: see the first test).
+    assert!(worst_nrmse(&s) < 0.05, "NRMSE {}", worst_nrmse(&s));
 }
