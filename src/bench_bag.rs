@@ -29,8 +29,9 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use oilfilm_bag::{BagWriter, Compression, QosProfile, TopicSpec, WriterOptions};
 use oilfilm_msgs::RosMessage;
-use oilfilm_nodes::harness::{reanalyse, run_sim_rig, GraphParams, Recording};
-use oilfilm_nodes::topics::{self, Topic};
+use oilfilm_graph::runner::bag::reanalyse;
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams, Recording};
+use oilfilm_graph::topics::{self, Topic};
 use oilfilm_physics::config::RigConfig;
 
 const TARGET_RECORD_MB_S: f64 = 300.0;
@@ -140,8 +141,10 @@ fn record_rows(tmp: &Path, settings: &[(&str, &[Encoded], WriterOptions)]) -> Re
 pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
     anyhow::ensure!(seconds.is_finite() && seconds >= 10.0, "--seconds must be >= 10 (two estimator windows), got {seconds}");
     let rig = RigConfig::zhou2004()?;
-    // The sim_rig launch setup: two-tone 23/37 Hz, 500-scan frames at 5 kHz, 5 s windows.
-    let params = GraphParams::sim_rig(seconds, 25_000, 12_500);
+    // The sim_rig launch setup: two-tone 23/37 Hz, 500-scan frames at 5 kHz, 5 s windows;
+    // these rows condition zero-phase (the launch file's causal chain is `causal_row`).
+    let mut params = GraphParams::sim_rig(seconds, 25_000, 12_500)?;
+    params.conditioner.chain = "zero_phase".into();
     let started = Instant::now();
     let (rec, _) = run_sim_rig(&rig, &params).context("simulating the rig graph")?;
     let sim_s = started.elapsed().as_secs_f64();
@@ -249,8 +252,8 @@ const REANALYSIS_PASSES: usize = 7;
 /// The conditioner core over `frames`, then the estimator core over its output (the status
 /// first, as the graph gives it): each stage's wall time on its own, on this thread.
 fn stages(rig: &RigConfig, params: &GraphParams, frames: &[oilfilm_msgs::DaqFrame], status: &[oilfilm_msgs::RigStatus]) -> Result<(f64, f64)> {
-    use oilfilm_nodes::conditioner::ConditionerCore;
-    use oilfilm_nodes::estimator::EstimatorCore;
+    use oilfilm_graph::conditioner::ConditionerCore;
+    use oilfilm_graph::estimator::EstimatorCore;
     let mut conditioner = ConditionerCore::new(rig.clone(), &params.conditioner)?;
     let mut estimator = EstimatorCore::new(rig.clone(), params.estimator.clone())?;
     let started = Instant::now();
@@ -275,7 +278,7 @@ fn stages(rig: &RigConfig, params: &GraphParams, frames: &[oilfilm_msgs::DaqFram
 /// The re-analysis row of a bag the launch files record: the same graph with the causal
 /// conditioning chain (`launch_configs/params/sim_rig.yaml`, ADR 0014), simulated again.
 fn causal_row(tmp: &Path, rig: &RigConfig, seconds: f64) -> Result<ReanalysisRow> {
-    let mut params = GraphParams::sim_rig(seconds, 25_000, 12_500);
+    let mut params = GraphParams::sim_rig(seconds, 25_000, 12_500)?;
     params.conditioner.chain = "causal".into();
     let (rec, _) = run_sim_rig(rig, &params).context("simulating the rig graph with the causal chain")?;
     let (_, all) = encoded(&rec);

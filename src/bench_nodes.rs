@@ -24,12 +24,12 @@ use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::calibration_for;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame};
-use oilfilm_nodes::conditioner::{Chain, ConditionerParams};
+use oilfilm_graph::conditioner::{Chain, ConditionerParams};
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::ports::{Publish, Receive};
-use oilfilm_nodes::stamp::Stamp;
-use oilfilm_nodes::topics;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::{Publish, Receive};
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
 
@@ -119,7 +119,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     let order = cal.scan_order();
     let offsets: Vec<f64> = order.iter().map(|&c| cal.sample_offset_s(c)).collect::<Result<_, _>>()?;
     let epoch = Stamp::now();
-    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, case.daq_block, case.channels, epoch)?;
+    let frames = oilfilm_graph::daq::frames_of_scans(&rig, &rec.scans, case.daq_block, case.channels, epoch)?;
 
     // The conditioner's edge (zero-phase: the scans past a block it waits for; causal: the
     // scans past a sample) and its first sample, as it will compute them.
@@ -133,7 +133,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
             (edge, edge as u64)
         }
         Chain::Causal => {
-            // Its blocks start at multiples of the block length (nodes/src/conditioner.rs).
+            // Its blocks start at multiples of the block length (crates/graph/src/conditioner.rs).
             let d = conditioning::causal::delays(&calibration, &cp.conditioning()?, case.rate_hz)?;
             (d.delay_scans(), (d.first_index() as u64).div_ceil(case.conditioner_block as u64) * case.conditioner_block as u64)
         }

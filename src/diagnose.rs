@@ -85,7 +85,7 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
         }
     }
     let Some(first) = frames.first() else {
-        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to diagnose", oilfilm_nodes::topics::DAQ_FRAMES.name);
+        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to diagnose", oilfilm_graph::topics::DAQ_FRAMES.name);
     };
     let channels: Vec<ChannelId> = first
         .channel_names

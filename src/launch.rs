@@ -8,10 +8,11 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use oilfilm_msgs::CoefficientEstimate;
 use oilfilm_nodes::dds::{shutdown_flag, RosNode};
-use oilfilm_nodes::launch::{self, Supervisor};
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::ports::Receive;
-use oilfilm_nodes::topics;
+use oilfilm_graph::launch;
+use oilfilm_nodes::supervisor::Supervisor;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
+use oilfilm_graph::topics;
 
 #[derive(Debug, clap::Args)]
 pub struct LaunchArgs {

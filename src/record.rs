@@ -1,13 +1,12 @@
-//! `oilfilm record` and `oilfilm play`: the recorder and player nodes' code
-//! (`oilfilm_nodes::shell::run_recorder`, `run_player`) with command-line options instead of
-//! ROS parameters.
+//! `oilfilm record` and `oilfilm play`: the recorder and player nodes on the DDS runner
+//! (`oilfilm_nodes::runner::run`), with command-line options instead of ROS parameters.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::player::PlayerParams;
-use oilfilm_nodes::recorder::RecorderParams;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::player::PlayerParams;
+use oilfilm_graph::recorder::RecorderParams;
 
 #[derive(Debug, clap::Args)]
 pub struct RecordArgs {
@@ -30,7 +29,7 @@ pub struct RecordArgs {
     #[arg(long, default_value_t = 1.0)]
     pub status_period_s: f64,
     /// The graph's namespace.
-    #[arg(long, default_value = oilfilm_nodes::topics::NAMESPACE)]
+    #[arg(long, default_value = oilfilm_graph::topics::NAMESPACE)]
     pub namespace: String,
 }
 
@@ -83,8 +82,8 @@ pub fn run_record(args: &RecordArgs) -> Result<()> {
         status_period_s: args.status_period_s,
     };
     oilfilm_nodes::dds::init_logging();
-    let dir = oilfilm_nodes::shell::run_recorder(&node("recorder", &args.namespace), &p, &params_map(&p)?)?;
-    println!("{}", dir.display());
+    let recorder = oilfilm_nodes::runner::run::<oilfilm_graph::recorder::Recorder>(&node("recorder", &args.namespace), &p, &params_map(&p)?)?;
+    println!("{}", recorder.closed().unwrap_or(recorder.dir()).display());
     Ok(())
 }
 
@@ -100,6 +99,6 @@ pub fn run_play(args: &PlayArgs) -> Result<()> {
         wait_s: args.wait_s,
     };
     oilfilm_nodes::dds::init_logging();
-    oilfilm_nodes::shell::run_player(&node("player", oilfilm_nodes::topics::NAMESPACE), &p, &params_map(&p)?)?;
+    oilfilm_nodes::runner::run::<oilfilm_graph::player::Player>(&node("player", oilfilm_graph::topics::NAMESPACE), &p, &params_map(&p)?)?;
     Ok(())
 }

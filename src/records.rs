@@ -13,7 +13,7 @@ use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::effects::{ChannelDelay, FilmRelaxation, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
 
-use oilfilm_nodes::harness::Input;
+use oilfilm_graph::runner::bag::Input;
 
 use crate::RigSource;
 
@@ -401,25 +401,25 @@ pub fn read_bag_inputs(dir: &std::path::Path, threads: usize) -> Result<(Vec<oil
         }
     })?;
     if frames.is_empty() {
-        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
+        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_graph::topics::DAQ_FRAMES.name);
     }
     Ok((frames, status))
 }
 
 /// A bag's DAQ frames and rig status through a fresh conditioner and estimator, with the
-/// estimates of `harness::reanalyse` bit for bit: the status first (its chunks are small and
+/// estimates of `runner::bag::reanalyse` bit for bit: the status first (its chunks are small and
 /// the estimator takes every status before the frames, as the replay graph does), then the
 /// frames, conditioned on this thread as worker threads read and decode the chunks after
 /// them, each handed to the estimator on a thread of its own
-/// (`harness::reanalyse_overlapped`). Returns the estimates (the `Recording` holds nothing
+/// (`runner::bag::reanalyse_overlapped`). Returns the estimates (the `Recording` holds nothing
 /// else) and how many frames and status messages went in.
 pub fn reanalyse_bag(
     dir: &std::path::Path,
     rig: &RigConfig,
-    conditioner: &oilfilm_nodes::conditioner::ConditionerParams,
-    estimator: &oilfilm_nodes::estimator::EstimatorParams,
+    conditioner: &oilfilm_graph::conditioner::ConditionerParams,
+    estimator: &oilfilm_graph::estimator::EstimatorParams,
     threads: usize,
-) -> Result<(oilfilm_nodes::harness::Recording, usize, usize)> {
+) -> Result<(oilfilm_graph::runner::memory::Recording, usize, usize)> {
     use oilfilm_msgs::RosMessage;
     let bag = oilfilm_bag::Bag::open(dir)?;
     let is_status = |_: &str, type_name: &str| type_name == oilfilm_msgs::RigStatus::TYPE_NAME;
@@ -429,10 +429,10 @@ pub fn reanalyse_bag(
     let mut frames = 0usize;
     let out = bag.read_topics(&is_frame, &|m| m.decode::<oilfilm_msgs::DaqFrame>(), threads, |inputs| {
         let counted = inputs.inspect(|_| frames += 1);
-        oilfilm_nodes::harness::reanalyse_overlapped(rig, conditioner, estimator, status, counted)
+        oilfilm_graph::runner::bag::reanalyse_overlapped(rig, conditioner, estimator, status, counted)
     })??;
     if frames == 0 {
-        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_nodes::topics::DAQ_FRAMES.name);
+        bail!("{}: the bag holds no DAQ frames (topic {}); nothing to identify", dir.display(), oilfilm_graph::topics::DAQ_FRAMES.name);
     }
     Ok((out, frames, status_count))
 }
@@ -448,17 +448,17 @@ fn recorded_chain(dir: &std::path::Path) -> Result<Option<&'static str>> {
 }
 
 /// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
-/// and estimator (the node cores, `oilfilm_nodes::harness::reanalyse`).
+/// and estimator (the nodes, `oilfilm_graph::runner::bag::reanalyse`).
 fn identify_bag(args: &IdentifyArgs) -> Result<()> {
-    use oilfilm_nodes::conditioner::ConditionerParams;
-    use oilfilm_nodes::estimator::EstimatorParams;
-    use oilfilm_nodes::params::{self, NodeArgs};
+    use oilfilm_graph::conditioner::ConditionerParams;
+    use oilfilm_graph::estimator::EstimatorParams;
+    use oilfilm_graph::params::{self, NodeArgs};
 
     let rig = args.source.load()?;
     let name = args.file.display().to_string();
     let node_args = |node: &str| NodeArgs {
         name: node.into(),
-        namespace: oilfilm_nodes::topics::NAMESPACE.into(),
+        namespace: oilfilm_graph::topics::NAMESPACE.into(),
         params_files: args.params.iter().cloned().collect(),
         ..Default::default()
     };

@@ -114,10 +114,12 @@ fn bad_input_names_file_line_and_column_and_exits_non_zero() {
 #[test]
 fn identify_a_bag_gives_the_live_estimates() {
     use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
-    use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
-    use oilfilm_nodes::topics;
+    use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
+    use oilfilm_graph::topics;
 
-    let p = GraphParams::sim_rig(12.0, 25_000, 25_000);
+    let mut p = GraphParams::sim_rig(12.0, 25_000, 25_000).unwrap();
+    // The zero-phase chain here (the launch file's causal one in the next test).
+    p.conditioner.chain = "zero_phase".into();
     let rig = oilfilm_physics::config::RigConfig::zhou2004().unwrap();
     let (live, _) = run_sim_rig(&rig, &p).unwrap();
     assert!(!live.estimates.is_empty());
@@ -220,10 +222,10 @@ fn diagnose_reads_a_bag_of_the_node_graph() {
 #[test]
 fn identify_a_causal_bag_follows_the_recorded_chain() {
     use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
-    use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
-    use oilfilm_nodes::topics;
+    use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
+    use oilfilm_graph::topics;
 
-    let mut p = GraphParams::sim_rig(12.0, 25_000, 25_000);
+    let mut p = GraphParams::sim_rig(12.0, 25_000, 25_000).unwrap();
     p.conditioner.chain = "causal".into();
     let rig = oilfilm_physics::config::RigConfig::zhou2004().unwrap();
     let (live, _) = run_sim_rig(&rig, &p).unwrap();

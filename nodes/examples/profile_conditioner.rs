@@ -10,14 +10,14 @@ use std::time::Instant;
 
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_nodes::stamp::Stamp;
-use oilfilm_nodes::conditioner::{ConditionerCore, ConditionerParams};
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_graph::conditioner::{ConditionerCore, ConditionerParams};
 use oilfilm_identification::estimator::spectrum::LineSearch;
 use oilfilm_identification::estimator::solve::ScaledFactor;
 use oilfilm_identification::estimator::window::SummaryBuilder;
 use oilfilm_identification::estimator::{estimate_window_fed, se_decimation, uncertainty, Signals, Solver, WindowFeed};
 use oilfilm_identification::pipeline::{window_report_fed, ReportFeed};
-use oilfilm_nodes::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_graph::estimator::{EstimatorCore, EstimatorParams};
 use oilfilm_physics::config::RigConfig;
 
 fn main() -> anyhow::Result<()> {
@@ -26,7 +26,7 @@ fn main() -> anyhow::Result<()> {
     rig.daq.sample_rate_hz = rate;
     rig.daq.channel_interval_s = 1.0 / (rate * channels as f64);
     let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 300.0), seconds, SimulateOptions::default(), &mut |_| {})?;
-    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, daq_block, channels, Stamp(0))?;
+    let frames = oilfilm_graph::daq::frames_of_scans(&rig, &rec.scans, daq_block, channels, Stamp(0))?;
     println!("{} frames of {daq_block} scans x {channels} channels at {rate} Hz", frames.len());
     for block in [10_000i64, 5_000, 2_000, 1_000] {
         let params = ConditionerParams { lowpass_cutoff_hz: 55.5, block_scans: block, ..ConditionerParams::default() };

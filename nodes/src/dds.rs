@@ -2,7 +2,7 @@
 //!
 //! What ros2-client does not do for us, done here: `ROS_DOMAIN_ID` is read from the
 //! environment and passed into the context; every topic's QoS is set explicitly from
-//! [`crate::topics`] (ros2-client's subscription default is best-effort, keep-last 1); the
+//! [`oilfilm_graph::topics`] (ros2-client's subscription default is best-effort, keep-last 1); the
 //! typed parameters are declared through the standard parameter services, and a change
 //! from `ros2 param set` (or rclpy) is checked against the typed struct before it is
 //! accepted, then handed to the node's loop; and the node re-announces itself on
@@ -20,10 +20,11 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use crate::error::NodeError;
-use crate::params::NodeArgs;
-use crate::ports::{Publish, RawCdr, Receive};
-use crate::topics::Topic;
+use oilfilm_graph::node::{Connect, Input, Message, Output, RawTopic};
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::{Publish, RawCdr, Receive};
+use oilfilm_graph::topics::Topic;
+use oilfilm_graph::NodeError;
 
 fn mw(what: impl Into<String>, e: impl std::fmt::Display) -> NodeError {
     NodeError::Middleware { what: what.into(), reason: e.to_string() }
@@ -47,7 +48,7 @@ pub fn qos_of(topic: &Topic) -> QosProfile {
 }
 
 /// Our QoS table's entry in ros2-client's terms.
-pub fn qos_from(q: crate::topics::TopicQos) -> QosProfile {
+pub fn qos_from(q: oilfilm_graph::topics::TopicQos) -> QosProfile {
     QosProfile {
         reliability: if q.reliable { Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) } } else { Reliability::BestEffort },
         durability: if q.transient_local { Durability::TransientLocal } else { Durability::Volatile },
@@ -271,7 +272,7 @@ impl RosNode {
     }
 
     fn topic(&mut self, topic: &Topic) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
-        let full = crate::topics::qualified(&self.namespace, topic);
+        let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
         self.topic_named(&full, topic.type_name, &qos_of(topic))
     }
 
@@ -290,7 +291,7 @@ impl RosNode {
     pub fn publisher_named<M: Serialize>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsPublisher<M>, NodeError> {
         let t = self.topic_named(full, type_name, &qos)?;
         let p = self.node.create_publisher::<M>(&t, Some(qos)).map_err(|e| mw(format!("publisher {full}"), e))?;
-        Ok(DdsPublisher { publisher: p, topic: leak_name(full) })
+        Ok(DdsPublisher { publisher: p, topic: leak_name(full), readers: Readers::new(&self.context, full) })
     }
 
     /// A typed subscription on a topic given by full name, type and QoS (`/clock`).
@@ -328,7 +329,7 @@ impl RosNode {
         let writer = publisher
             .create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
             .map_err(|e| mw(format!("raw publisher {full}"), e))?;
-        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0 })
+        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, first_ack: false })
     }
 
     /// Matched subscriptions on a topic (fully qualified name), as DDS discovery sees them.
@@ -339,7 +340,8 @@ impl RosNode {
     pub fn publisher<M: Serialize>(&mut self, topic: &Topic) -> Result<DdsPublisher<M>, NodeError> {
         let t = self.topic(topic)?;
         let p = self.node.create_publisher::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("publisher {}", topic.name), e))?;
-        Ok(DdsPublisher { publisher: p, topic: topic.name })
+        let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
+        Ok(DdsPublisher { publisher: p, topic: topic.name, readers: Readers::new(&self.context, &full) })
     }
 
     pub fn subscription<M: DeserializeOwned + 'static>(&mut self, topic: &Topic) -> Result<DdsSubscription<M>, NodeError> {
@@ -360,7 +362,7 @@ impl RosNode {
     /// Waits (at most `timeout`) until `topic` has a matched subscription, so that what is
     /// published next is not lost to a reader still being discovered; false on timeout.
     pub fn wait_for_subscribers(&self, topic: &Topic, timeout: std::time::Duration) -> bool {
-        let full = crate::topics::qualified(&self.namespace, topic);
+        let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
         let deadline = std::time::Instant::now() + timeout;
         while self.node.subscription_count(&full) == 0 {
             if std::time::Instant::now() >= deadline {
@@ -405,6 +407,35 @@ impl Drop for RosNode {
 pub struct DdsPublisher<M: Serialize> {
     publisher: ros2_client::Publisher<M>,
     topic: &'static str,
+    readers: Readers,
+}
+
+/// The readers DDS discovery knows on one topic, looked up at most every
+/// [`Readers::REFRESH`] (a node asks every turn; discovery changes on a scale of seconds).
+struct Readers {
+    participant: ros2_client::dds::rustdds::DomainParticipant,
+    /// The topic's DDS name (`rt/oilfilm/daq/frames`).
+    dds_name: String,
+    last: Option<(std::time::Instant, usize)>,
+}
+
+impl Readers {
+    const REFRESH: std::time::Duration = std::time::Duration::from_millis(100);
+
+    fn new(context: &Context, full: &str) -> Self {
+        Self { participant: context.domain_participant(), dds_name: format!("rt/{}", full.trim_start_matches('/')), last: None }
+    }
+
+    fn count(&mut self) -> usize {
+        match self.last {
+            Some((at, n)) if at.elapsed() < Self::REFRESH => n,
+            _ => {
+                let n = self.participant.discovered_readers().iter().filter(|r| *r.subscription_topic_data.topic_name() == self.dds_name).count();
+                self.last = Some((std::time::Instant::now(), n));
+                n
+            }
+        }
+    }
 }
 
 /// The few topic names given at run time (`/clock`) live as long as the process.
@@ -494,7 +525,14 @@ pub struct RawPublisher {
     writer: dds_no_key::DataWriter<RawCdr, RawAdapter>,
     topic: String,
     matched: i32,
+    /// Whether the first wait for acknowledgments has had its grace (see `flush`).
+    first_ack: bool,
 }
+
+/// How long a reliable reader may take to send its first acknowledgment: rustdds counts a
+/// reliable reader in its acknowledgment wait only once that reader has sent its first
+/// ACKNACK (answering a heartbeat); until then the wait returns at once.
+const FIRST_ACK: std::time::Duration = std::time::Duration::from_millis(500);
 
 impl RawPublisher {
     /// Readers this writer is matched with now. A reader DDS discovery has seen is not
@@ -519,23 +557,33 @@ impl RawPublisher {
     }
 }
 
-impl Publish<RawCdr> for &mut RawPublisher {
-    fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
-        (**self).publish(message)
-    }
-}
-
 impl Publish<RawCdr> for RawPublisher {
     fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
         self.writer
             .write(message, Some(ros2_client::dds::rustdds::Timestamp::now()))
             .map_err(|e| mw(format!("publish on {}", self.topic), format!("{e:?}")))
     }
+
+    fn readers(&mut self) -> Option<usize> {
+        Some(self.matched())
+    }
+
+    /// The first call gives the readers [`FIRST_ACK`] to send their first acknowledgment.
+    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
+        if !std::mem::replace(&mut self.first_ack, true) {
+            std::thread::sleep(FIRST_ACK);
+        }
+        self.wait_for_acknowledgments(timeout)
+    }
 }
 
 impl<M: Serialize> Publish<M> for DdsPublisher<M> {
     fn publish(&mut self, message: M) -> Result<(), NodeError> {
         self.publisher.publish(message).map_err(|e| mw(format!("publish on {}", self.topic), e))
+    }
+
+    fn readers(&mut self) -> Option<usize> {
+        Some(self.readers.count())
     }
 }
 
@@ -554,6 +602,22 @@ impl<M: DeserializeOwned + 'static> Receive<M> for DdsSubscription<M> {
                 Ok(None)
             }
         }
+    }
+}
+
+/// The DDS port kind: a node's ports as ros2-client publishers and subscriptions of `ros`.
+impl Connect for RosNode {
+    fn input<M: Message>(&mut self, topic: &Topic) -> Result<Input<'static, M>, NodeError> {
+        Ok(Box::new(self.subscription::<M>(topic)?))
+    }
+    fn output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError> {
+        Ok(Box::new(self.publisher::<M>(topic)?))
+    }
+    fn raw_input(&mut self, topic: &RawTopic) -> Result<Input<'static, RawCdr>, NodeError> {
+        Ok(Box::new(self.raw_subscription(&topic.name, &topic.type_name, qos_from_bag(&topic.qos, false))?))
+    }
+    fn raw_output(&mut self, topic: &RawTopic) -> Result<Output<'static, RawCdr>, NodeError> {
+        Ok(Box::new(self.raw_publisher(&topic.name, &topic.type_name, qos_from_bag(&topic.qos, false))?))
     }
 }
 

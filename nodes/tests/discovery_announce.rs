@@ -10,7 +10,7 @@
 use std::time::{Duration, Instant};
 
 use oilfilm_nodes::dds::{ros_discovery_topic, RosNode};
-use oilfilm_nodes::params::NodeArgs;
+use oilfilm_graph::params::NodeArgs;
 use ros2_client::dds::rustdds::{
     policy::{Durability, History},
     DomainParticipant, QosPolicyBuilder,

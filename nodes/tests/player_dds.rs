@@ -11,11 +11,11 @@ use std::time::{Duration, Instant};
 use oilfilm_bag::{Bag, BagWriter, TopicSpec, WriterOptions};
 use oilfilm_msgs::{Clock, DaqFrame, Header, RigStatus, RosMessage};
 use oilfilm_nodes::dds::{qos_from, RosNode};
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::ports::Receive;
-use oilfilm_nodes::recorder::bag_qos;
-use oilfilm_nodes::stamp::Stamp;
-use oilfilm_nodes::topics::{self, TopicQos};
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
+use oilfilm_graph::recorder::bag_qos;
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_graph::topics::{self, TopicQos};
 
 const T0: u64 = 1_700_000_000_000_000_000;
 const FRAMES: u64 = 120;

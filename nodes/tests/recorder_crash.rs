@@ -12,8 +12,9 @@ use std::time::{Duration, Instant};
 
 use oilfilm_bag::{Bag, BagMessage};
 use oilfilm_msgs::DaqFrame;
-use oilfilm_nodes::launch::{NodeLaunch, Supervisor};
-use oilfilm_nodes::stamp::Stamp;
+use oilfilm_graph::launch::NodeLaunch;
+use oilfilm_nodes::supervisor::Supervisor;
+use oilfilm_graph::stamp::Stamp;
 
 fn bin_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_oilfilm-recorder")).parent().unwrap().to_path_buf()

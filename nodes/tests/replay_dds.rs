@@ -16,11 +16,12 @@ use oilfilm_identification::ascii::{self, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame};
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_nodes::exciter::ExciterParams;
-use oilfilm_nodes::launch::{NodeLaunch, Supervisor};
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::ports::Receive;
-use oilfilm_nodes::topics;
+use oilfilm_graph::exciter::ExciterParams;
+use oilfilm_graph::launch::NodeLaunch;
+use oilfilm_nodes::supervisor::Supervisor;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
+use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
 
 fn bin_dir() -> PathBuf {

@@ -17,14 +17,16 @@ use std::time::{Duration, Instant};
 use oilfilm_msgs::cdr::encode;
 use oilfilm_msgs::CoefficientEstimate;
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
-use oilfilm_nodes::launch::{NodeLaunch, Supervisor};
-use oilfilm_nodes::params::NodeArgs;
-use oilfilm_nodes::ports::Receive;
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
+use oilfilm_graph::launch::NodeLaunch;
+use oilfilm_nodes::supervisor::Supervisor;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
 use scratch::Scratch;
-use oilfilm_nodes::topics;
+use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
 
+#[path = "../../crates/graph/tests/common/mod.rs"]
 mod common;
 use common::{params, rig_at_40_db};
 
@@ -44,6 +46,9 @@ fn write_params(dir: &Path, rig: &RigConfig, p: &GraphParams) -> PathBuf {
     p.estimator.rig = rig_s;
     // Four times real time: 21 s of rig in ~5 s.
     p.daq.rate_factor = 4.0;
+    // The rig clock starts where the in-memory graph's does (not at the wall clock), so the
+    // stamps match too.
+    p.daq.start_stamp_ns = oilfilm_graph::runner::memory::EPOCH.0;
     let mut doc = BTreeMap::new();
     let section = |v: serde_json::Value| serde_json::json!({ "ros__parameters": v });
     doc.insert("/oilfilm/exciter", section(serde_json::to_value(&p.exciter).unwrap()));

@@ -1,4 +1,4 @@
-//! Records the reference bag of `bags/`: the in-memory `sim_rig` graph (the node cores, as
+//! Records the reference bag of `bags/`: the in-memory `sim_rig` graph (the nodes, as
 //! `oilfilm launch` runs them) with the parameters of a ROS 2 params file, every topic
 //! written to a rosbag2 MCAP bag (zstd chunks, one file).
 //!
@@ -13,8 +13,7 @@ mod sim_rig;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use oilfilm_nodes::harness::{run_sim_rig, GraphParams};
-use oilfilm_nodes::params::{self, NodeArgs};
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
 use oilfilm_physics::config::RigConfig;
 
 fn main() -> anyhow::Result<()> {
@@ -22,18 +21,7 @@ fn main() -> anyhow::Result<()> {
     let (Some(params_file), Some(dir)) = (args.next().map(PathBuf::from), args.next().map(PathBuf::from)) else {
         anyhow::bail!("usage: write_reference_bag PARAMS_FILE DIR");
     };
-    let node = |name: &str| NodeArgs {
-        name: name.into(),
-        namespace: oilfilm_nodes::topics::NAMESPACE.into(),
-        params_files: vec![params_file.clone()],
-        ..Default::default()
-    };
-    let p = GraphParams {
-        exciter: params::load(&node("exciter"))?.0,
-        daq: params::load(&node("daq"))?.0,
-        conditioner: params::load(&node("conditioner"))?.0,
-        estimator: params::load(&node("estimator"))?.0,
-    };
+    let p = GraphParams::from_params_file(&params_file)?;
     let rig = RigConfig::zhou2004()?;
     let (rec, truth) = run_sim_rig(&rig, &p).context("running the sim_rig graph")?;
     let msgs = sim_rig::published(&rec);

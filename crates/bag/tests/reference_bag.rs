@@ -9,8 +9,8 @@ mod sim_rig;
 use std::path::PathBuf;
 
 use oilfilm_bag::{Bag, OilfilmMessage};
-use oilfilm_nodes::harness::{reanalyse, run_sim_rig, GraphParams};
-use oilfilm_nodes::params::{self, NodeArgs};
+use oilfilm_graph::runner::bag::reanalyse;
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
 use oilfilm_physics::config::RigConfig;
 
 /// Each identified coefficient against the film's own, relative to the film's value. The
@@ -23,19 +23,7 @@ fn root() -> PathBuf {
 }
 
 fn graph_params() -> GraphParams {
-    let file = root().join("bags/sim_rig_multisine.params.yaml");
-    let node = |name: &str| NodeArgs {
-        name: name.into(),
-        namespace: oilfilm_nodes::topics::NAMESPACE.into(),
-        params_files: vec![file.clone()],
-        ..Default::default()
-    };
-    GraphParams {
-        exciter: params::load(&node("exciter")).unwrap().0,
-        daq: params::load(&node("daq")).unwrap().0,
-        conditioner: params::load(&node("conditioner")).unwrap().0,
-        estimator: params::load(&node("estimator")).unwrap().0,
-    }
+    GraphParams::from_params_file(&root().join("bags/sim_rig_multisine.params.yaml")).unwrap()
 }
 
 #[test]

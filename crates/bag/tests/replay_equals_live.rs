@@ -1,6 +1,6 @@
 //! Offline re-analysis from a bag equals the live graph, bit for bit: the in-memory sim_rig
 //! graph records every topic into a bag; the bag's DAQ frames and rig status, read back,
-//! go through a fresh conditioner and estimator (`harness::reanalyse`, the code the node
+//! go through a fresh conditioner and estimator (the bag runner, `runner::bag::reanalyse`: the nodes the
 //! binaries run) and give the very estimate bytes the live estimator published, which the
 //! bag also holds.
 
@@ -9,12 +9,13 @@ mod sim_rig;
 
 use oilfilm_bag::{Bag, OilfilmMessage, WriterOptions};
 use oilfilm_msgs::RosMessage;
-use oilfilm_nodes::harness::{reanalyse, reanalyse_overlapped, reanalyse_stream, run_sim_rig, GraphParams, Input};
+use oilfilm_graph::runner::bag::{reanalyse, reanalyse_overlapped, reanalyse_stream, Input};
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
 use oilfilm_physics::config::RigConfig;
 
 #[test]
 fn estimates_from_a_bag_equal_the_live_ones_bit_for_bit() {
-    let p = GraphParams::sim_rig(12.0, 25_000, 12_500);
+    let p = GraphParams::sim_rig(12.0, 25_000, 12_500).unwrap();
     let rig = RigConfig::zhou2004().unwrap();
     let (live, _) = run_sim_rig(&rig, &p).unwrap();
     assert!(live.estimates.len() >= 2, "{} estimates", live.estimates.len());

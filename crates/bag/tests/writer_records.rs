@@ -256,7 +256,7 @@ fn a_closed_chunk_reaches_the_file_while_the_writer_waits() {
     // A frame (40 kB) fills a chunk: each write closes one.
     let options = WriterOptions { compression_threads: 1, chunk_size: 8 << 10, ..WriterOptions::default() };
     let mut w = BagWriter::create(&dir, options).unwrap();
-    let topic = w.add_topic(sim_rig::topic_spec(&oilfilm_nodes::topics::DAQ_FRAMES)).unwrap();
+    let topic = w.add_topic(sim_rig::topic_spec(&oilfilm_graph::topics::DAQ_FRAMES)).unwrap();
     for m in &frames {
         w.write(topic, m.log_time, &m.data).unwrap();
     }
@@ -286,8 +286,8 @@ fn a_chunk_compression_does_not_shrink_is_stored_uncompressed() {
     for (compression, name) in [(Compression::Zstd, "zstd"), (Compression::Lz4, "lz4")] {
         let dir = tmp(&format!("incompressible-{name}"));
         let mut w = BagWriter::create(&dir, WriterOptions { compression, ..WriterOptions::default() }).unwrap();
-        let noise_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_nodes::topics::ESTIMATES)).unwrap();
-        let frame_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_nodes::topics::DAQ_FRAMES)).unwrap();
+        let noise_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_graph::topics::ESTIMATES)).unwrap();
+        let frame_topic = w.add_topic(sim_rig::topic_spec(&oilfilm_graph::topics::DAQ_FRAMES)).unwrap();
         // xorshift bytes: incompressible for zstd and lz4.
         let mut x = 0x9E37_79B9_7F4A_7C15u64;
         let noise: Vec<u8> = (0..300)

@@ -38,6 +38,10 @@ pub struct HousingConfig {
     pub exciter_max_force_n: f64,
     /// The exciters' frequency band, Hz (the paper's: 0-80 Hz).
     pub exciter_band_hz: [f64; 2],
+    /// The fastest an exciter's force may change, N/s: no setpoint differs from the one
+    /// before by more than this over the setpoint period, through every transition (start,
+    /// plan change, stop). A safety limit of the exciters and their amplifiers.
+    pub exciter_max_slew_n_per_s: f64,
     pub gravity_m_s2: f64,
 }
 
@@ -159,6 +163,7 @@ impl RigConfig {
         if f_hi >= 0.5 * self.daq.sample_rate_hz {
             return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("upper edge {f_hi} Hz must stay below the DAQ's Nyquist frequency {} Hz", 0.5 * self.daq.sample_rate_hz)));
         }
+        positive("housing.exciter_max_slew_n_per_s", h.exciter_max_slew_n_per_s)?;
         positive("housing.gravity_m_s2", h.gravity_m_s2)?;
         let s = &self.static_load;
         if !s.ripple_fraction.is_finite() || !(0.0..0.2).contains(&s.ripple_fraction) {

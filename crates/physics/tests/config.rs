@@ -66,6 +66,8 @@ fn invalid_files_name_the_field() {
         ("wrong type", mutate("mass_kg = 60.0", "mass_kg = \"sixty\""), "mass_kg"),
         ("zero mass", mutate("mass_kg = 60.0", "mass_kg = 0.0"), "housing.mass_kg"),
         ("parallel exciters", mutate("exciter_angles_deg = [45.0, 135.0]", "exciter_angles_deg = [45.0, 225.0]"), "housing.exciter_angles_deg"),
+        ("no slew limit", mutate("exciter_max_slew_n_per_s = 1.0e6", "exciter_max_slew_n_per_s = 0.0"), "housing.exciter_max_slew_n_per_s"),
+        ("slew limit missing", mutate("exciter_max_slew_n_per_s = 1.0e6\n", ""), "exciter_max_slew_n_per_s"),
         ("band above Nyquist", mutate("exciter_band_hz = [0.0, 80.0]", "exciter_band_hz = [0.0, 3000.0]"), "housing.exciter_band_hz"),
         ("load beyond the bellows", mutate("bearing_load_n = 5000.0", "bearing_load_n = 50000.0"), "operating.bearing_load_n"),
         ("negative speed", mutate("speed_rpm = 1500.0", "speed_rpm = -1500.0"), "operating.speed_rpm"),

@@ -1,11 +1,5 @@
-//! The `conditioner` node (see `oilfilm_nodes::shell::conditioner_main`).
+//! The `conditioner` node on DDS (`oilfilm_graph::conditioner::Conditioner`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::conditioner_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-conditioner: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::conditioner::Conditioner>()
 }

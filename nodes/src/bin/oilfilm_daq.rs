@@ -1,11 +1,5 @@
-//! The `daq` node (see `oilfilm_nodes::shell::daq_main`).
+//! The `daq` node on DDS (`oilfilm_graph::daq::Daq`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::daq_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-daq: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::daq::Daq>()
 }

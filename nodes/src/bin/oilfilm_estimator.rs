@@ -1,11 +1,5 @@
-//! The `estimator` node (see `oilfilm_nodes::shell::estimator_main`).
+//! The `estimator` node on DDS (`oilfilm_graph::estimator::Estimator`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::estimator_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-estimator: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::estimator::Estimator>()
 }

@@ -1,11 +1,5 @@
-//! The `exciter` node (see `oilfilm_nodes::shell::exciter_main`).
+//! The `exciter` node on DDS (`oilfilm_graph::exciter::Exciter`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::exciter_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-exciter: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::exciter::Exciter>()
 }

@@ -1,11 +1,5 @@
-//! The `player` node (see `oilfilm_nodes::shell::player_main`).
+//! The `player` node on DDS (`oilfilm_graph::player::Player`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::player_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-player: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::player::Player>()
 }

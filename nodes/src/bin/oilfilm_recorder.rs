@@ -1,11 +1,5 @@
-//! The `recorder` node (see `oilfilm_nodes::shell::recorder_main`).
+//! The `recorder` node on DDS (`oilfilm_graph::recorder::Recorder`).
 
 fn main() -> std::process::ExitCode {
-    match oilfilm_nodes::shell::recorder_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("oilfilm-recorder: {e}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    oilfilm_nodes::runner::main::<oilfilm_graph::recorder::Recorder>()
 }

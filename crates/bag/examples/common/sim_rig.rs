@@ -6,8 +6,8 @@ use std::path::Path;
 
 use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
 use oilfilm_msgs::RosMessage;
-use oilfilm_nodes::harness::{run_sim_rig, GraphParams, Recording};
-use oilfilm_nodes::topics::{self, Topic};
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams, Recording};
+use oilfilm_graph::topics::{self, Topic};
 use oilfilm_physics::config::RigConfig;
 
 /// One message as published: its topic (qualified), type, log time (its header stamp), CDR
@@ -24,7 +24,7 @@ pub struct Published {
 /// `duration_s` of the Zhou rig with the default two-tone plan, 5 kHz in blocks of 500
 /// scans, estimates over 1 s windows every 0.5 s (so every topic carries messages).
 pub fn short_run(duration_s: f64) -> Recording {
-    let p = GraphParams::sim_rig(duration_s, 5_000, 2_500);
+    let p = GraphParams::sim_rig(duration_s, 5_000, 2_500).expect("the shipped sim_rig launch file loads");
     // The crate's examples and tests run only with a rig the physics crate builds itself.
     let rig = RigConfig::zhou2004().expect("the built-in Zhou 2004 rig is valid");
     run_sim_rig(&rig, &p).expect("the short sim_rig run works").0

@@ -4,16 +4,16 @@
 //! errors with `signal_band_hz` 55.5, the sim_rig params) pushed every conditioned frame,
 //! best and median of several passes. A loop to profile (`perf record`) the estimator alone.
 //!
-//! `cargo run --release -p oilfilm-nodes --example profile_reanalysis [PASSES]`
+//! `cargo run --release -p oilfilm-graph --example profile_reanalysis [PASSES]`
 //! (with `ONLY_CAUSAL=1`: the causal conditioner alone, e.g. under `perf record`)
 
 use std::time::Instant;
 
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_nodes::stamp::Stamp;
-use oilfilm_nodes::conditioner::{Chain, ConditionerCore, ConditionerParams};
-use oilfilm_nodes::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_graph::conditioner::{Chain, ConditionerCore, ConditionerParams};
+use oilfilm_graph::estimator::{EstimatorCore, EstimatorParams};
 use oilfilm_physics::config::RigConfig;
 
 fn main() -> anyhow::Result<()> {
@@ -22,7 +22,7 @@ fn main() -> anyhow::Result<()> {
     let rig = RigConfig::zhou2004()?;
     let rate = rig.daq.sample_rate_hz;
     let rec = simulate::simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), seconds, SimulateOptions::default(), &mut |_| {})?;
-    let frames = oilfilm_nodes::daq::frames_of_scans(&rig, &rec.scans, block, rig.daq.calibration().scan_order().len(), Stamp(0))?;
+    let frames = oilfilm_graph::daq::frames_of_scans(&rig, &rec.scans, block, rig.daq.calibration().scan_order().len(), Stamp(0))?;
     // The conditioner's share, both chains, timed the same way as the estimator below.
     let mut conditioned = Vec::new();
     let only_causal = std::env::var_os("ONLY_CAUSAL").is_some();

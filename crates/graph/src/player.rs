@@ -26,6 +26,7 @@ use oilfilm_msgs::{Clock, Time};
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
+use crate::node::{Connect, Node, Output, RawTopic, Start, Turn};
 use crate::ports::{Publish, RawCdr};
 use crate::stamp::Stamp;
 
@@ -262,7 +263,7 @@ impl PlayerCore {
 }
 
 /// Publishes a step: `/clock` first, then the messages on their topics' ports.
-pub fn publish_step(core: &PlayerCore, step: &Step, ports: &mut [Box<dyn Publish<RawCdr> + '_>], clock: Option<&mut dyn Publish<Clock>>) -> Result<(), NodeError> {
+pub fn publish_step(core: &PlayerCore, step: &Step, ports: &mut [Output<'_, RawCdr>], clock: Option<&mut dyn Publish<Clock>>) -> Result<(), NodeError> {
     if let (Some(c), Some(port)) = (step.clock.clone(), clock) {
         port.publish(Clock { clock: c })?;
     }
@@ -271,6 +272,134 @@ pub fn publish_step(core: &PlayerCore, step: &Step, ports: &mut [Box<dyn Publish
         port.publish(item.data.clone())?;
     }
     Ok(())
+}
+
+/// How long a reliable reader may take to acknowledge, at the end, what was played.
+const LAST_ACK: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Where the player is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    /// Waiting (since then) for a subscriber on every topic, at most `wait_s`.
+    Waiting(Option<Stamp>),
+    /// Subscribers found: the readers learn of the writers about when the writers learn of
+    /// them, so a moment more, until then.
+    Settling(Stamp),
+    /// Playing since then (the origin of the core's wall clock); with a fast batch still to
+    /// be acknowledged.
+    Playing { origin: Stamp, unacknowledged: bool },
+}
+
+/// The player node: a bag on its topics, with `/clock`.
+pub struct Player {
+    core: PlayerCore,
+    bag: String,
+    wait_s: f64,
+    clock: bool,
+    phase: Phase,
+}
+
+pub struct PlayerPorts<'a> {
+    /// One per topic, in the core's topic order.
+    pub topics: Vec<Output<'a, RawCdr>>,
+    pub clock: Option<Output<'a, Clock>>,
+}
+
+impl Player {
+    pub fn core(&self) -> &PlayerCore {
+        &self.core
+    }
+
+    fn fast(&self) -> bool {
+        matches!(self.core.options.rate, Rate::Fast)
+    }
+}
+
+impl Node for Player {
+    const NAME: &'static str = "player";
+    type Params = PlayerParams;
+    type Ports<'a> = PlayerPorts<'a>;
+
+    fn new(params: &PlayerParams, _start: &Start) -> Result<Self, NodeError> {
+        let options = params.options()?;
+        let bag = oilfilm_bag::Bag::open(&params.bag)?;
+        let info = bag.info().clone();
+        let qos_of = |name: &str| info.topics_with_message_count.iter().find(|t| t.topic_metadata.name == name).and_then(|t| t.topic_metadata.offered_qos_profiles.first().copied());
+        let (topics, items) = play_list(bag.messages()?, &params.topics, &qos_of)?;
+        let core = PlayerCore::new(topics, items, options)?;
+        Ok(Self { core, bag: params.bag.clone(), wait_s: params.wait_s, clock: params.clock, phase: Phase::Waiting(None) })
+    }
+
+    /// Each topic with the QoS it was recorded with; fast: reliable, and every sample kept
+    /// until acknowledged (a batch must fit the writer's history).
+    fn connect<C: Connect>(&self, c: &mut C) -> Result<PlayerPorts<'static>, NodeError> {
+        let fast = self.fast();
+        let mut topics = Vec::new();
+        for t in self.core.topics() {
+            let mut qos = t.qos.unwrap_or_else(|| QosProfile::keep_last(10, true, false));
+            if fast {
+                qos = QosProfile { reliability: oilfilm_bag::metadata::Reliability::Reliable, history: oilfilm_bag::metadata::History::KeepAll, ..qos };
+            }
+            topics.push(c.raw_output(&RawTopic { name: t.name.clone(), type_name: t.type_name.clone(), qos })?);
+        }
+        let clock = if self.clock { Some(c.output(&crate::topics::CLOCK)?) } else { None };
+        Ok(PlayerPorts { topics, clock })
+    }
+
+    fn turn(&mut self, now: Stamp, ports: &mut PlayerPorts<'_>) -> Result<Turn, NodeError> {
+        let fast = self.fast();
+        match self.phase {
+            Phase::Waiting(since) => {
+                let since = since.unwrap_or(now);
+                let waiting: Vec<usize> = (0..ports.topics.len()).filter(|&i| ports.topics[i].readers() == Some(0)).collect();
+                if !waiting.is_empty() && now.seconds_since(since) < self.wait_s {
+                    self.phase = Phase::Waiting(Some(since));
+                    return Ok(Turn { wake: Some(Stamp(now.0 + 20_000_000)), ..Turn::default() });
+                }
+                for i in waiting {
+                    tracing::warn!(node = Self::NAME, "no subscriber on {} after {} s: playing anyway", self.core.topics()[i].name, self.wait_s);
+                }
+                let until = Stamp(now.0 + 200_000_000);
+                self.phase = Phase::Settling(until);
+                Ok(Turn { wake: Some(until), ..Turn::default() })
+            }
+            Phase::Settling(until) if now < until => Ok(Turn { wake: Some(until), ..Turn::default() }),
+            Phase::Settling(_) => {
+                tracing::info!(node = Self::NAME, "playing {} message(s) on {} topic(s) from {}", self.core.items().len(), self.core.topics().len(), self.bag);
+                self.phase = Phase::Playing { origin: now, unacknowledged: false };
+                self.turn(now, ports)
+            }
+            Phase::Playing { origin, unacknowledged } => {
+                if unacknowledged {
+                    // Reliable readers acknowledge a batch before the next: nothing is dropped.
+                    for port in &mut ports.topics {
+                        if !port.flush(std::time::Duration::from_secs(1))? {
+                            return Ok(Turn::default());
+                        }
+                    }
+                    self.phase = Phase::Playing { origin, unacknowledged: false };
+                }
+                let step = self.core.step(Stamp(now.0 - origin.0));
+                publish_step(&self.core, &step, &mut ports.topics, ports.clock.as_mut().map(|c| c as &mut dyn Publish<Clock>))?;
+                let handled = step.publish.len() + usize::from(step.clock.is_some());
+                if fast && !step.publish.is_empty() {
+                    self.phase = Phase::Playing { origin, unacknowledged: true };
+                }
+                Ok(Turn { handled, finished: step.finished, wake: Some(Stamp(origin.0 + step.next_wall.0)) })
+            }
+        }
+    }
+
+    /// Reliable readers get the last messages before the writers go.
+    fn finish(&mut self, _now: Stamp, ports: &mut PlayerPorts<'_>) -> Result<(), NodeError> {
+        tracing::info!(node = Self::NAME, "played {} message(s), {} full pass(es)", self.core.position(), self.core.passes() + u64::from(self.core.position() == self.core.items().len()));
+        for port in &mut ports.topics {
+            if !port.flush(LAST_ACK).unwrap_or(false) {
+                tracing::warn!(node = Self::NAME, "a reader did not acknowledge the last messages within {} s", LAST_ACK.as_secs());
+            }
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

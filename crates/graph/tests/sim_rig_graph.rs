@@ -7,7 +7,8 @@
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::cdr::encode;
 use oilfilm_msgs::{CoefficientEstimate, DaqFrame};
-use oilfilm_nodes::harness::{reanalyse, run_sim_rig, Recording};
+use oilfilm_graph::runner::bag::reanalyse;
+use oilfilm_graph::runner::memory::{run_sim_rig, Recording};
 use oilfilm_physics::config::RigConfig;
 
 mod common;
@@ -110,7 +111,7 @@ fn recut(frames: &[DaqFrame], size: usize) -> Vec<DaqFrame> {
     let values: Vec<f64> = frames.iter().flat_map(|f| f.values.iter().copied()).collect();
     let counts: Vec<i16> = frames.iter().flat_map(|f| f.counts.iter().copied()).collect();
     let scans = (values.len() + counts.len()) / width;
-    let t0 = oilfilm_nodes::stamp::Stamp::from_time(&first.header.stamp);
+    let t0 = oilfilm_graph::stamp::Stamp::from_time(&first.header.stamp);
     (0..scans)
         .step_by(size)
         .enumerate()

@@ -49,6 +49,7 @@ use oilfilm_physics::daq::ChannelId;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
+use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
 use crate::stamp::Stamp;
 use crate::topics;
 
@@ -590,6 +591,53 @@ impl ConditionerCore {
             s.first_scan += keep_from as u64;
         }
         frame
+    }
+}
+
+/// The conditioner node: DAQ frames in, conditioned frames out.
+pub struct Conditioner {
+    core: ConditionerCore,
+}
+
+pub struct ConditionerPorts<'a> {
+    pub frames: Input<'a, DaqFrame>,
+    pub conditioned: Output<'a, ConditionedFrame>,
+}
+
+impl Conditioner {
+    pub fn core(&self) -> &ConditionerCore {
+        &self.core
+    }
+}
+
+impl Node for Conditioner {
+    const NAME: &'static str = "conditioner";
+    type Params = ConditionerParams;
+    type Ports<'a> = ConditionerPorts<'a>;
+
+    fn new(params: &ConditionerParams, start: &Start) -> Result<Self, NodeError> {
+        Ok(Self { core: ConditionerCore::new((start.rig)(&params.rig)?, params)? })
+    }
+
+    fn connect<C: Connect>(&self, c: &mut C) -> Result<ConditionerPorts<'static>, NodeError> {
+        Ok(ConditionerPorts { frames: c.input(&topics::DAQ_FRAMES)?, conditioned: c.output(&topics::CONDITIONED)? })
+    }
+
+    fn turn(&mut self, _now: Stamp, ports: &mut ConditionerPorts<'_>) -> Result<Turn, NodeError> {
+        let mut turn = Turn::default();
+        while let Some(frame) = ports.frames.receive()? {
+            turn.handled += 1;
+            match self.core.push(&frame) {
+                Ok(out) => {
+                    for c in out {
+                        ports.conditioned.publish(c)?;
+                        turn.handled += 1;
+                    }
+                }
+                Err(e) => skipped(Self::NAME, &e),
+            }
+        }
+        Ok(turn)
     }
 }
 

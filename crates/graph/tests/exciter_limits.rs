@@ -4,10 +4,10 @@
 
 use oilfilm_identification::excitation::Limits;
 use oilfilm_msgs::ExciterCommand;
-use oilfilm_nodes::exciter::{ExciterCore, ExciterParams};
-use oilfilm_nodes::stamp::Stamp;
+use oilfilm_graph::exciter::{ExciterCore, ExciterParams, HardLimits};
+use oilfilm_graph::stamp::Stamp;
 
-const HARD: Limits = Limits { max_force_n: 1500.0, band_hz: [0.0, 80.0] };
+const HARD: HardLimits = HardLimits { force: Limits { max_force_n: 1500.0, band_hz: [0.0, 80.0] }, max_slew_n_per_s: 1.0e6 };
 
 /// Every setpoint the core publishes over `seconds` of rig time, in 0.1 s status steps.
 fn run(core: &mut ExciterCore, from: Stamp, seconds: f64) -> Vec<ExciterCommand> {
@@ -116,7 +116,7 @@ fn hostile_requests_never_exceed_the_limit() {
     println!("hostile requests: {accepted} accepted, {rejected} rejected");
     assert!(rejected > 200, "the hostile half must be rejected");
     assert!(accepted > 50, "plausible requests up to the limits must be accepted");
-    assert_within(&all, HARD.max_force_n, "hostile requests");
+    assert_within(&all, HARD.force.max_force_n, "hostile requests");
 
     // A legitimate request that hits the limit exactly is accepted and stays within it.
     let mut r = ExciterCommand { ramp_s: 0.0, amplitude_scale: 1.0, ..Default::default() };

@@ -1,7 +1,7 @@
 //! The DAQ node's line sources: an ASCII record replayed from a file, or a live TCP stream
 //! from an external acquisition process, both in the ASCII record format v1
 //! ([`oilfilm_identification::ascii`]). The core here takes lines (the shell reads them
-//! from the file or the socket: [`crate::shell::read_lines`]) and gives [`DaqFrame`]s of
+//! from the file or the socket: [`crate::lines::read_lines`]) and gives [`DaqFrame`]s of
 //! `block_scans` consecutive scans, each followed by a [`RigStatus`]. No I/O, no clock.
 //!
 //! ## The TCP wire format

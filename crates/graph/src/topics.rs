@@ -67,13 +67,20 @@ pub const CONDITIONED: Topic =
 pub const ESTIMATES: Topic =
     Topic { name: "estimates", type_name: "oilfilm_msgs/msg/CoefficientEstimate", qos: qos(100, true) };
 
+/// The simulated (or replayed) clock: absolute, outside the graph's namespace; the player
+/// publishes it.
+pub const CLOCK: Topic = Topic { name: "/clock", type_name: "rosgraph_msgs/msg/Clock", qos: TopicQos { reliable: true, depth: 1, transient_local: false } };
+
 /// Every topic of the graph.
 pub const ALL: &[Topic] = &[EXCITER_REQUEST, EXCITER_COMMAND, DAQ_FRAMES, RIG_STATUS, CONDITIONED, ESTIMATES];
 
 /// The default namespace.
 pub const NAMESPACE: &str = "/oilfilm";
 
-/// `namespace/name` with exactly one slash between.
+/// `namespace/name` with exactly one slash between; an absolute name (`/clock`) as it is.
 pub fn qualified(namespace: &str, topic: &Topic) -> String {
+    if topic.name.starts_with('/') {
+        return topic.name.to_string();
+    }
     format!("{}/{}", namespace.trim_end_matches('/'), topic.name)
 }

@@ -19,6 +19,7 @@ use oilfilm_physics::config::RigConfig;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
+use crate::node::{skipped, Connect, Input, Node, Output, ParamCheck, Start, Turn};
 use crate::stamp::Stamp;
 use crate::topics;
 
@@ -482,6 +483,68 @@ fn fill(msg: &mut CoefficientEstimate, r: &WindowReport) {
             msg.solved = false;
             msg.refusal_reason = refusal.to_string();
         }
+    }
+}
+
+/// The estimator node: conditioned frames and the rig's status in, estimates out.
+pub struct Estimator {
+    core: EstimatorCore,
+}
+
+pub struct EstimatorPorts<'a> {
+    pub conditioned: Input<'a, ConditionedFrame>,
+    pub status: Input<'a, RigStatus>,
+    pub estimates: Output<'a, CoefficientEstimate>,
+}
+
+impl Node for Estimator {
+    const NAME: &'static str = "estimator";
+    type Params = EstimatorParams;
+    type Ports<'a> = EstimatorPorts<'a>;
+
+    fn new(params: &EstimatorParams, start: &Start) -> Result<Self, NodeError> {
+        Ok(Self { core: EstimatorCore::new((start.rig)(&params.rig)?, params.clone())? })
+    }
+
+    fn connect<C: Connect>(&self, c: &mut C) -> Result<EstimatorPorts<'static>, NodeError> {
+        Ok(EstimatorPorts { conditioned: c.input(&topics::CONDITIONED)?, status: c.input(&topics::RIG_STATUS)?, estimates: c.output(&topics::ESTIMATES)? })
+    }
+
+    /// The status first (the speed), then the conditioned frames.
+    fn turn(&mut self, _now: Stamp, ports: &mut EstimatorPorts<'_>) -> Result<Turn, NodeError> {
+        let mut turn = Turn::default();
+        while let Some(status) = ports.status.receive()? {
+            turn.handled += 1;
+            self.core.rig_status(&status);
+        }
+        while let Some(frame) = ports.conditioned.receive()? {
+            turn.handled += 1;
+            match self.core.push(&frame) {
+                Ok(out) => {
+                    for e in out {
+                        if e.solved {
+                            tracing::info!(node = Self::NAME, "window {}..{}: solved", e.window_start_sample, e.window_end_sample);
+                        } else {
+                            tracing::info!(node = Self::NAME, "window {}..{}: refused: {}", e.window_start_sample, e.window_end_sample, e.refusal_reason);
+                        }
+                        ports.estimates.publish(e)?;
+                        turn.handled += 1;
+                    }
+                }
+                Err(e) => skipped(Self::NAME, &e),
+            }
+        }
+        Ok(turn)
+    }
+
+    fn param_check(&self) -> Option<ParamCheck<EstimatorParams>> {
+        Some(Box::new(|p: &EstimatorParams| p.config(5000.0).map(|_| ())))
+    }
+
+    fn reconfigure(&mut self, params: &EstimatorParams) -> Result<(), NodeError> {
+        self.core.set_params(params.clone())?;
+        tracing::info!(node = Self::NAME, "parameters changed: window {}, hop {}", self.core.params().window, self.core.params().hop);
+        Ok(())
     }
 }
 

@@ -16,7 +16,7 @@
 //!   log time old and hands it to the OS then; so at most the last ~1 s of each topic.
 //!
 //! The core owns no port and no clock: [`poll`] takes what waits on the inputs and stamps
-//! it with the clock it is given.
+//! it with the clock it is given; the node ([`Recorder`]) gives it the turn's time.
 
 use std::path::PathBuf;
 
@@ -24,6 +24,7 @@ use oilfilm_bag::{BagWriter, Compression, QosProfile, TopicId, TopicSpec, Writer
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
+use crate::node::{Connect, Input, Node, RawTopic, Start, Turn};
 use crate::ports::{RawCdr, Receive};
 use crate::stamp::Stamp;
 use crate::topics::{self, TopicQos};
@@ -211,7 +212,7 @@ impl RecorderCore {
 
 /// One turn: takes everything waiting on `inputs` (one per topic, in the core's topic
 /// order), each message stamped with `clock()` as it is taken. Returns the number taken.
-pub fn poll(core: &mut RecorderCore, inputs: &mut [Box<dyn Receive<RawCdr> + '_>], clock: &dyn Fn() -> Stamp) -> Result<usize, NodeError> {
+pub fn poll(core: &mut RecorderCore, inputs: &mut [Input<'_, RawCdr>], clock: &dyn Fn() -> Stamp) -> Result<usize, NodeError> {
     let mut taken = 0;
     for (index, input) in inputs.iter_mut().enumerate() {
         while let Some(m) = input.receive()? {
@@ -238,6 +239,100 @@ pub fn status_line(stats: &RecorderStats, topics: &[RecordTopic], elapsed_s: f64
         mb_per_s,
         per_topic.join(", ")
     )
+}
+
+/// The recorder node: our topics to a bag until it is stopped.
+pub struct Recorder {
+    /// `None` once closed.
+    core: Option<RecorderCore>,
+    dir: PathBuf,
+    status_period_s: f64,
+    started: Stamp,
+    /// When the last status line was printed, and the bytes then.
+    last_status: (Stamp, u64),
+    /// The last log time given (each message's is later than the one before).
+    last_log: Stamp,
+    closed: Option<PathBuf>,
+}
+
+impl Recorder {
+    /// The bag's directory.
+    pub fn dir(&self) -> &std::path::Path {
+        &self.dir
+    }
+
+    /// The closed bag's directory, once [`Node::finish`] has closed it.
+    pub fn closed(&self) -> Option<&std::path::Path> {
+        self.closed.as_deref()
+    }
+
+    fn take(&mut self, now: Stamp, inputs: &mut [Input<'_, RawCdr>]) -> Result<usize, NodeError> {
+        let Some(core) = &mut self.core else { return Ok(0) };
+        // The turn's time, one nanosecond more for each message after the first: log times
+        // keep the order messages were taken in.
+        let last = std::cell::Cell::new(self.last_log);
+        let clock = || {
+            let t = Stamp(now.0.max(last.get().0 + 1));
+            last.set(t);
+            t
+        };
+        let taken = poll(core, inputs, &clock)?;
+        self.last_log = last.get();
+        Ok(taken)
+    }
+}
+
+impl Node for Recorder {
+    const NAME: &'static str = "recorder";
+    type Params = RecorderParams;
+    type Ports<'a> = Vec<Input<'a, RawCdr>>;
+
+    fn new(params: &RecorderParams, start: &Start) -> Result<Self, NodeError> {
+        let options = params.writer_options()?;
+        let topics = select_topics(start.namespace, &params.topics)?;
+        let dir = params.output_dir(start.now);
+        let core = RecorderCore::new(BagWriter::create(&dir, options)?, topics)?;
+        tracing::info!(node = Self::NAME, "recording {} topic(s) to {}", core.topics().len(), dir.display());
+        Ok(Self { core: Some(core), dir, status_period_s: params.status_period_s, started: start.now, last_status: (start.now, 0), last_log: Stamp(i64::MIN), closed: None })
+    }
+
+    /// Each topic with its publisher's reliability and durability (so they match), but a
+    /// deep history: a burst (a fast replay) must wait in the reader rather than push older
+    /// samples out.
+    fn connect<C: Connect>(&self, c: &mut C) -> Result<Vec<Input<'static, RawCdr>>, NodeError> {
+        let topics = self.core.as_ref().map_or(&[][..], |core| core.topics());
+        topics
+            .iter()
+            .map(|t| c.raw_input(&RawTopic { name: t.name.clone(), type_name: t.type_name.clone(), qos: QosProfile::keep_last(10_000, t.qos.reliable, t.qos.transient_local) }))
+            .collect()
+    }
+
+    fn turn(&mut self, now: Stamp, inputs: &mut Vec<Input<'_, RawCdr>>) -> Result<Turn, NodeError> {
+        let taken = self.take(now, inputs)?;
+        if let Some(core) = &self.core {
+            let since_s = now.seconds_since(self.last_status.0);
+            if self.status_period_s > 0.0 && since_s >= self.status_period_s {
+                let rate = (core.stats().bytes - self.last_status.1) as f64 * 1e-6 / since_s;
+                eprintln!("{}", status_line(core.stats(), core.topics(), now.seconds_since(self.started), rate));
+                self.last_status = (now, core.stats().bytes);
+            }
+        }
+        Ok(Turn { handled: taken, ..Turn::default() })
+    }
+
+    /// What arrived before the stop is kept; the bag is closed (metadata.yaml written), even
+    /// after an error, so what was written stays readable.
+    fn finish(&mut self, now: Stamp, inputs: &mut Vec<Input<'_, RawCdr>>) -> Result<(), NodeError> {
+        let taken = self.take(now, inputs);
+        let Some(core) = self.core.take() else { return taken.map(|_| ()) };
+        let (stats, topics) = (core.stats().clone(), core.topics().to_vec());
+        let dir = core.close()?;
+        taken?;
+        eprintln!("{}", status_line(&stats, &topics, now.seconds_since(self.started), 0.0));
+        tracing::info!(node = Self::NAME, "closed {} ({} messages)", dir.display(), stats.messages);
+        self.closed = Some(dir);
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
-//! Ports: how a node core meets the world. A node's `poll` takes its ports as trait objects,
-//! so the same core runs on DDS ([`crate::dds`]), on a bag, or in memory ([`memory`]) in
-//! tests, and a replay gives the live results bit for bit.
+//! Ports: how a node meets the world. A node's turn ([`crate::node::Node::turn`]) takes its
+//! ports as trait objects, so the same node runs on DDS (the `oilfilm-nodes` crate), on a
+//! bag's messages ([`crate::runner::bag`]) or in memory ([`memory`], [`crate::runner::memory`]),
+//! and a replay gives the live results bit for bit.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -16,6 +17,54 @@ pub struct RawCdr(pub Vec<u8>);
 /// Where a node sends messages of one topic.
 pub trait Publish<M> {
     fn publish(&mut self, message: M) -> Result<(), NodeError>;
+
+    /// How many readers the topic has now, if the port knows (DDS: the subscriptions
+    /// discovery has matched; in memory: the subscribers). `None`: it cannot tell.
+    fn readers(&mut self) -> Option<usize> {
+        None
+    }
+
+    /// Waits (at most `timeout`) until every reliable reader has what was published; false
+    /// when one has not. A port that delivers at once (in memory) has nothing to wait for.
+    fn flush(&mut self, _timeout: std::time::Duration) -> Result<bool, NodeError> {
+        Ok(true)
+    }
+}
+
+impl<M, P: Publish<M> + ?Sized> Publish<M> for Box<P> {
+    fn publish(&mut self, message: M) -> Result<(), NodeError> {
+        (**self).publish(message)
+    }
+    fn readers(&mut self) -> Option<usize> {
+        (**self).readers()
+    }
+    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
+        (**self).flush(timeout)
+    }
+}
+
+impl<M, P: Publish<M> + ?Sized> Publish<M> for &mut P {
+    fn publish(&mut self, message: M) -> Result<(), NodeError> {
+        (**self).publish(message)
+    }
+    fn readers(&mut self) -> Option<usize> {
+        (**self).readers()
+    }
+    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
+        (**self).flush(timeout)
+    }
+}
+
+impl<M, R: Receive<M> + ?Sized> Receive<M> for &mut R {
+    fn receive(&mut self) -> Result<Option<M>, NodeError> {
+        (**self).receive()
+    }
+}
+
+impl<M, R: Receive<M> + ?Sized> Receive<M> for Box<R> {
+    fn receive(&mut self) -> Result<Option<M>, NodeError> {
+        (**self).receive()
+    }
 }
 
 /// Where a node takes messages of one topic from; `Ok(None)` when none is waiting.
@@ -92,6 +141,10 @@ pub mod memory {
                 q.lock().unwrap_or_else(PoisonError::into_inner).push_back(message.clone());
             }
             Ok(())
+        }
+
+        fn readers(&mut self) -> Option<usize> {
+            Some(self.bus.subscribers.lock().unwrap_or_else(PoisonError::into_inner).len())
         }
     }
 

@@ -17,6 +17,9 @@ use oilfilm_physics::simulation::SimulatedRig;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
+use crate::lines::LineDaq;
+use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
+use crate::topics;
 use crate::stamp::Stamp;
 
 /// The DAQ node's parameters.
@@ -374,6 +377,154 @@ impl SimDaqCore {
 
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
+    }
+}
+
+/// How long a DAQ waits for a subscriber of its frames before publishing anyway, s (frames
+/// published before a subscriber is discovered are lost to it: the topic is volatile).
+pub const READER_WAIT_S: f64 = 10.0;
+
+/// The DAQ node: the simulated rig driven by the exciter's setpoints, or a line source
+/// (ASCII record, TCP stream), by its `source` parameter.
+pub enum Daq {
+    Sim(SimDaq),
+    Lines(LineDaq),
+}
+
+pub struct DaqPorts<'a> {
+    /// The exciter's setpoints (the simulated rig only: a line source does not subscribe).
+    pub commands: Option<Input<'a, ExciterCommand>>,
+    pub frames: Output<'a, DaqFrame>,
+    pub status: Output<'a, RigStatus>,
+}
+
+impl Daq {
+    /// The simulated rig, if that is the source.
+    pub fn sim(&self) -> Option<&SimDaqCore> {
+        match self {
+            Daq::Sim(s) => Some(&s.core),
+            Daq::Lines(_) => None,
+        }
+    }
+}
+
+impl Node for Daq {
+    const NAME: &'static str = "daq";
+    type Params = DaqParams;
+    type Ports<'a> = DaqPorts<'a>;
+
+    /// Scan 0 of the simulated rig is at `start_stamp_ns`, or at `start.now` when 0.
+    fn new(params: &DaqParams, start: &Start) -> Result<Self, NodeError> {
+        params.validate()?;
+        let rig = (start.rig)(&params.rig)?;
+        if params.source == "sim" {
+            let epoch = if params.start_stamp_ns != 0 { Stamp(params.start_stamp_ns) } else { start.now };
+            Ok(Daq::Sim(SimDaq { core: SimDaqCore::new(&rig, params, epoch)?, params: params.clone(), reader_wait: None, wall_start: None, status_sent: false, waiting_since: None }))
+        } else {
+            Ok(Daq::Lines(LineDaq::new(params, &rig)?))
+        }
+    }
+
+    fn connect<C: Connect>(&self, c: &mut C) -> Result<DaqPorts<'static>, NodeError> {
+        let commands = match self {
+            Daq::Sim(_) => Some(c.input(&topics::EXCITER_COMMAND)?),
+            Daq::Lines(_) => None,
+        };
+        Ok(DaqPorts { commands, frames: c.output(&topics::DAQ_FRAMES)?, status: c.output(&topics::RIG_STATUS)? })
+    }
+
+    fn turn(&mut self, now: Stamp, ports: &mut DaqPorts<'_>) -> Result<Turn, NodeError> {
+        match self {
+            Daq::Sim(s) => s.turn(now, ports),
+            Daq::Lines(l) => l.turn(now, ports),
+        }
+    }
+
+    fn finish(&mut self, _now: Stamp, ports: &mut DaqPorts<'_>) -> Result<(), NodeError> {
+        match self {
+            Daq::Sim(_) => Ok(()),
+            Daq::Lines(l) => l.finish(ports),
+        }
+    }
+}
+
+/// The simulated DAQ node: the core and its pacing on the runner's clock.
+pub struct SimDaq {
+    core: SimDaqCore,
+    params: DaqParams,
+    /// When the wait for a subscriber of the frames began.
+    reader_wait: Option<Stamp>,
+    /// The clock when the rig started running (after that wait): block `k` is due
+    /// `k` blocks of rig time later, divided by `rate_factor`.
+    wall_start: Option<Stamp>,
+    status_sent: bool,
+    /// Since when the next block has waited for setpoints.
+    waiting_since: Option<Stamp>,
+}
+
+/// `t` plus `s` seconds.
+fn later(t: Stamp, s: f64) -> Stamp {
+    Stamp(t.0.saturating_add((s * 1e9).ceil() as i64))
+}
+
+impl SimDaq {
+    /// Takes setpoints, then runs the next block when it is due (by `rate_factor`: 0 = as
+    /// soon as its setpoints are there) and its setpoints are there (or the wait for them
+    /// timed out: the force is held).
+    fn turn(&mut self, now: Stamp, ports: &mut DaqPorts<'_>) -> Result<Turn, NodeError> {
+        let mut turn = Turn::default();
+        if let Some(commands) = &mut ports.commands {
+            while let Some(cmd) = commands.receive()? {
+                turn.handled += 1;
+                if let Err(e) = self.core.command(&cmd) {
+                    skipped("daq", &e);
+                }
+            }
+        }
+        let wall_start = match self.wall_start {
+            Some(w) => w,
+            None => {
+                let since = *self.reader_wait.get_or_insert(now);
+                let readers = ports.frames.readers();
+                if readers == Some(0) && now.seconds_since(since) < READER_WAIT_S {
+                    return Ok(Turn { wake: Some(later(now, 0.02)), ..turn });
+                }
+                if readers == Some(0) {
+                    tracing::warn!(node = "daq", "no subscriber on {} after {READER_WAIT_S} s: publishing anyway", topics::DAQ_FRAMES.name);
+                }
+                *self.wall_start.insert(now)
+            }
+        };
+        if !self.status_sent {
+            ports.status.publish(self.core.status())?;
+            self.status_sent = true;
+            turn.handled += 1;
+        }
+        let p = &self.params;
+        let epoch = self.core.epoch();
+        let elapsed_s = self.core.now().seconds_since(epoch);
+        if p.duration_s > 0.0 && elapsed_s >= p.duration_s - 0.5 / self.core.sample_rate_hz() {
+            tracing::info!(node = "daq", "duration reached: {} s of rig time", p.duration_s);
+            turn.finished = true;
+            return Ok(turn);
+        }
+        let block_end_s = self.core.next_block_end().seconds_since(epoch);
+        if p.rate_factor > 0.0 && block_end_s > now.seconds_since(wall_start) * p.rate_factor {
+            return Ok(Turn { wake: Some(later(wall_start, block_end_s / p.rate_factor)), ..turn });
+        }
+        if !self.core.ready() {
+            let since = *self.waiting_since.get_or_insert(now);
+            if now.seconds_since(since) < p.command_timeout_s {
+                return Ok(Turn { wake: Some(later(since, p.command_timeout_s)), ..turn });
+            }
+            tracing::warn!(node = "daq", "no exciter setpoints for the block ending at {:.3} s after {} s: running it with the force held", block_end_s, p.command_timeout_s);
+        }
+        self.waiting_since = None;
+        let frame = self.core.produce()?;
+        ports.frames.publish(frame)?;
+        ports.status.publish(self.core.status())?;
+        turn.handled += 2;
+        Ok(turn)
     }
 }
 

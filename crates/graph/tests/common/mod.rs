@@ -3,7 +3,7 @@
 
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_nodes::harness::GraphParams;
+use oilfilm_graph::runner::memory::GraphParams;
 use oilfilm_physics::config::RigConfig;
 
 /// The Zhou rig with its displacement probes at 40 dB below the plan's motion (the
@@ -22,8 +22,8 @@ pub fn rig_at_40_db(plan: &ExcitationPlan) -> RigConfig {
     rig
 }
 
-/// The sim_rig parameters of the accuracy tests: 10 s windows every 5 s, the low-pass at
-/// 1.5 x the highest line of the two-tone (37 Hz).
+/// The shipped sim_rig launch file's parameters (the low-pass at 1.5 x the highest line of
+/// the two-tone, 37 Hz) for the accuracy tests: 10 s windows every 5 s.
 pub fn params(duration_s: f64) -> GraphParams {
-    GraphParams::sim_rig(duration_s, 50_000, 25_000)
+    GraphParams::sim_rig(duration_s, 50_000, 25_000).expect("the shipped sim_rig launch file loads")
 }

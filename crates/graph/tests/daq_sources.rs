@@ -1,4 +1,4 @@
-//! The DAQ node's line sources (ASCII replay and TCP stream, `oilfilm_nodes::replay`), fed
+//! The DAQ node's line sources (ASCII replay and TCP stream, `oilfilm_graph::replay`), fed
 //! by the shell's own reading functions: a simulated record written with the project's ASCII
 //! writer comes back frame by frame bit for bit and identifies; malformed rows are reported
 //! one by one with their line and column and skipped, losing no good row; a gap shows in the
@@ -13,15 +13,15 @@ use std::time::{Duration, Instant};
 use oilfilm_identification::ascii::{self, Record, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{DaqFrame, RigStatus};
-use oilfilm_nodes::conditioner::ConditionerParams;
-use oilfilm_nodes::daq::DaqParams;
-use oilfilm_nodes::error::NodeError;
-use oilfilm_nodes::estimator::EstimatorParams;
-use oilfilm_nodes::exciter::ExciterParams;
-use oilfilm_nodes::harness::reanalyse;
-use oilfilm_nodes::replay::{Produced, ReplayCore};
-use oilfilm_nodes::shell::{read_lines, run_ascii_source, run_tcp_source, Backoff, ReplayPace};
-use oilfilm_nodes::stamp::Stamp;
+use oilfilm_graph::conditioner::ConditionerParams;
+use oilfilm_graph::daq::DaqParams;
+use oilfilm_graph::error::NodeError;
+use oilfilm_graph::estimator::EstimatorParams;
+use oilfilm_graph::exciter::ExciterParams;
+use oilfilm_graph::runner::bag::reanalyse;
+use oilfilm_graph::replay::{Produced, ReplayCore};
+use oilfilm_graph::lines::{read_lines, run_ascii_source, run_tcp_source, Backoff, ReplayPace};
+use oilfilm_graph::stamp::Stamp;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
 use oilfilm_physics::operating_point::OperatingPoint;
@@ -326,7 +326,7 @@ fn read_lines_numbers_lines_keeps_line_ends_and_reports_an_unterminated_last_lin
     .unwrap();
     assert_eq!(got, [(1, "a\r\n".to_string()), (2, "\n".to_string()), (3, "b\u{fffd} c\n".to_string())]);
     match end {
-        oilfilm_nodes::shell::LinesEnd::Eof { unterminated } => assert_eq!(unterminated, Some((4, "last".to_string()))),
+        oilfilm_graph::lines::LinesEnd::Eof { unterminated } => assert_eq!(unterminated, Some((4, "last".to_string()))),
         other => panic!("{other:?}"),
     }
 }
