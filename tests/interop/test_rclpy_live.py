@@ -15,14 +15,21 @@ conditioner, estimator on ros2-client) and, from an rclpy node:
    service the probe's participant never discovers is called from a fresh one, and named:
    see `Participants`);
 4. an rclpy publisher drives the exciter (a new two-tone request takes effect; a hostile
-   request is refused and nothing beyond the limit is ever published);
-5. on SIGINT the graph stops cleanly and the exciter's last command is a ramp to zero.
+   request is refused and nothing beyond the limit is ever published) through every kind of
+   transition: start, plan change, amplitude change, stop, start again;
+5. on SIGINT the graph stops cleanly and the exciter's last command is a ramp to zero; over
+   all of 4 and 5 the force never steps: the setpoints as the exciter driver applies them
+   never change between two setpoints by more than the rig file's slew limit, nor by more
+   than the plans' own slopes and ramps allow;
+6. an exciter whose only subscriber (rclpy) goes away ramps to zero, and starts again from
+   zero when a subscriber is back; the same check on its setpoints.
 
 Run through run-rclpy-live.sh (environment, a random domain, the binaries' directory).
 """
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -57,6 +64,60 @@ def check(cond, what):
         print(f"FAIL: {what}", file=sys.stderr)
         failures.append(what)
     return cond
+
+
+def stamp_ns(t):
+    return t.sec * 1_000_000_000 + t.nanosec
+
+
+def applied(cmds):
+    """The setpoints as the rig's exciter driver applies them, one per setpoint period: the
+    commands in the order published (sequence; each once), each replacing the future from its
+    first setpoint on, the last setpoint held where none is known (after a stop)."""
+    cmds = sorted({c.sequence: c for c in cmds}.values(), key=lambda c: c.sequence)
+    t0 = stamp_ns(cmds[0].header.stamp)
+    out = []
+    for c in cmds:
+        first = round((stamp_ns(c.header.stamp) - t0) * c.setpoint_rate_hz * 1e-9)
+        points = list(zip(c.force_1_n, c.force_2_n))[max(0, -first):]
+        first = max(first, 0)
+        hold = out[-1] if out else (0.0, 0.0)
+        del out[first:]
+        out.extend([hold] * (first - len(out)))
+        out.extend(points)
+    return out
+
+
+def largest_step(points):
+    """The largest change between consecutive setpoints, N, and where."""
+    return max(((max(abs(b[0] - a[0]), abs(b[1] - a[1])), k) for k, (a, b) in enumerate(zip(points, points[1:]), 1)), default=(0.0, 0))
+
+
+def rig_slew_limit():
+    """The rig file's exciter slew limit, N/s (the built-in rig the graph runs)."""
+    with open(os.path.join(ROOT, "launch_configs/rigs/zhou2004.toml")) as f:
+        return float(re.search(r"^exciter_max_slew_n_per_s\s*=\s*([0-9.eE+-]+)", f.read(), re.M).group(1))
+
+
+def shaped_bound(plans, rate_hz):
+    """What a step between setpoints may be when every transition is a shaped ramp: the
+    steepest plan's own change (2 pi f A / rate) plus the steepest ramp's (raised cosine over
+    at least 0.05 s: pi A / (2 n)), for `plans` [(amplitude_n, top_frequency_hz, ramp_s)]."""
+    wave = max(2 * math.pi * f * a / rate_hz for a, f, _ in plans)
+    ramp = max(math.pi * a / (2 * max(r, 0.05) * rate_hz) for a, _, r in plans)
+    return wave + ramp
+
+
+def check_no_step(cmds, plans, what):
+    points = applied(cmds)
+    rate = cmds[0].setpoint_rate_hz
+    step, at = largest_step(points)
+    limit = rig_slew_limit() / rate
+    bound = shaped_bound(plans, rate)
+    check(step <= limit and step <= bound,
+          f"{what}: the largest change between consecutive setpoints is {step:.2f} N (setpoint {at} of {len(points)}), "
+          f"within the rig's slew limit {limit:.0f} N and the plans' slopes and ramps {bound:.2f} N")
+    return points
 
 
 def spin_until(executor, pred, timeout_s):
@@ -278,6 +339,32 @@ def main():
               "a hostile request (1e9 N, NaN) is refused: later setpoints stay within the 200 N plan")
         check(all(max(map(abs, c.force_1_n + c.force_2_n)) <= c.max_force_n for c in got["exciter/command"]),
               "no setpoint ever beyond max_force_n")
+        # An amplitude change (the same waveforms at 100 N: a cross-fade), a stop, a start.
+        amp = ExciterCommand()
+        amp.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
+        amp.frequency_hz = [31.0, 47.0]
+        amp.amplitude_n = [100.0, 100.0]
+        amp.ramp_s = 0.2
+        amp.amplitude_scale = 1.0
+        requests.publish(amp)
+        at_100 = lambda: [c for c in got["exciter/command"] if list(c.amplitude_n) == [100.0, 100.0] and not c.stop]
+        spin_until(executor, lambda: len(at_100()) >= 5, 30)
+        check(len(at_100()) >= 5 and max(map(abs, at_100()[-1].force_1_n)) <= 100.0 + 1e-9, "an rclpy request changed the amplitude to 100 N")
+        requests.publish(ExciterCommand(stop=True))
+        stopped = lambda: [c for c in got["exciter/command"] if c.stop]
+        spin_until(executor, lambda: len(stopped()) >= 5, 30)
+        check(len(stopped()) >= 5 and max(map(abs, stopped()[-1].force_1_n + stopped()[-1].force_2_n)) == 0.0,
+              "an rclpy stop request ramps the exciter to zero and holds it")
+        again = ExciterCommand()
+        again.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
+        again.frequency_hz = [29.0, 43.0]
+        again.amplitude_n = [300.0, 300.0]
+        again.ramp_s = 0.2
+        again.amplitude_scale = 1.0
+        requests.publish(again)
+        restarted = lambda: [c for c in got["exciter/command"] if list(c.frequency_hz) == [29.0, 43.0] and not c.stop]
+        spin_until(executor, lambda: len(restarted()) >= 8, 30)
+        check(len(restarted()) >= 8 and max(map(abs, restarted()[-1].force_1_n)) > 290.0, "an rclpy request starts the exciter again after a stop")
 
         # 5. Clean stop.
         launch.send_signal(signal.SIGINT)
@@ -287,6 +374,10 @@ def main():
         check(bool(stops) and stops[-1].force_1_n[-1] == 0.0 and stops[-1].force_2_n[-1] == 0.0,
               "on SIGINT the exciter publishes a ramp to zero (stop = true)")
         check(launch.wait(timeout=20) == 0, "oilfilm launch exits 0 after SIGINT")
+        # Start, plan change, amplitude change, stop, start again, shutdown: the plans (amplitude,
+        # top line, ramp) of the params file and the requests above.
+        check_no_step(got["exciter/command"], [(400.0, 37.0, 0.2), (200.0, 47.0, 0.2), (100.0, 47.0, 0.2), (300.0, 43.0, 0.2)],
+                      "every transition of the live graph's exciter")
     finally:
         # The launch and every node it started (one process group): none may outlive the test
         # (orphaned graphs from failed runs loaded the machine for the runs after them).
@@ -306,9 +397,83 @@ def main():
         parts.close()
         node.destroy_node()
         rclpy.shutdown()
+    lost_subscriber(bin_dir)
     note = f" ({len(parts.rediscovered)} service(s) reached from a fresh participant only: {', '.join(parts.rediscovered)})" if parts.rediscovered else ""
     print("rclpy live interop: " + ("ok" if not failures else f"{len(failures)} failure(s)") + note)
     return 1 if failures else 0
+
+
+def lost_subscriber(bin_dir):
+    """6. The exciter alone, its rig clock and its only subscriber rclpy's: the subscriber
+    goes, comes back, and the exciter is stopped with SIGINT."""
+    rclpy.init()
+    node = rclpy.create_node("oilfilm_rclpy_exciter_driver")
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    durable = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    status = node.create_publisher(RigStatus, f"{NS}/rig/status", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    got = []
+    log = tempfile.NamedTemporaryFile(prefix="oilfilm-exciter-", suffix=".log", delete=False)
+    exciter = subprocess.Popen([os.path.join(bin_dir, "oilfilm-exciter"), "--ros-args", "-r", "__node:=exciter", "-r", f"__ns:={NS}",
+                                "--params-file", os.path.join(ROOT, "tests/interop/live/params.yaml")],
+                               stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    rig_ns = [1_700_000_000_000_000_000]
+    last_tick = [0.0]
+
+    def run_for(seconds, pred=lambda: False):
+        """Spins, publishing the rig clock (0.1 s of rig time every 0.1 s of wall time)."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline and not pred():
+            if time.monotonic() - last_tick[0] >= 0.1:
+                last_tick[0] = time.monotonic()
+                rig_ns[0] += 100_000_000
+                st = RigStatus()
+                st.header.stamp.sec, st.header.stamp.nanosec = divmod(rig_ns[0], 1_000_000_000)
+                st.speed_rad_s = 1500 * math.pi / 30
+                status.publish(st)
+            executor.spin_once(timeout_sec=0.02)
+        return pred()
+
+    try:
+        sub = node.create_subscription(ExciterCommand, f"{NS}/exciter/command", got.append, durable)
+        check(run_for(30, lambda: sum(len(c.force_1_n) for c in got) >= 15000),
+              "the exciter alone follows rclpy's rig clock and publishes setpoints to its one subscriber")
+        node.destroy_subscription(sub)
+        run_for(2.0)
+        seen = len(got)
+        sub = node.create_subscription(ExciterCommand, f"{NS}/exciter/command", got.append, durable)
+        resumed = lambda: any(not c.stop for c in got[seen:]) and any(c.stop for c in got)
+        run_for(30, lambda: resumed() and sum(len(c.force_1_n) for c in got[seen:] if not c.stop) >= 10000)
+        down = [c for c in got if c.stop]
+        check(bool(down) and down[0].force_1_n[-1] == 0.0 and down[0].force_2_n[-1] == 0.0,
+              "with its last subscriber gone the exciter ramped to zero (stop = true; the new subscriber got it from the history)")
+        check(resumed(), "with a subscriber back the exciter starts again")
+        exciter.send_signal(signal.SIGINT)
+        run_for(10, lambda: exciter.poll() is not None)
+        run_for(1.0)
+        check(exciter.wait(timeout=20) == 0 and got[-1].stop and got[-1].force_1_n[-1] == 0.0, "on SIGINT the lone exciter ramps to zero and exits 0")
+        points = check_no_step(got, [(400.0, 37.0, 0.2)], "the exciter's subscriber lost and back, and its shutdown")
+        rest = [k for k in range(1, len(points)) if points[k - 1] == (0.0, 0.0) and points[k] != (0.0, 0.0)]
+        check(len(rest) >= 2, f"the force started from zero twice (at the start and after the subscriber came back): {len(rest)}")
+    finally:
+        try:
+            os.killpg(exciter.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        exciter.wait()
+        log.close()
+        with open(log.name, errors="replace") as f:
+            text = f.read()
+        check("no subscriber left" in text, "the exciter says when it lost its last subscriber")
+        if failures:
+            print(f"the lone exciter's output ({log.name}):", file=sys.stderr)
+            sys.stderr.write(text[-4000:])
+        else:
+            os.unlink(log.name)
+        node.destroy_node()
+        rclpy.shutdown()
 
 
 if __name__ == "__main__":
