@@ -257,14 +257,11 @@ def test_oilfilm_identify_reads_a_bag_written_by_rosbags(expected, tmp_path):
             if m["topic"] not in conns:
                 conns[m["topic"]] = w.add_connection(m["topic"], m["type"], typestore=ts, offered_qos_profiles=[qos])
             w.write(conns[m["topic"]], m["log_time"], ts.serialize_cdr(build(ts, m["type"], m["value"]), m["type"]))
-    # The short run's settings (GraphParams::sim_rig(2 s, 5000, 2500)): the sim_rig params
-    # file with 1 s windows every 0.5 s and the zero-phase chain, which GraphParams::sim_rig
-    # keeps where the launch file runs the causal one (ADR 0014). rosbags' bag holds no
-    # conditioned frames, so identify cannot take the chain from the recording.
-    launch = (ROOT / "launch_configs" / "params" / "sim_rig.yaml").read_text()
-    assert "chain: causal" in launch
-    params = tmp_path / "sim_rig_zero_phase.yaml"
-    params.write_text(launch.replace("chain: causal", "chain: zero_phase"))
+    # The short run's settings (GraphParams::sim_rig(2 s, 5000, 2500): the sim_rig launch
+    # file, ADR 0021): its params file, causal chain included, with 1 s windows every 0.5 s.
+    # rosbags' bag holds no conditioned frames, so identify takes the chain from the file.
+    params = ROOT / "launch_configs" / "params" / "sim_rig.yaml"
+    assert "chain: causal" in params.read_text()
     run = subprocess.run([BIN, "identify", str(out), "--params", str(params), "--window", "5000", "--hop", "2500", "--json"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
