@@ -108,6 +108,17 @@ def shaped_bound(plans, rate_hz):
     return wave + ramp
 
 
+def two_tone_request(f1, f2, amplitude_n, ramp_s):
+    """A request for a sine per exciter."""
+    r = ExciterCommand()
+    r.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
+    r.frequency_hz = [f1, f2]
+    r.amplitude_n = [amplitude_n, amplitude_n]
+    r.ramp_s = ramp_s
+    r.amplitude_scale = 1.0
+    return r
+
+
 def check_no_step(cmds, plans, what):
     points = applied(cmds)
     rate = cmds[0].setpoint_rate_hz
@@ -316,13 +327,7 @@ def main():
         check(r is not None and not r.successful and "read-only" in r.reason, "set_parameters: the DAQ's parameters are read-only while it runs")
 
         # 4. Drive the exciter from rclpy.
-        req = ExciterCommand()
-        req.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
-        req.frequency_hz = [31.0, 47.0]
-        req.amplitude_n = [200.0, 200.0]
-        req.ramp_s = 0.2
-        req.amplitude_scale = 1.0
-        requests.publish(req)
+        requests.publish(two_tone_request(31.0, 47.0, 200.0, 0.2))
         new = lambda: [c for c in got["exciter/command"] if list(c.frequency_hz) == [31.0, 47.0]]
         spin_until(executor, lambda: len(new()) >= 3, 30)
         check(len(new()) >= 3, "an rclpy request switched the exciter to 31/47 Hz")
@@ -340,13 +345,7 @@ def main():
         check(all(max(map(abs, c.force_1_n + c.force_2_n)) <= c.max_force_n for c in got["exciter/command"]),
               "no setpoint ever beyond max_force_n")
         # An amplitude change (the same waveforms at 100 N: a cross-fade), a stop, a start.
-        amp = ExciterCommand()
-        amp.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
-        amp.frequency_hz = [31.0, 47.0]
-        amp.amplitude_n = [100.0, 100.0]
-        amp.ramp_s = 0.2
-        amp.amplitude_scale = 1.0
-        requests.publish(amp)
+        requests.publish(two_tone_request(31.0, 47.0, 100.0, 0.2))
         at_100 = lambda: [c for c in got["exciter/command"] if list(c.amplitude_n) == [100.0, 100.0] and not c.stop]
         spin_until(executor, lambda: len(at_100()) >= 5, 30)
         check(len(at_100()) >= 5 and max(map(abs, at_100()[-1].force_1_n)) <= 100.0 + 1e-9, "an rclpy request changed the amplitude to 100 N")
@@ -355,13 +354,7 @@ def main():
         spin_until(executor, lambda: len(stopped()) >= 5, 30)
         check(len(stopped()) >= 5 and max(map(abs, stopped()[-1].force_1_n + stopped()[-1].force_2_n)) == 0.0,
               "an rclpy stop request ramps the exciter to zero and holds it")
-        again = ExciterCommand()
-        again.waveform = [ExciterCommand.WAVEFORM_SINE, ExciterCommand.WAVEFORM_SINE]
-        again.frequency_hz = [29.0, 43.0]
-        again.amplitude_n = [300.0, 300.0]
-        again.ramp_s = 0.2
-        again.amplitude_scale = 1.0
-        requests.publish(again)
+        requests.publish(two_tone_request(29.0, 43.0, 300.0, 0.2))
         restarted = lambda: [c for c in got["exciter/command"] if list(c.frequency_hz) == [29.0, 43.0] and not c.stop]
         spin_until(executor, lambda: len(restarted()) >= 8, 30)
         check(len(restarted()) >= 8 and max(map(abs, restarted()[-1].force_1_n)) > 290.0, "an rclpy request starts the exciter again after a stop")

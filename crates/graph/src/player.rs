@@ -380,7 +380,7 @@ impl Node for Player {
                     self.phase = Phase::Playing { origin, unacknowledged: false };
                 }
                 let step = self.core.step(Stamp(now.0 - origin.0));
-                publish_step(&self.core, &step, &mut ports.topics, ports.clock.as_mut().map(|c| c as &mut dyn Publish<Clock>))?;
+                publish_step(&self.core, &step, &mut ports.topics, ports.clock.as_mut().map(|c| c.as_mut() as &mut dyn Publish<Clock>))?;
                 let handled = step.publish.len() + usize::from(step.clock.is_some());
                 if fast && !step.publish.is_empty() {
                     self.phase = Phase::Playing { origin, unacknowledged: true };

@@ -31,18 +31,6 @@ pub trait Publish<M> {
     }
 }
 
-impl<M, P: Publish<M> + ?Sized> Publish<M> for Box<P> {
-    fn publish(&mut self, message: M) -> Result<(), NodeError> {
-        (**self).publish(message)
-    }
-    fn readers(&mut self) -> Option<usize> {
-        (**self).readers()
-    }
-    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
-        (**self).flush(timeout)
-    }
-}
-
 impl<M, P: Publish<M> + ?Sized> Publish<M> for &mut P {
     fn publish(&mut self, message: M) -> Result<(), NodeError> {
         (**self).publish(message)
@@ -61,33 +49,9 @@ impl<M, R: Receive<M> + ?Sized> Receive<M> for &mut R {
     }
 }
 
-impl<M, R: Receive<M> + ?Sized> Receive<M> for Box<R> {
-    fn receive(&mut self) -> Result<Option<M>, NodeError> {
-        (**self).receive()
-    }
-}
-
 /// Where a node takes messages of one topic from; `Ok(None)` when none is waiting.
 pub trait Receive<M> {
     fn receive(&mut self) -> Result<Option<M>, NodeError>;
-}
-
-/// A port that never delivers anything (a topic the node does not use in this setup).
-pub struct Nothing;
-
-impl<M> Receive<M> for Nothing {
-    fn receive(&mut self) -> Result<Option<M>, NodeError> {
-        Ok(None)
-    }
-}
-
-/// A port that drops what it is given.
-pub struct Discard;
-
-impl<M> Publish<M> for Discard {
-    fn publish(&mut self, _message: M) -> Result<(), NodeError> {
-        Ok(())
-    }
 }
 
 /// In-memory topics: every subscriber gets every message published after it subscribed,

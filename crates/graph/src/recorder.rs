@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
 use crate::node::{Connect, Input, Node, RawTopic, Start, Turn};
-use crate::ports::{RawCdr, Receive};
+use crate::ports::RawCdr;
 use crate::stamp::Stamp;
 use crate::topics::{self, TopicQos};
 
@@ -338,7 +338,7 @@ impl Node for Recorder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ports::{memory::Bus, Publish};
+    use crate::ports::{memory::Bus, Publish, Receive};
     use oilfilm_bag::Bag;
     use oilfilm_msgs::{encode, DaqFrame, Header, RigStatus, Time};
 
