@@ -386,6 +386,8 @@ pub const READER_WAIT_S: f64 = 10.0;
 
 /// The DAQ node: the simulated rig driven by the exciter's setpoints, or a line source
 /// (ASCII record, TCP stream), by its `source` parameter.
+// One `Daq` a process, made once and never moved in a loop: the variants' sizes cost nothing.
+#[allow(clippy::large_enum_variant)]
 pub enum Daq {
     Sim(SimDaq),
     Lines(LineDaq),

@@ -245,7 +245,8 @@ impl ExciterParams {
 pub fn check_plan(plan: &ExcitationPlan, limits: &Limits, max_slew_n_per_s: f64) -> Result<(), String> {
     plan.validate(limits).map_err(|e| e.to_string())?;
     let rise = steepest_rise_n_per_s(plan, max_slew_n_per_s);
-    if !(rise <= max_slew_n_per_s) {
+    // NaN (a malformed waveform) is refused too.
+    if rise.is_nan() || rise > max_slew_n_per_s {
         return Err(format!(
             "its force rises at up to {rise:.0} N/s, beyond the exciters' slew limit {max_slew_n_per_s:.0} N/s (rig file: housing.exciter_max_slew_n_per_s): lower the amplitude or the frequency"
         ));

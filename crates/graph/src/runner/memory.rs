@@ -99,6 +99,8 @@ impl Graph {
         let nodes = with_overrides(launch::read_with(path, launch_args)?, overrides)?;
         let mut g = Self::new(nodes.first().map_or(topics::NAMESPACE, |n| n.namespace.as_str()));
         for n in &nodes {
+            // Each node's relative topics in its own namespace, as on DDS.
+            g.buses.namespace.clone_from(&n.namespace);
             let wired = wire_launched(n, g.now, rig, &mut g.buses)?;
             g.nodes.push(wired);
         }
