@@ -20,16 +20,16 @@
 //! Every change of what the exciters do is a ramp. A plan's `t = 0` starts with its own
 //! raised-cosine ramp (`ramp_s`). A new plan of another shape (other waveforms or
 //! frequencies) first ramps the running one down to zero over the new plan's `ramp_s`, then
-//! starts the new one with its ramp; a change of amplitude only (the same waveforms) cross-fades
-//! the two amplitudes over `ramp_s` on the running plan's clock, so the phase runs on. A stop,
-//! the node's shutdown and the loss of the last subscriber of `exciter/command` ramp to zero
-//! over the running plan's `ramp_s` and hold zero (every ramp down or cross-fade lasts at least
-//! [`MIN_RAMP_S`] and at most [`MAX_TRANSITION_S`]; a new transition during one shortens it,
-//! from where the force is, never lengthens it); after a lost subscriber the plan starts again, with its ramp, once a subscriber
-//! is back. Under all of that, each setpoint differs from the one before by at most
-//! `exciter_max_slew_n_per_s / setpoint_rate_hz`, whatever the ramps are (a `ramp_s` of 0
-//! moves at the slew limit). The ramps are on the setpoint grid (indices, no clock), so a run
-//! is as reproducible as before.
+//! starts the new one with its ramp; a change of amplitude only (the same waveforms)
+//! cross-fades the two amplitudes over `ramp_s` on the running plan's clock, so the phase runs
+//! on. A stop, the node's shutdown and the loss of the last subscriber of `exciter/command`
+//! ramp to zero over the running plan's `ramp_s` and hold zero; after a lost subscriber the
+//! plan starts again, with its ramp, once a subscriber is back. Every ramp down or cross-fade
+//! lasts at least [`MIN_RAMP_S`] and at most [`MAX_TRANSITION_S`]; a new transition during one
+//! shortens it, from where the force is, never lengthens it. Under all of that, each setpoint
+//! differs from the one before by at most `exciter_max_slew_n_per_s / setpoint_rate_hz`,
+//! whatever the ramps are (a `ramp_s` of 0 moves at the slew limit). The ramps live on the
+//! setpoint grid (indices, no clock), so a run is as reproducible as before.
 
 use std::f64::consts::PI;
 
@@ -412,10 +412,6 @@ impl ExciterCore {
 
     pub fn limits(&self) -> Limits {
         self.limits
-    }
-
-    pub fn hard_limits(&self) -> HardLimits {
-        self.hard
     }
 
     pub fn plan(&self) -> &ExcitationPlan {

@@ -339,6 +339,10 @@ impl LineDaq {
         if self.deliver(ports, &mut turn)? {
             self.join()?;
             turn.finished = true;
+        } else if turn.handled == 0 {
+            // The reading thread is on it: look again shortly (the in-memory runner's clock
+            // must not think the graph stalled).
+            turn.wake = Some(Stamp(now.0 + 5_000_000));
         }
         Ok(turn)
     }

@@ -1,5 +1,6 @@
 //! The `sim_rig` graph (exciter -> simulated DAQ -> conditioner -> estimator) on in-memory
-//! topics, running the very cores and polls the node binaries run: accuracy against the
+//! topics, with the parameters of `launch_configs/sim_rig.launch.yaml` (the run's length and
+//! windows, and where said the chain, set on top), running the very nodes the binaries run: accuracy against the
 //! simulated film's linear coefficients, refusal of the paper's single sine, replay equal to
 //! live bit for bit, independence of frame boundaries, and the DAQ equal to the offline
 //! simulator bit for bit.

@@ -24,8 +24,8 @@ use crate::exciter::{Exciter, ExciterParams};
 use crate::launch::{self, NodeLaunch};
 use crate::node::{load_rig, Connect, Input, Message, Node, Output, RawTopic, Start};
 use crate::params::{self, NodeArgs};
-use crate::ports::memory::{Bus, Subscriber};
-use crate::ports::RawCdr;
+use crate::ports::memory::{Bus, Publisher, Subscriber};
+use crate::ports::{Publish, RawCdr};
 use crate::stamp::Stamp;
 use crate::topics::{self, Topic};
 
@@ -62,14 +62,38 @@ impl Buses {
     }
 }
 
+/// A typed writer that also hands raw readers of its topic (a recorder) the message's CDR,
+/// as DDS would; encoded only while such a reader exists.
+struct Bridged<M> {
+    typed: Publisher<M>,
+    raw: Publisher<RawCdr>,
+}
+
+impl<M: Message> Publish<M> for Bridged<M> {
+    fn publish(&mut self, message: M) -> Result<(), NodeError> {
+        if self.raw.readers().is_some_and(|n| n > 0) {
+            self.raw.publish(RawCdr(oilfilm_msgs::encode(&message)))?;
+        }
+        self.typed.publish(message)
+    }
+
+    fn readers(&mut self) -> Option<usize> {
+        Some(self.typed.readers().unwrap_or(0) + self.raw.readers().unwrap_or(0))
+    }
+}
+
 impl Connect for Buses {
     fn input<M: Message>(&mut self, topic: &Topic) -> Result<Input<'static, M>, NodeError> {
         Ok(Box::new(self.bus::<M>(topic)?.subscriber()))
     }
     fn output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError> {
-        Ok(Box::new(self.bus::<M>(topic)?.publisher()))
+        let typed = self.bus::<M>(topic)?.publisher();
+        let name = topics::qualified(&self.namespace, topic);
+        let raw = self.raw.entry(name).or_default().publisher();
+        Ok(Box::new(Bridged { typed, raw }))
     }
-    /// Raw topics are buses of their own: a raw reader sees raw writers only.
+    /// A raw reader gets what typed and raw writers publish; a raw writer (a player) reaches
+    /// raw readers only.
     fn raw_input(&mut self, topic: &RawTopic) -> Result<Input<'static, RawCdr>, NodeError> {
         Ok(Box::new(self.raw_bus(topic).subscriber()))
     }
@@ -127,7 +151,7 @@ impl Graph {
     }
 
     /// A publisher on `topic` (a request to a node, a bag's messages).
-    pub fn inject<M: Message>(&mut self, topic: &Topic) -> Result<crate::ports::memory::Publisher<M>, NodeError> {
+    pub fn inject<M: Message>(&mut self, topic: &Topic) -> Result<Publisher<M>, NodeError> {
         Ok(self.buses.bus::<M>(topic)?.publisher())
     }
 
@@ -173,7 +197,9 @@ impl Graph {
                 _ => return Err(NodeError::Closed("in-memory graph stalled: no node busy, none finished, none waiting for a time".into())),
             }
         }
-        for node in &mut self.nodes {
+        // Last started, first stopped: what a node publishes as it stops (the exciter's ramp
+        // to zero) still reaches a recorder listed before it.
+        for node in self.nodes.iter_mut().rev() {
             node.finish(self.now)?;
         }
         Ok(())
