@@ -358,6 +358,12 @@ def main():
         restarted = lambda: [c for c in got["exciter/command"] if list(c.frequency_hz) == [29.0, 43.0] and not c.stop]
         spin_until(executor, lambda: len(restarted()) >= 8, 30)
         check(len(restarted()) >= 8 and max(map(abs, restarted()[-1].force_1_n)) > 290.0, "an rclpy request starts the exciter again after a stop")
+        # A plan change through the parameters (back to the params file's 23/37 Hz, at 350 N).
+        r = set_param(parts, "exciter", "amplitude_n", ParameterType.PARAMETER_DOUBLE, 350.0)
+        check(r is not None and r.successful, "set_parameters: exciter amplitude_n 350 accepted")
+        by_param = lambda: [c for c in got["exciter/command"] if list(c.frequency_hz) == [23.0, 37.0] and list(c.amplitude_n) == [350.0, 350.0]]
+        spin_until(executor, lambda: len(by_param()) >= 8, 30)
+        check(len(by_param()) >= 8 and max(map(abs, by_param()[-1].force_1_n)) > 340.0, "the parameter change runs the 350 N two-tone")
 
         # 5. Clean stop.
         launch.send_signal(signal.SIGINT)
@@ -369,7 +375,7 @@ def main():
         check(launch.wait(timeout=20) == 0, "oilfilm launch exits 0 after SIGINT")
         # Start, plan change, amplitude change, stop, start again, shutdown: the plans (amplitude,
         # top line, ramp) of the params file and the requests above.
-        check_no_step(got["exciter/command"], [(400.0, 37.0, 0.2), (200.0, 47.0, 0.2), (100.0, 47.0, 0.2), (300.0, 43.0, 0.2)],
+        check_no_step(got["exciter/command"], [(400.0, 37.0, 0.2), (200.0, 47.0, 0.2), (100.0, 47.0, 0.2), (300.0, 43.0, 0.2), (350.0, 37.0, 0.2)],
                       "every transition of the live graph's exciter")
     finally:
         # The launch and every node it started (one process group): none may outlive the test
