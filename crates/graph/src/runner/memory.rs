@@ -33,7 +33,8 @@ use crate::topics::{self, Topic};
 /// stamps its scan 0 here.
 pub const EPOCH: Stamp = Stamp(1_700_000_000_000_000_000);
 
-/// One of this source tree's launch files (`launch_configs/NAME`), the files users run.
+/// One of this source tree's launch files (`launch_configs/NAME`), the files users run. The
+/// path is the tree's, compiled in: for tests, benchmarks and examples run from the tree.
 pub fn shipped(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch_configs").join(name)
 }
