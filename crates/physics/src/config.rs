@@ -26,6 +26,15 @@ use crate::operating_point::{self, EquilibriumOptions};
 /// The text of the built-in Zhou et al. (2004) rig.
 pub const ZHOU2004_TOML: &str = include_str!("../../../launch_configs/rigs/zhou2004.toml");
 
+/// The exciters' slew limit when a rig file does not state one, N/s: 0.2 MN/s, 40 N per
+/// setpoint at 5 kHz (slower than any plan of the built-in rig needs; a ramp to 1.5 kN then
+/// takes 7.5 ms, well inside the exciter's own ramps).
+pub const DEFAULT_EXCITER_MAX_SLEW_N_PER_S: f64 = 2.0e5;
+
+fn default_exciter_max_slew() -> f64 {
+    DEFAULT_EXCITER_MAX_SLEW_N_PER_S
+}
+
 /// Housing and exciters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -40,7 +49,10 @@ pub struct HousingConfig {
     pub exciter_band_hz: [f64; 2],
     /// The fastest an exciter's force may change, N/s: no setpoint differs from the one
     /// before by more than this over the setpoint period, through every transition (start,
-    /// plan change, stop). A safety limit of the exciters and their amplifiers.
+    /// plan change, stop). A safety limit of the exciters and their amplifiers. A rig sheet
+    /// written for analysis may leave it out: then the conservative
+    /// [`DEFAULT_EXCITER_MAX_SLEW_N_PER_S`] holds (the analysis never reads it).
+    #[serde(default = "default_exciter_max_slew")]
     pub exciter_max_slew_n_per_s: f64,
     pub gravity_m_s2: f64,
 }

@@ -67,7 +67,6 @@ fn invalid_files_name_the_field() {
         ("zero mass", mutate("mass_kg = 60.0", "mass_kg = 0.0"), "housing.mass_kg"),
         ("parallel exciters", mutate("exciter_angles_deg = [45.0, 135.0]", "exciter_angles_deg = [45.0, 225.0]"), "housing.exciter_angles_deg"),
         ("no slew limit", mutate("exciter_max_slew_n_per_s = 1.0e6", "exciter_max_slew_n_per_s = 0.0"), "housing.exciter_max_slew_n_per_s"),
-        ("slew limit missing", mutate("exciter_max_slew_n_per_s = 1.0e6\n", ""), "exciter_max_slew_n_per_s"),
         ("band above Nyquist", mutate("exciter_band_hz = [0.0, 80.0]", "exciter_band_hz = [0.0, 3000.0]"), "housing.exciter_band_hz"),
         ("load beyond the bellows", mutate("bearing_load_n = 5000.0", "bearing_load_n = 50000.0"), "operating.bearing_load_n"),
         ("negative speed", mutate("speed_rpm = 1500.0", "speed_rpm = -1500.0"), "operating.speed_rpm"),
@@ -107,4 +106,14 @@ fn effects_on_unknown_channels_are_refused_by_name() {
     let err = SimulatedRig::new(&c, 0.0).expect_err("unknown channel").to_string();
     println!("{err}");
     assert!(err.contains("effects.channel_delay.channel"), "{err}");
+}
+
+#[test]
+fn a_rig_sheet_without_the_exciters_slew_limit_loads_with_the_conservative_default() {
+    // Rig sheets written for analysis (the outside records' among them) do not state the
+    // exciters' slew limit; they must still load, the conservative default holding.
+    let text = mutate("exciter_max_slew_n_per_s = 1.0e6\n", "");
+    assert!(!text.contains("exciter_max_slew_n_per_s"), "the mutation removed the key");
+    let c = RigConfig::from_toml_str(&text, "sheet.toml").expect("loads without the slew limit");
+    assert_eq!(c.housing.exciter_max_slew_n_per_s, oilfilm_physics::config::DEFAULT_EXCITER_MAX_SLEW_N_PER_S);
 }
