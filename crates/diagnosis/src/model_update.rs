@@ -73,6 +73,13 @@ pub struct ModelUpdate {
     pub updated_damping_n_s_m: Matrix2<f64>,
     pub identified_stiffness_n_m: Matrix2<f64>,
     pub identified_damping_n_s_m: Matrix2<f64>,
+    /// The journal's static position relative to the bearing, m: measured (mean of the
+    /// bearing probes), and the nominal and updated film models' equilibria under the measured
+    /// static load (`null` where a model has none). The probes' zero is rarely known to the
+    /// micrometre, so this is a check beside the fit, not part of it.
+    pub measured_position_m: [f64; 2],
+    pub nominal_position_m: Option<[f64; 2]>,
+    pub updated_position_m: Option<[f64; 2]>,
     /// Held-out NRMSE of the predicted motion (both axes).
     pub nominal_heldout_nrmse: f64,
     pub updated_heldout_nrmse: f64,
@@ -99,6 +106,8 @@ pub struct LinePrediction {
 /// A theory tabulated over the Sommerfeld number.
 struct Table {
     name: String,
+    /// The theory's rig (film model and bearing kind), for its equilibrium.
+    rig: RigConfig,
     /// ln S, and the dimensionless `K c / W` and `C c w / W` (row-major 2x2 each) there.
     ln_s: Vec<f64>,
     k: Vec<[f64; 4]>,
@@ -153,7 +162,7 @@ fn theories(rig: &RigConfig) -> Vec<(String, RigConfig)> {
 fn tabulate(name: String, rig: &RigConfig, op: &Operating, s_nominal: f64) -> Result<Table, DiagnosisError> {
     let mut film = rig.film()?;
     let c = op.clearance_m;
-    let mut t = Table { name, ln_s: Vec::new(), k: Vec::new(), c: Vec::new() };
+    let mut t = Table { name, rig: rig.clone(), ln_s: Vec::new(), k: Vec::new(), c: Vec::new() };
     for f in S_GRID {
         let s = f * s_nominal;
         let running = Running { omega_rad_s: op.omega, viscosity_pa_s: s / op.s_per_mu };
@@ -407,6 +416,19 @@ pub fn update(ctx: &Context, chosen: &Judged, rig: &RigConfig) -> Result<ModelUp
     }
     let (ti, _, cl, mu) = best_of(&chosen.kc);
     let (k_upd, c_upd) = coefficients_at(&tables[ti], &op, cl, mu);
+    let updated_position = {
+        let mut r = tables[ti].rig.clone();
+        r.bearing.clearance_m = cl;
+        r.film()
+            .ok()
+            .and_then(|mut f| operating_point::solve(f.as_mut(), &Running { omega_rad_s: omega, viscosity_pa_s: mu }, load, &EquilibriumOptions::default()).ok())
+            .map(|o| [o.journal.x_m, o.journal.y_m])
+    };
+    let measured_position_m = {
+        let v = p.narrow.valid.clone();
+        let n = v.len() as f64;
+        [p.narrow.x_m[v.clone()].iter().sum::<f64>() / n, p.narrow.y_m[v].iter().sum::<f64>() / n]
+    };
     let (k_id, c_id) = chosen.stiffness_damping();
     let mut theory_fits: Vec<TheoryFit> = tables
         .iter()
@@ -443,6 +465,9 @@ pub fn update(ctx: &Context, chosen: &Judged, rig: &RigConfig) -> Result<ModelUp
         updated_damping_n_s_m: c_upd,
         identified_stiffness_n_m: k_id,
         identified_damping_n_s_m: c_id,
+        measured_position_m,
+        nominal_position_m: Some([nominal_op.journal.x_m, nominal_op.journal.y_m]),
+        updated_position_m: updated_position,
         nominal_heldout_nrmse: nominal_nrmse,
         updated_heldout_nrmse: updated_nrmse,
         improvement_factor: nominal_nrmse / updated_nrmse,
