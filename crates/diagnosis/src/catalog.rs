@@ -268,10 +268,25 @@ pub const DELAY_CHANNELS: [ChannelId; 8] =
     [ChannelId::ProbeAX, ChannelId::ProbeAY, ChannelId::ProbeBX, ChannelId::ProbeBY, ChannelId::FrameX, ChannelId::FrameY, ChannelId::F1, ChannelId::F2];
 /// Largest delay searched, s (either sign).
 pub const MAX_DELAY_S: f64 = 1.0e-3;
-/// Samples at one extreme code that make a probe count as clipped (and at least this
+/// Samples on one extreme plateau that make a probe count as clipped (and at least this
 /// fraction of the record).
 pub const MIN_CLIPPED_SAMPLES: usize = 10;
 pub const MIN_CLIPPED_FRACTION: f64 = 2.0e-4;
+/// Widths (ADC codes) of the band below a probe's extreme reading tried as its plateau: an
+/// exact code first; then wider, because a card's own noise after the clipping amplifier (one
+/// or two codes on a real 16-bit card) spreads the plateau over a few codes.
+const PLATEAU_WIDTHS_LSB: [f64; 4] = [0.5, 2.0, 4.0, 8.0];
+/// How much denser (per code) the readings must be in the plateau band than in the band twice
+/// as wide just below it. A clipped probe stays on its plateau while the signal passes through
+/// the band below in moments; an unclipped peak is about as dense at its top codes as just
+/// below them, however quiet the probe (measured probes' peaks stay under 3).
+const PLATEAU_DENSITY_RATIO: f64 = 4.0;
+/// A smooth (parabolic) peak spends time in proportion to the square root of the depth below
+/// its top, so the band `[0, w]` holds `1 / (sqrt 3 - 1)` times the readings of `(w, 3 w]`.
+const PEAK_BAND_RATIO: f64 = 1.366;
+/// Standard deviations (Poisson) by which a plateau band must hold more readings than a
+/// smooth peak would put there: a few dozen samples make a ratio by chance.
+const PLATEAU_MIN_Z: f64 = 5.0;
 /// A record whose temperature moves less than this (standard deviation about its smooth
 /// trend's mean, C) cannot show a thermal drift.
 pub const MIN_TEMPERATURE_SPREAD_C: f64 = 0.05;
@@ -560,16 +575,15 @@ impl<'a> Context<'a> {
             };
             let col = &raw.columns[k];
             for high in [true, false] {
-                let extreme = if high { col.iter().copied().fold(f64::NEG_INFINITY, f64::max) } else { col.iter().copied().fold(f64::INFINITY, f64::min) };
-                let flags: Vec<bool> = col.iter().map(|v| (v - extreme).abs() <= 0.5 * lsb_units).collect();
+                let Some((flags, level)) = plateau(col, high, lsb_units) else { continue };
                 let count = flags.iter().filter(|f| **f).count();
                 let runs = flags.windows(2).filter(|w| w[1] && !w[0]).count() + usize::from(flags.first() == Some(&true));
                 if count < MIN_CLIPPED_SAMPLES || (count as f64) < MIN_CLIPPED_FRACTION * n as f64 || runs < 2 {
                     continue;
                 }
                 let si = match raw.units {
-                    RawUnits::Volts => p.calibration.to_si(ch, extreme)?,
-                    RawUnits::Si => extreme,
+                    RawUnits::Volts => p.calibration.to_si(ch, level)?,
+                    RawUnits::Si => level,
                 };
                 // The side in the probe's own SI reading: a negative sensitivity turns the
                 // highest code into the lowest reading.
@@ -583,7 +597,7 @@ impl<'a> Context<'a> {
             }
         }
         let Some((channel, clipped, limit_m, upper, count, resolution_m)) = best else {
-            return Ok(Err("no displacement probe shows flat-topped readings (a run of identical extreme codes)".into()));
+            return Ok(Err("no displacement probe shows flat-topped readings (runs of readings piled up within a few codes of an extreme)".into()));
         };
         let si_of = |ch: ChannelId| -> Result<Vec<f64>, DiagnosisError> {
             let col = raw.column(ch).ok_or_else(|| DiagnosisError::bad_input(format!("channel `{ch}`"), "not in the record"))?;
@@ -1329,4 +1343,105 @@ fn fit_runout(p: &Prepared) -> Runout {
         }
     };
     Runout { omega_rad_s: w, mean: [phasor(&jx), phasor(&jy)], difference: [phasor(&s.tilt_x_m), phasor(&s.tilt_y_m)], t0_s: t0 }
+}
+
+/// A clipped plateau at one extreme of a column: the samples on it and its level (the median
+/// reading on it), or `None`. The narrowest band below the extreme (and everything beyond it)
+/// that holds enough readings and is [`PLATEAU_DENSITY_RATIO`] times denser per code than the
+/// band twice as wide below it.
+fn plateau(col: &[f64], high: bool, lsb: f64) -> Option<(Vec<bool>, f64)> {
+    if col.is_empty() || !(lsb > 0.0) {
+        return None;
+    }
+    // Work in codes measured down from the extreme, so both sides are one case. The extreme
+    // is the `min_count`-th reading from the end, not the last: with the card's noise on a
+    // plateau, the very last reading is a tail sample codes away from the plateau's bulk.
+    let sign = if high { 1.0 } else { -1.0 };
+    let min_count = MIN_CLIPPED_SAMPLES.max((MIN_CLIPPED_FRACTION * col.len() as f64).ceil() as usize);
+    if col.len() < min_count {
+        return None;
+    }
+    let mut flipped: Vec<f64> = col.iter().map(|v| sign * v).collect();
+    let (_, anchor, _) = flipped.select_nth_unstable_by(col.len() - min_count, f64::total_cmp);
+    let extreme = *anchor;
+    let depth: Vec<f64> = col.iter().map(|v| (extreme - sign * v) / lsb).collect();
+    // The anchor alone puts `min_count` readings in every band: a plateau needs several times
+    // that, or a handful of samples would make a ratio.
+    let min_on = 3 * min_count;
+    for w in PLATEAU_WIDTHS_LSB {
+        let on = depth.iter().filter(|d| **d <= w).count();
+        let below = depth.iter().filter(|d| **d > w && **d <= 3.0 * w).count();
+        // Densities per code: `on` over w, `below` over 2 w.
+        let dense = (on as f64) * 2.0 >= PLATEAU_DENSITY_RATIO * below as f64;
+        let smooth = PEAK_BAND_RATIO * below as f64;
+        let significant = (on as f64 - smooth) / (smooth + 1.0).sqrt() >= PLATEAU_MIN_Z;
+        if on >= min_on && dense && significant {
+            let flags: Vec<bool> = depth.iter().map(|d| *d <= w).collect();
+            let mut levels: Vec<f64> = col.iter().zip(&flags).filter(|(_, f)| **f).map(|(v, _)| *v).collect();
+            levels.sort_by(f64::total_cmp);
+            // `levels` holds `on >= min_count >= 1` readings, so the index is in range.
+            let level = levels[levels.len() / 2];
+            return Some((flags, level));
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plateau;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// A 16-bit +-10 V card's code, V.
+    const LSB: f64 = 20.0 / 65536.0;
+
+    /// Two tones, 4000 codes peak, quantised: `clip_codes` from the top clipped away, then
+    /// the card's own Gaussian noise (`card_noise_codes` rms) added after the clipping.
+    fn record(clip_codes: f64, card_noise_codes: f64) -> Vec<f64> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        (0..50_000)
+            .map(|i| {
+                let t = i as f64 / 5000.0;
+                let v = 2500.0 * (2.0 * std::f64::consts::PI * 23.0 * t).sin() + 1500.0 * (2.0 * std::f64::consts::PI * 37.0 * t + 0.4).sin();
+                let z: f64 = StandardNormal.sample(&mut rng);
+                (v.min(4000.0 - clip_codes) + card_noise_codes * z).round() * LSB
+            })
+            .collect()
+    }
+
+    fn clipped(flags: &[bool]) -> usize {
+        flags.iter().filter(|f| **f).count()
+    }
+
+    #[test]
+    fn an_exact_plateau_is_found_at_its_code() {
+        let (flags, level) = plateau(&record(300.0, 0.0), true, LSB).expect("clipped");
+        assert!((level / LSB - 3700.0).abs() < 0.5, "level {} codes", level / LSB);
+        assert!(clipped(&flags) > 1000);
+        assert!(plateau(&record(300.0, 0.0), false, LSB).is_none(), "the unclipped side is not a plateau");
+    }
+
+    #[test]
+    fn a_plateau_the_card_spreads_over_a_few_codes_is_found() {
+        // Clipped a little (a few hundred samples, as a probe just over its range shows) and
+        // spread by 1.5 codes rms: the last reading is a noise tail, not the plateau.
+        let r = record(40.0, 1.5);
+        let exact = clipped(&record(40.0, 0.0).iter().map(|v| (v / LSB).round() == 3960.0).collect::<Vec<_>>());
+        let (flags, level) = plateau(&r, true, LSB).expect("clipped");
+        assert!((level / LSB - 3960.0).abs() <= 1.0, "level {} codes", level / LSB);
+        let found = clipped(&flags) as f64;
+        assert!((found / exact as f64 - 1.0).abs() < 0.2, "{found} flagged of {exact} clipped");
+    }
+
+    #[test]
+    fn an_unclipped_peak_is_not_a_plateau() {
+        // Quantised and noise-free, many samples share the top codes, but no more densely than
+        // just below them; with the card's noise, neither.
+        for noise in [0.0, 0.5, 1.5, 3.0] {
+            let r = record(0.0, noise);
+            assert!(plateau(&r, true, LSB).is_none(), "noise {noise}");
+            assert!(plateau(&r, false, LSB).is_none(), "noise {noise}");
+        }
+    }
 }
