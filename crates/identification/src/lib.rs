@@ -15,6 +15,8 @@
 //! * [`pipeline`]: a raw record and its rig in, windowed coefficients with their operating
 //!   point and dimensionless forms out: the one path the CLI, the nodes and replay share.
 //! * [`simulate`]: a seeded record from the simulated rig under an excitation plan.
+//! * [`simd`]: the one place that picks the CPU's vector instructions for every hot loop
+//!   (results are the same bits on every instruction set).
 //! * [`campaign`]: the paper's two studies on the simulated rig (coefficients against the load
 //!   parameter and against the excitation amplitude), with its fits and the checks of its
 //!   findings.
@@ -26,6 +28,7 @@ pub mod error;
 pub mod estimator;
 pub mod excitation;
 pub mod pipeline;
+pub mod simd;
 pub mod simulate;
 
 pub use error::IdentificationError;

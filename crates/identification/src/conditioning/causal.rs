@@ -48,26 +48,24 @@
 //! on once the probe is back.
 //!
 //! ## Bit for bit, block by block
-//! A call runs stage by stage over its whole block (calibration into channel columns, the
-//! de-skew stencils over the columns, the kinematics and applied force, the low-pass with its
-//! six lanes side by side in registers, the differentiators over the columns, eq. 2), with
-//! what the next call needs carried over: the last scans the stencils reach back to, the
-//! low-pass's state, the last `2M` low-passed samples and velocities. Each sample still goes
-//! through the same operations in the same order as it did when the chain ran scan by scan
-//! (no fused multiply-add, each sum in the same order), whatever block it came in, so the
-//! output does not depend on how the input was cut, nor on which compiled copy runs (AVX-512,
-//! AVX2 or the baseline, chosen at run time). The unit tests keep the scan-by-scan chain as
-//! the reference and compare bits for many cuttings, with out-of-range readings in them.
+//! A call runs stage by stage over its whole block on the prepared chain's kernels
+//! ([`super::Chain`]: the front end's de-skew stencils, the low-pass's forward pass over
+//! frames of eight lanes, the differentiator's interior), with what the next call needs
+//! carried over: the last scans the stencils reach back to, the low-pass's state, the last
+//! `2M` low-passed samples and velocities. Each sample goes through the same operations in
+//! the same order whatever block it came in and whichever instruction set runs, so the output
+//! depends on neither. The unit tests keep a scan-by-scan chain, written plainly, as the
+//! reference and compare bits for many cuttings, with out-of-range readings in them.
 
 use std::ops::Range;
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::{deskew, differentiate, film_force, lowpass, range_check, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
+use super::chain::stencil_any;
+use super::lowpass::ForwardStream;
+use super::{kinematics, range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
+use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
-
-/// Columns through the low-pass: `x, y` (relative), `X, Y` (housing), `F_x, F_y` (applied).
-const LANES: usize = 6;
 
 /// The causal low-pass's order for a configuration: twice `lowpass_order`, so that its
 /// stop band falls as fast as the zero-phase chain's squared magnitude (`|H|^2` of order
@@ -99,43 +97,26 @@ impl CausalDelays {
     pub fn first_index(&self) -> usize {
         self.lookback + self.settling + self.derivative
     }
+
+    fn of(chain: &Chain) -> Self {
+        let stencils = stencils(chain);
+        let ahead = stencils.iter().map(|(s, w)| s + w.len() as isize - 1).max().unwrap_or(0).max(0) as usize;
+        let back = stencils.iter().map(|(s, _)| -s).max().unwrap_or(0).max(0) as usize;
+        Self { lookahead: ahead, lookback: back, derivative: 2 * chain.derivative.half_length(), settling: chain.lowpass.settling_samples() }
+    }
+}
+
+/// The de-skew stencil of each channel (start relative to the output, weights); the identity
+/// without de-skew.
+fn stencils(chain: &Chain) -> Vec<(isize, Vec<f64>)> {
+    chain.delays.iter().map(|d| d.as_ref().map_or((0, vec![1.0]), |d| (d.stencil_start(), d.weights().to_vec()))).collect()
 }
 
 /// The delays [`CausalChain::new`] will have for this calibration, configuration and rate.
 pub fn delays(calibration: &Calibration, config: &ConditioningConfig, sample_rate_hz: f64) -> Result<CausalDelays, IdentificationError> {
-    let (lp, sg, stencils) = design(calibration, config, sample_rate_hz)?;
-    Ok(delays_of(&lp, &sg, &stencils))
-}
-
-type Stencil = (isize, Vec<f64>);
-
-fn design(calibration: &Calibration, config: &ConditioningConfig, fs: f64) -> Result<(lowpass::Butterworth, differentiate::SavitzkyGolayDerivative, Vec<Stencil>), IdentificationError> {
-    config.validate(fs)?;
-    let order = causal_order(config);
-    if order > lowpass::MAX_ORDER {
-        return Err(IdentificationError::invalid(
-            "conditioning.lowpass_order",
-            format!("the causal chain runs order 2 x lowpass_order, at most {}: lowpass_order must be <= {}, got {}", lowpass::MAX_ORDER, lowpass::MAX_ORDER / 2, config.lowpass_order),
-        ));
-    }
-    let lp = lowpass::Butterworth::design(order, config.lowpass_cutoff_hz, fs)?;
-    let sg = differentiate::SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
-    let mut stencils = Vec::with_capacity(CHANNEL_COUNT);
-    for &ch in &ChannelId::ALL {
-        if config.deskew {
-            let d = deskew::FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
-            stencils.push((d.stencil_start(), d.weights().to_vec()));
-        } else {
-            stencils.push((0, vec![1.0]));
-        }
-    }
-    Ok((lp, sg, stencils))
-}
-
-fn delays_of(lp: &lowpass::Butterworth, sg: &differentiate::SavitzkyGolayDerivative, stencils: &[Stencil]) -> CausalDelays {
-    let ahead = stencils.iter().map(|(s, w)| s + w.len() as isize - 1).max().unwrap_or(0).max(0) as usize;
-    let back = stencils.iter().map(|(s, _)| -s).max().unwrap_or(0).max(0) as usize;
-    CausalDelays { lookahead: ahead, lookback: back, derivative: 2 * sg.half_length(), settling: lp.settling_samples() }
+    // The delays do not depend on the mechanics: any valid ones do.
+    let mechanics = Mechanics { housing_mass_kg: 1.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
+    Ok(CausalDelays::of(&Chain::causal(calibration, &mechanics, config, sample_rate_hz)?))
 }
 
 /// One channel's front end.
@@ -155,15 +136,6 @@ struct Front {
     weights: Vec<f64>,
     /// The last in-range value (SI), fed to the filters in place of an out-of-range one.
     last_good: f64,
-}
-
-/// One second-order section's state for every lane, direct form I.
-#[derive(Copy, Clone, Debug, Default)]
-struct SectionState {
-    x1: [f64; LANES],
-    x2: [f64; LANES],
-    y1: [f64; LANES],
-    y2: [f64; LANES],
 }
 
 /// Samples the chain has produced and not yet handed on, columns of equal length.
@@ -211,9 +183,9 @@ impl CausalOutput {
     }
 }
 
-/// The block path's columns: what one call leaves for the next (the last scans the de-skew
-/// stencils reach back to, the last `2 M` low-passed samples and velocities the
-/// differentiators reach back to), and scratch columns reused from call to call.
+/// What one call leaves for the next (the last scans the de-skew stencils reach back to, the
+/// last `2 M` low-passed samples and velocities the differentiators reach back to), and
+/// scratch columns reused from call to call.
 #[derive(Clone, Debug, Default)]
 struct Buffers {
     /// SI readings (in-range, or held) by channel index, scans `raw_first ..`.
@@ -221,11 +193,11 @@ struct Buffers {
     raw_first: u64,
     /// This call's de-skewed samples by channel index.
     deskewed: [Vec<f64>; CHANNEL_COUNT],
-    /// This call's `r_x, r_y, F_x, F_y` (kinematics and applied force, not low-passed).
-    kinematics: [Vec<f64>; 4],
-    /// Low-passed `x, y, X, Y, F_x, F_y`, then the unfiltered `f3`, temperature, low-pass
-    /// indices `filtered_first ..`.
-    filtered: [Vec<f64>; 8],
+    /// This call's `[x, y, tilt_x, tilt_y, X, Y, F_x, F_y]` (applied force), low-passed in place.
+    frames: Vec<[f64; 8]>,
+    /// Low-passed `x, y, tilt_x, tilt_y, X, Y, F_x, F_y`, then the unfiltered `f3` and
+    /// temperature, low-pass indices `filtered_first ..`.
+    filtered: [Vec<f64>; 10],
     filtered_first: u64,
     /// `x', y', X', Y'`, indices `velocity_first ..`.
     velocity: [Vec<f64>; 4],
@@ -255,47 +227,18 @@ impl Buffers {
 /// Scans a pass of the block path takes at most (a longer call is cut into passes).
 const MAX_BLOCK: usize = 2_048;
 
-/// Which compiled copy of the block path runs (the same operations in the same order in
-/// each, so the same bits).
-#[derive(Copy, Clone, Debug, PartialEq, Eq)]
-enum Isa {
-    /// The target's baseline.
-    Baseline,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl Isa {
-    /// The widest the CPU has.
-    fn detect() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                return Isa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
-    }
-}
+/// Low-passed lanes the derivatives are taken of: `x, y, X, Y`.
+const DIFFERENTIATED: [usize; 4] = [0, 1, 4, 5];
 
 /// The causal chain's state. Build one per stream; push scans in order.
 #[derive(Clone)]
 pub struct CausalChain {
+    chain: Chain,
     units: RawUnits,
     width: usize,
     fronts: Vec<Front>,
-    applied: film_force::Applied,
-    mass_kg: f64,
-    sections: Vec<lowpass::Section>,
-    /// `c_1 .. c_M`, per second.
-    sg: Vec<f64>,
     delays: CausalDelays,
-    iir: Vec<SectionState>,
+    forward: Option<ForwardStream>,
     /// Scans pushed.
     scans: u64,
     /// Samples through the low-pass.
@@ -304,7 +247,6 @@ pub struct CausalChain {
     invalid_through: Option<u64>,
     /// History carried between calls, and scratch.
     buf: Buffers,
-    isa: Isa,
 }
 
 impl CausalChain {
@@ -319,11 +261,9 @@ impl CausalChain {
         mechanics: &Mechanics,
         config: &ConditioningConfig,
     ) -> Result<Self, IdentificationError> {
-        mechanics.validate()?;
-        let (lp, sg, stencils) = design(calibration, config, sample_rate_hz)?;
-        let delays = delays_of(&lp, &sg, &stencils);
+        let chain = Chain::causal(calibration, mechanics, config, sample_rate_hz)?;
         let mut fronts = Vec::with_capacity(CHANNEL_COUNT);
-        for (&ch, (start, weights)) in ChannelId::ALL.iter().zip(stencils) {
+        for (&ch, (start, weights)) in ChannelId::ALL.iter().zip(stencils(&chain)) {
             let column = columns[ch.index()];
             if column >= width {
                 return Err(IdentificationError::BadInput { what: format!("channel `{ch}`"), reason: format!("column {column} of a {width}-column scan") });
@@ -334,29 +274,29 @@ impl CausalChain {
             let c = calibration.channel(ch)?;
             let (offset_v, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
             if !(sensitivity.is_finite() && sensitivity != 0.0 && offset_v.is_finite()) {
-                return Err(IdentificationError::invalid(format!("calibration.{ch}.sensitivity_v_per_unit"), format!("must be finite and non-zero with a finite offset, got {sensitivity} V/unit, offset {offset_v} V")));
+                return Err(IdentificationError::invalid(
+                    format!("calibration.{ch}.sensitivity_v_per_unit"),
+                    format!("must be finite and non-zero with a finite offset, got {sensitivity} V/unit, offset {offset_v} V"),
+                ));
             }
             let (lo_v, hi_v) = range_check::volts_bounds(ch, calibration)?;
             let [a, b] = c.linear_range_v.map(|v| (v - offset_v) / sensitivity);
             // Mid-range: what the filters see until the first in-range reading.
             let mid = 0.5 * (a + b);
-            fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], start, weights, last_good: if mid.is_finite() { mid } else { 0.0 } });
+            let last_good = if mid.is_finite() { mid } else { 0.0 };
+            fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], start, weights, last_good });
         }
         Ok(Self {
+            delays: CausalDelays::of(&chain),
+            chain,
             units,
             width,
             fronts,
-            applied: film_force::Applied::new(mechanics),
-            mass_kg: mechanics.housing_mass_kg,
-            sections: lp.sections().to_vec(),
-            sg: sg.coefficients().to_vec(),
-            iir: vec![SectionState::default(); lp.sections().len()],
-            delays,
+            forward: None,
             scans: 0,
             lowpassed: 0,
             invalid_through: None,
             buf: Buffers::default(),
-            isa: Isa::detect(),
         })
     }
 
@@ -378,63 +318,44 @@ impl CausalChain {
     }
 
     /// Pushes the scans of `values` (rows of `width` readings, scan order) and appends the
-    /// samples they complete to `out`.
+    /// samples they complete to `out`. At most [`MAX_BLOCK`] scans a pass: the scratch
+    /// columns stay small (and in cache) however long a call is; the output does not depend
+    /// on the cutting.
     pub fn push(&mut self, values: &[f64], out: &mut CausalOutput) -> Result<(), IdentificationError> {
         if !values.len().is_multiple_of(self.width) {
             return Err(IdentificationError::BadInput { what: "scan values".into(), reason: format!("{} values are not whole scans of {} readings", values.len(), self.width) });
         }
-        self.push_with(self.isa, values, out);
+        for block in values.chunks(MAX_BLOCK * self.width) {
+            simd::dispatch(self.chain.isa(), Push { c: self, values: block, out });
+        }
         Ok(())
     }
+}
 
-    /// [`Self::push`] through the block path compiled for `isa` (which the CPU must have:
-    /// [`Isa::detect`] said so, or it is the baseline).
-    /// At most [`MAX_BLOCK`] scans a pass: the scratch columns stay small (and in cache)
-    /// however long a call is; the output does not depend on the cutting.
-    fn push_with(&mut self, isa: Isa, values: &[f64], out: &mut CausalOutput) {
-        for block in values.chunks(MAX_BLOCK * self.width) {
-            match isa {
-                Isa::Baseline => self.push_block::<false, false>(block, out),
-                // SAFETY: the only requirement of a `target_feature` function is that the CPU
-                // has the feature; `isa` is `Avx2` / `Avx512` only when `Isa::detect` found it.
-                #[cfg(target_arch = "x86_64")]
-                Isa::Avx2 => unsafe { self.push_block_avx2(block, out) },
-                #[cfg(target_arch = "x86_64")]
-                Isa::Avx512 => unsafe { self.push_block_avx512(block, out) },
-            }
-        }
-    }
+/// One pass of [`CausalChain::push`] as a [`Kernel`].
+struct Push<'a> {
+    c: &'a mut CausalChain,
+    values: &'a [f64],
+    out: &'a mut CausalOutput,
+}
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn push_block_avx2(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block::<false, true>(values, out);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn push_block_avx512(&mut self, values: &[f64], out: &mut CausalOutput) {
-        self.push_block::<true, false>(values, out);
-    }
+impl Kernel for Push<'_> {
+    type Output = ();
 
     /// The whole call stage by stage: calibrate every scan into channel columns, de-skew the
-    /// columns, the kinematics and applied force, the low-pass over the block (its six lanes
-    /// side by side), the differentiators over the block, eq. 2. Each sample goes through the
-    /// same operations in the same order as it did scan by scan (the test module keeps that
-    /// scan-by-scan chain as the reference), so the bits do not depend on the cutting.
-    /// `values` holds whole scans, at least one. `AVX512`, `AVX2`: compiled into
-    /// [`Self::push_block_avx512`] (the CPU has AVX-512F) or [`Self::push_block_avx2`], the
-    /// low-pass written for it.
+    /// columns, the kinematics and applied force into frames, the low-pass over the frames,
+    /// the differentiators over the columns, eq. 2. `values` holds whole scans, at least one.
     #[inline(always)]
-    fn push_block<const AVX512: bool, const AVX2: bool>(&mut self, values: &[f64], out: &mut CausalOutput) {
-        let width = self.width;
+    fn run<S: Simd>(self, simd: S) {
+        let Push { c, values, out } = self;
+        let width = c.width;
         let scans = values.len() / width;
-        let n0 = self.scans;
-        self.scans += scans as u64;
-        let d = self.delays;
+        let n0 = c.scans;
+        c.scans += scans as u64;
+        let d = c.delays;
         let (ahead, back, two_m) = (d.lookahead as u64, d.lookback as u64, d.derivative as u64);
         let half = two_m / 2;
-        let buf = &mut self.buf;
+        let buf = &mut c.buf;
 
         // Calibration and range check, channel by channel into the raw columns. The raw
         // columns hold the scans since `raw_first`, so scan `n0` goes at their current end.
@@ -443,10 +364,9 @@ impl CausalChain {
             col.resize(e0 + scans, 0.0);
         }
         {
-            // The readings into the channel columns, row after row (each row read once,
-            // each column written in order), then converted in place column by column.
+            // The readings into the channel columns, row after row, then converted in place.
             let dst = buf.raw.each_mut().map(|c| &mut c[e0..e0 + scans]);
-            let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| self.fronts[k].column);
+            let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| c.fronts[k].column);
             for (i, row) in values.chunks_exact(width).enumerate() {
                 for k in 0..CHANNEL_COUNT {
                     dst[k][i] = row[columns[k]];
@@ -454,12 +374,12 @@ impl CausalChain {
             }
         }
         let mut in_range = true;
-        for (f, col) in self.fronts.iter().zip(buf.raw.iter_mut()) {
-            in_range &= f.calibrate(self.units, &mut col[e0..]);
+        for (f, col) in c.fronts.iter().zip(buf.raw.iter_mut()) {
+            in_range &= f.calibrate(c.units, &mut col[e0..]);
         }
         buf.hits.clear();
         if in_range {
-            for (f, col) in self.fronts.iter_mut().zip(&buf.raw) {
+            for (f, col) in c.fronts.iter_mut().zip(&buf.raw) {
                 f.last_good = col[e0 + scans - 1];
             }
         } else {
@@ -467,8 +387,8 @@ impl CausalChain {
             // value and recording the violations in the order met.
             for (i, row) in values.chunks_exact(width).enumerate() {
                 let n = n0 + i as u64;
-                for (f, col) in self.fronts.iter_mut().zip(buf.raw.iter_mut()) {
-                    let (value, ok) = f.read(self.units, row[f.column]);
+                for (f, col) in c.fronts.iter_mut().zip(buf.raw.iter_mut()) {
+                    let (value, ok) = f.read(c.units, row[f.column]);
                     if ok {
                         f.last_good = value;
                     } else {
@@ -490,64 +410,35 @@ impl CausalChain {
         if first_n < end_n {
             let count = (end_n - first_n) as usize;
             let m0 = first_n - ahead;
-            for ((f, raw), y) in self.fronts.iter().zip(&buf.raw).zip(buf.deskewed.iter_mut()) {
+            for ((f, raw), y) in c.fronts.iter().zip(&buf.raw).zip(buf.deskewed.iter_mut()) {
                 // `m0 + start >= m0 - lookback >= raw_first` (the raw columns keep the last
-                // `L + lookback` scans) and `m0 + start + taps - 1 + count - 1 <= end_n - 1`.
+                // `L + lookback` scans) and the stencil's last reading is `<= end_n - 1`.
                 let from = (m0 as i64 + f.start as i64 - buf.raw_first as i64) as usize;
                 y.resize(count, 0.0);
-                fir(&f.weights, &raw[from..], y);
+                stencil_any(&f.weights, &raw[from..], y);
             }
-            // Kinematics (`r` = the mean of ends A and B) and the applied force.
+            // Kinematics (`r` = the mean of ends A and B, tilt = their difference) and the
+            // applied force, as frames of the low-pass's eight lanes.
             let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &buf.deskewed;
-            for c in buf.kinematics.iter_mut() {
-                c.clear();
-                c.resize(count, 0.0);
-            }
-            let [rx, ry, fx, fy] = &mut buf.kinematics;
-            let (rx, ry, fx, fy) = (&mut rx[..count], &mut ry[..count], &mut fx[..count], &mut fy[..count]);
-            let (a_x, a_y, b_x, b_y, f1, f2, f3) = (&a_x[..count], &a_y[..count], &b_x[..count], &b_y[..count], &f1[..count], &f2[..count], &f3[..count]);
-            for i in 0..count {
-                rx[i] = 0.5 * (a_x[i] + b_x[i]);
-                ry[i] = 0.5 * (a_y[i] + b_y[i]);
-                let [x, y] = self.applied.at(f1[i], f2[i], f3[i]);
-                fx[i] = x;
-                fy[i] = y;
-            }
+            buf.frames.clear();
+            buf.frames.extend((0..count).map(|i| {
+                let [x, tx] = kinematics::mean_and_difference(a_x[i], b_x[i]);
+                let [y, ty] = kinematics::mean_and_difference(a_y[i], b_y[i]);
+                let [fx, fy] = c.chain.applied.at(f1[i], f2[i], f3[i]);
+                [x, y, tx, ty, frame_x[i], frame_y[i], fx, fy]
+            }));
 
-            // Low-pass: index `p = m - lookback`.
-            let p0 = self.lowpassed;
-            self.lowpassed += count as u64;
+            // Low-pass: index `p = m - lookback`, started in the steady state of its first input.
+            let p0 = c.lowpassed;
+            c.lowpassed += count as u64;
+            let st = c.forward.get_or_insert_with(|| c.chain.lowpass.forward_steady(buf.frames[0]));
+            c.chain.lowpass.forward_run(simd, st, &mut buf.frames);
             let fe = (p0 - buf.filtered_first) as usize;
-            for c in buf.filtered.iter_mut() {
-                c.resize(fe + count, 0.0);
+            for col in buf.filtered.iter_mut() {
+                col.resize(fe + count, 0.0);
             }
-            let inputs = [&rx[..], &ry[..], &frame_x[..count], &frame_y[..count], &fx[..], &fy[..]];
-            let [o0, o1, o2, o3, o4, o5, o_f3, o_t] = &mut buf.filtered;
-            // The first two samples one by one: the first starts every section in its DC
-            // steady state, and the AVX-512 and AVX2 cascades need two samples of history
-            // behind them.
-            let skip = (SHARED_FROM.saturating_sub(p0) as usize).min(count);
-            for i in 0..skip {
-                let y = lowpass_scan(&self.sections, &mut self.iir, inputs.map(|c| c[i]), p0 + i as u64 == 0);
-                for (o, v) in [&mut *o0, &mut *o1, &mut *o2, &mut *o3, &mut *o4, &mut *o5].into_iter().zip(y) {
-                    o[fe + i] = v;
-                }
-            }
-            let (inputs, outputs) = (inputs.map(|c| &c[skip..]), [&mut o0[fe + skip..], &mut o1[fe + skip..], &mut o2[fe + skip..], &mut o3[fe + skip..], &mut o4[fe + skip..], &mut o5[fe + skip..]]);
-            #[cfg(target_arch = "x86_64")]
-            if AVX512 && skip < count {
-                // SAFETY: `AVX512` is true only in `push_block_avx512`, which runs only when
-                // the CPU has AVX-512F (`Isa::detect`). `skip < count`: the samples before
-                // `SHARED_FROM` have gone through.
-                unsafe { avx512::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
-            } else if AVX2 && skip < count {
-                // SAFETY: as above, for `AVX2`, `push_block_avx2` and AVX2.
-                unsafe { avx2::iir_block(&self.sections, &mut self.iir, inputs, outputs) };
-            } else {
-                iir_block(&self.sections, &mut self.iir, inputs, outputs);
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            iir_block(&self.sections, &mut self.iir, inputs, outputs);
+            let [l0, l1, l2, l3, l4, l5, l6, l7, o_f3, o_t] = &mut buf.filtered;
+            simd.transpose8(&mut [l0, l1, l2, l3, l4, l5, l6, l7].map(|c| &mut c[..]), fe, &mut buf.frames, false);
             o_f3[fe..].copy_from_slice(&f3[..count]);
             o_t[fe..].copy_from_slice(&temperature[..count]);
 
@@ -561,9 +452,9 @@ impl CausalChain {
                 buf.velocity_first = q0 - buf.velocity[0].len() as u64;
                 let ve = buf.velocity[0].len();
                 let from = (q0 - half - buf.filtered_first) as usize;
-                for (v, x) in buf.velocity.iter_mut().zip(&buf.filtered) {
+                for (v, &lane) in buf.velocity.iter_mut().zip(&DIFFERENTIATED) {
                     v.resize(ve + nv, 0.0);
-                    savitzky_golay(&self.sg, &x[from..], &mut v[ve..]);
+                    c.chain.derivative.interior_slices(simd, &buf.filtered[lane][from..], &mut v[ve..]);
                 }
                 // Acceleration and every output at `r = p - 2M`, once the low-pass has settled.
                 let r0 = (pv - two_m).max(d.settling as u64 + two_m);
@@ -572,25 +463,26 @@ impl CausalChain {
                     let no = (r_end - r0) as usize;
                     let from = (r0 - half - buf.velocity_first) as usize;
                     for (a, v) in buf.acceleration.iter_mut().zip(&buf.velocity) {
-                        a.clear();
                         a.resize(no, 0.0);
-                        savitzky_golay(&self.sg, &v[from..], a);
+                        c.chain.derivative.interior_slices(simd, &v[from..], a);
                     }
-                    self.emit(r0, no, out);
+                    c.emit(r0, no, out);
                 }
             }
         }
-        let buf = &mut self.buf;
+        let buf = &mut c.buf;
         let reach = back + (d.settling as u64) + two_m;
         if let Some(&n) = buf.hits.last() {
             // `n + reach` grows with `n`: the last violation reaches furthest.
-            self.invalid_through = Some(self.invalid_through.map_or(n + reach, |t| t.max(n + reach)));
+            c.invalid_through = Some(c.invalid_through.map_or(n + reach, |t| t.max(n + reach)));
         }
         Buffers::keep_last(&mut buf.raw, &mut buf.raw_first, (ahead + back) as usize);
         Buffers::keep_last(&mut buf.filtered, &mut buf.filtered_first, two_m as usize);
         Buffers::keep_last(&mut buf.velocity, &mut buf.velocity_first, two_m as usize);
     }
+}
 
+impl CausalChain {
     /// Appends the `count` outputs from index `r0` of the low-pass (time index `r0 +
     /// lookback`): this call's accelerations are in the acceleration columns.
     #[inline(always)]
@@ -603,7 +495,7 @@ impl CausalChain {
             out.first_index = time0;
         }
         let start = out.len();
-        let [x, y, _, _, fx, fy, f3, temperature] = &buf.filtered;
+        let [x, y, _, _, _, _, fx, fy, f3, temperature] = &buf.filtered;
         let [ax, ay, hx, hy] = &buf.acceleration;
         out.x_m.extend_from_slice(&x[fo..fo + count]);
         out.y_m.extend_from_slice(&y[fo..fo + count]);
@@ -611,7 +503,7 @@ impl CausalChain {
         out.vy_m_s.extend_from_slice(&buf.velocity[1][vo..vo + count]);
         out.ax_m_s2.extend_from_slice(&ax[..count]);
         out.ay_m_s2.extend_from_slice(&ay[..count]);
-        let m = self.mass_kg;
+        let m = self.chain.mechanics().housing_mass_kg;
         out.fx_n.extend(fx[fo..fo + count].iter().zip(&hx[..count]).map(|(f, a)| f - m * a));
         out.fy_n.extend(fy[fo..fo + count].iter().zip(&hy[..count]).map(|(f, a)| f - m * a));
         out.static_load_n.extend_from_slice(&f3[fo..fo + count]);
@@ -663,19 +555,10 @@ impl Front {
         (value, (volts > self.lo_v) & (volts < self.hi_v) & value.is_finite())
     }
 
-    /// The channel's readings in `col` converted to SI in place, `CHUNK` at a time; `false`
-    /// if any is out of range (the caller then redoes the block holding values).
+    /// The channel's readings in `col` converted to SI in place; `false` if any is out of
+    /// range (the caller then redoes the block holding values).
     #[inline(always)]
     fn calibrate(&self, units: RawUnits, col: &mut [f64]) -> bool {
-        match units {
-            RawUnits::Volts => self.calibrate_in_place::<true>(col),
-            RawUnits::Si => self.calibrate_in_place::<false>(col),
-        }
-    }
-
-    #[inline(always)]
-    fn calibrate_in_place<const VOLTS: bool>(&self, col: &mut [f64]) -> bool {
-        let units = if VOLTS { RawUnits::Volts } else { RawUnits::Si };
         // A count rather than a short-circuit `all`, so that the loop vectorises.
         let mut bad = 0u64;
         for c in col.iter_mut() {
@@ -687,424 +570,15 @@ impl Front {
     }
 }
 
-/// Outputs per chunk of the FIR loops below: their sums are independent, so a chunk of
-/// several registers' worth keeps the adders busy instead of waiting on one sum.
-const CHUNK: usize = 32;
-
-/// `y[i] = sum_j w[j] x[i + j]`, each sum from `0.0` in tap order, as the scan-by-scan
-/// chain summed it. `CHUNK` outputs at a time with their sums in registers.
-#[inline(always)]
-fn fir(w: &[f64], x: &[f64], y: &mut [f64]) {
-    let n = y.len();
-    let x = &x[..n + w.len() - 1];
-    let mut chunks = y.chunks_exact_mut(CHUNK);
-    let mut i = 0;
-    for out in &mut chunks {
-        let mut acc = [0.0; CHUNK];
-        for (j, &wj) in w.iter().enumerate() {
-            let v = &x[i + j..][..CHUNK];
-            for l in 0..CHUNK {
-                acc[l] += wj * v[l];
-            }
-        }
-        out.copy_from_slice(&acc);
-        i += CHUNK;
-    }
-    for (o, i) in chunks.into_remainder().iter_mut().zip(i..) {
-        let mut acc = 0.0;
-        for (j, &wj) in w.iter().enumerate() {
-            acc += wj * x[i + j];
-        }
-        *o = acc;
-    }
-}
-
-/// The centred Savitzky-Golay derivative: `y[i] = sum_k c_k (x[i + M + k + 1] - x[i + M -
-/// k - 1])` from `0.0`, `k` in order; `x` starts `M` before the first output's centre.
-#[inline(always)]
-fn savitzky_golay(c: &[f64], x: &[f64], y: &mut [f64]) {
-    let (m, n) = (c.len(), y.len());
-    let x = &x[..n + 2 * m];
-    let mut chunks = y.chunks_exact_mut(CHUNK);
-    let mut i = 0;
-    for out in &mut chunks {
-        let mut acc = [0.0; CHUNK];
-        for (k, &ck) in c.iter().enumerate() {
-            let (ahead, behind) = (&x[i + m + k + 1..][..CHUNK], &x[i + m - k - 1..][..CHUNK]);
-            for l in 0..CHUNK {
-                acc[l] += ck * (ahead[l] - behind[l]);
-            }
-        }
-        out.copy_from_slice(&acc);
-        i += CHUNK;
-    }
-    for (o, i) in chunks.into_remainder().iter_mut().zip(i..) {
-        let mut acc = 0.0;
-        for (k, &ck) in c.iter().enumerate() {
-            acc += ck * (x[i + m + k + 1] - x[i + m - k - 1]);
-        }
-        *o = acc;
-    }
-}
-
-/// One sample of every lane through the cascade, direct form I; `first`: start every
-/// section in the DC steady state of its input.
-#[inline(always)]
-fn lowpass_scan(sections: &[lowpass::Section], states: &mut [SectionState], mut x: [f64; LANES], first: bool) -> [f64; LANES] {
-    for (s, st) in sections.iter().zip(states.iter_mut()) {
-        let [b0, b1, b2] = s.b;
-        let [a1, a2] = s.a;
-        if first {
-            let g = (b0 + b1 + b2) / (1.0 + a1 + a2);
-            let y = x.map(|v| g * v);
-            *st = SectionState { x1: x, x2: x, y1: y, y2: y };
-        }
-        let mut y = [0.0; LANES];
-        for l in 0..LANES {
-            y[l] = b0 * x[l] + b1 * st.x1[l] + b2 * st.x2[l] - a1 * st.y1[l] - a2 * st.y2[l];
-        }
-        st.x2 = st.x1;
-        st.x1 = x;
-        st.y2 = st.y1;
-        st.y1 = y;
-        x = y;
-    }
-    x
-}
-
-/// The cascade over a block: `out[l][i]` from `inp[l][i]`, sample after sample, the
-/// sections' state in registers (for the orders the causal chain can have).
-#[inline(always)]
-fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
-    macro_rules! fixed {
-        ($s:literal) => {
-            if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
-                return iir_block_const::<$s>(sections, states, inp, out);
-            }
-        };
-    }
-    fixed!(1);
-    fixed!(2);
-    fixed!(3);
-    fixed!(4);
-    fixed!(5);
-    fixed!(6);
-    // Not reached (the design has at most six sections); the same operations anyway.
-    let n = out[0].len();
-    for i in 0..n {
-        let y = lowpass_scan(sections, states, inp.map(|c| c[i]), false);
-        for l in 0..LANES {
-            out[l][i] = y[l];
-        }
-    }
-}
-
-/// Lanes in the generic code's rows and the AVX-512 register: the six padded to eight; the
-/// padding lanes stay zero. (The AVX2 cascade groups them four and two instead, unpadded.)
-const PADDED: usize = 8;
-
-#[inline(always)]
-fn iir_block_const<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
-    let n = out[0].len();
-    let inp = inp.map(|c| &c[..n]);
-    let out = out.map(|c| &mut c[..n]);
-    let pad = |a: &[f64; LANES]| {
-        let mut p = [0.0; PADDED];
-        p[..LANES].copy_from_slice(a);
-        p
-    };
-    let coef: [[f64; 5]; S] = std::array::from_fn(|k| [sections[k].b[0], sections[k].b[1], sections[k].b[2], sections[k].a[0], sections[k].a[1]]);
-    let mut x1: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].x1));
-    let mut x2: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].x2));
-    let mut y1: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].y1));
-    let mut y2: [[f64; PADDED]; S] = std::array::from_fn(|k| pad(&states[k].y2));
-    for i in 0..n {
-        let mut x = [0.0; PADDED];
-        for l in 0..LANES {
-            x[l] = inp[l][i];
-        }
-        for k in 0..S {
-            let [b0, b1, b2, a1, a2] = coef[k];
-            let mut y = [0.0; PADDED];
-            for l in 0..PADDED {
-                y[l] = b0 * x[l] + b1 * x1[k][l] + b2 * x2[k][l] - a1 * y1[k][l] - a2 * y2[k][l];
-            }
-            x2[k] = x1[k];
-            x1[k] = x;
-            y2[k] = y1[k];
-            y1[k] = y;
-            x = y;
-        }
-        for l in 0..LANES {
-            out[l][i] = x[l];
-        }
-    }
-    for k in 0..S {
-        let lanes = |p: &[f64; PADDED]| -> [f64; LANES] { std::array::from_fn(|l| p[l]) };
-        states[k] = SectionState { x1: lanes(&x1[k]), x2: lanes(&x2[k]), y1: lanes(&y1[k]), y2: lanes(&y2[k]) };
-    }
-}
-
-/// Samples through the low-pass after which each section's input history equals the
-/// previous section's output history (see [`avx512::iir_block`]).
-const SHARED_FROM: u64 = 2;
-
-/// Whether each section's input history is the previous section's output history, bit for
-/// bit: what the AVX-512 and AVX2 cascades rely on (they keep only the latter).
-#[cfg(target_arch = "x86_64")]
-fn histories_shared(states: &[SectionState]) -> bool {
-    states.windows(2).all(|w| w[1].x1.map(f64::to_bits) == w[0].y1.map(f64::to_bits) && w[1].x2.map(f64::to_bits) == w[0].y2.map(f64::to_bits))
-}
-
-/// The low-pass written with the AVX-512 intrinsics: the six lanes in one register, and only
-/// `2 + 2 S` registers of state, so that the state of every section stays in registers.
-#[cfg(target_arch = "x86_64")]
-mod avx512 {
-    use super::{iir_block as generic, lowpass, SectionState, LANES, PADDED};
-    use std::arch::x86_64::{__m512d, _mm512_add_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd, _mm512_sub_pd};
-
-    /// Samples per tile: the lanes are moved into rows first and back after, so that the
-    /// loop carrying the recursion holds only the arithmetic.
-    const TILE: usize = 32;
-
-    /// [`super::iir_block`] for the CPUs with AVX-512F, the same operations in the same order
-    /// (`b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`, left to right, separate multiplies and adds).
-    /// Section `k`'s input is section `k - 1`'s output, so its input history (`x1`, `x2`) is
-    /// section `k - 1`'s output history (`y1`, `y2`), the same values, once
-    /// [`super::SHARED_FROM`] samples have gone through (the steady-state start sets `x2` and
-    /// `y2` from the DC gain, not from a step): only the cascade's input history and each
-    /// section's output history are kept.
-    #[target_feature(enable = "avx512f")]
-    pub(super) fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
-        debug_assert!(super::histories_shared(states), "the low-pass's sections share their histories only after {} samples", super::SHARED_FROM);
-        macro_rules! fixed {
-            ($s:literal) => {
-                if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
-                    return cascade::<$s>(sections, states, inp, out);
-                }
-            };
-        }
-        fixed!(1);
-        fixed!(2);
-        fixed!(3);
-        fixed!(4);
-        fixed!(5);
-        fixed!(6);
-        generic(sections, states, inp, out);
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx512f")]
-    fn cascade<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
-        let n = out[0].len();
-        let inp = inp.map(|c| &c[..n]);
-        let mut out = out.map(|c| &mut c[..n]);
-        let load = |a: &[f64; LANES]| {
-            let mut p = [0.0; PADDED];
-            p[..LANES].copy_from_slice(a);
-            // SAFETY: `p` holds the eight doubles read.
-            unsafe { _mm512_loadu_pd(p.as_ptr()) }
-        };
-        let coef: [[__m512d; 5]; S] = std::array::from_fn(|k| {
-            let (b, a) = (sections[k].b, sections[k].a);
-            [b[0], b[1], b[2], a[0], a[1]].map(|c| _mm512_set1_pd(c))
-        });
-        let (mut in1, mut in2) = (load(&states[0].x1), load(&states[0].x2));
-        let mut y1: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y1));
-        let mut y2: [__m512d; S] = std::array::from_fn(|k| load(&states[k].y2));
-        let mut rows = [[0.0; PADDED]; TILE];
-        let mut start = 0;
-        while start < n {
-            let t = TILE.min(n - start);
-            let rows = &mut rows[..t];
-            for (l, c) in inp.iter().enumerate() {
-                for (r, &v) in rows.iter_mut().zip(&c[start..start + t]) {
-                    r[l] = v;
-                }
-            }
-            for r in rows.iter_mut() {
-                // SAFETY: `r` holds the eight doubles read.
-                let x0 = unsafe { _mm512_loadu_pd(r.as_ptr()) };
-                let (mut x, mut x1, mut x2) = (x0, in1, in2);
-                for k in 0..S {
-                    let [b0, b1, b2, a1, a2] = coef[k];
-                    let acc = _mm512_add_pd(_mm512_mul_pd(b0, x), _mm512_mul_pd(b1, x1));
-                    let acc = _mm512_add_pd(acc, _mm512_mul_pd(b2, x2));
-                    let acc = _mm512_sub_pd(acc, _mm512_mul_pd(a1, y1[k]));
-                    let y = _mm512_sub_pd(acc, _mm512_mul_pd(a2, y2[k]));
-                    // The next section's input history is this one's output history.
-                    x1 = y1[k];
-                    x2 = y2[k];
-                    y2[k] = y1[k];
-                    y1[k] = y;
-                    x = y;
-                }
-                in2 = in1;
-                in1 = x0;
-                // SAFETY: `r` has room for the eight doubles written.
-                unsafe { _mm512_storeu_pd(r.as_mut_ptr(), x) };
-            }
-            for (l, c) in out.iter_mut().enumerate() {
-                for (o, r) in c[start..start + t].iter_mut().zip(rows.iter()) {
-                    *o = r[l];
-                }
-            }
-            start += t;
-        }
-        let lanes = |v: __m512d| -> [f64; LANES] {
-            let mut p = [0.0; PADDED];
-            // SAFETY: `p` has room for the eight doubles written.
-            unsafe { _mm512_storeu_pd(p.as_mut_ptr(), v) };
-            std::array::from_fn(|l| p[l])
-        };
-        for k in 0..S {
-            let (x1, x2) = if k == 0 { (lanes(in1), lanes(in2)) } else { (lanes(y1[k - 1]), lanes(y2[k - 1])) };
-            states[k] = SectionState { x1, x2, y1: lanes(y1[k]), y2: lanes(y2[k]) };
-        }
-    }
-}
-
-/// The low-pass written with the AVX2 intrinsics, the sections' histories shared as in
-/// [`avx512::iir_block`]. Sixteen 256-bit registers cannot hold the six lanes' state of the
-/// generic code (its rows of eight, four per section: 32 registers for the default order 8),
-/// so the compiler kept it on the stack, a load and a store per row and sample. Here the lanes
-/// go through the cascade in two groups, `x, y, X, Y` in one 256-bit register and then
-/// `F_x, F_y` in one 128-bit register, one group after the other over the block: `2 + 2 S`
-/// registers of state per group (ten for `S = 4`).
-///
-/// `group!` is [`avx512::iir_block`]'s cascade for a group of lanes and a vector type. The
-/// AVX-512 one could be generated by it as well; it is left as it was because the hosts this
-/// was written and tested on have no AVX-512 to run it.
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use super::{iir_block as generic, lowpass, SectionState, LANES};
-    use std::arch::x86_64::{
-        __m128d, __m256d, _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_storeu_pd, _mm256_sub_pd, _mm_add_pd, _mm_loadu_pd, _mm_mul_pd,
-        _mm_set1_pd, _mm_storeu_pd, _mm_sub_pd,
-    };
-
-    /// Samples per tile: a group's lanes are moved into rows first and back after, so that
-    /// the loop carrying the recursion holds only the arithmetic.
-    const TILE: usize = 32;
-
-    /// [`super::iir_block`] for the CPUs with AVX2, the same operations in the same order for
-    /// every lane (`b0 x + b1 x1 + b2 x2 - a1 y1 - a2 y2`, left to right, separate multiplies
-    /// and adds), after [`super::SHARED_FROM`] samples (see [`super::avx512::iir_block`]).
-    #[target_feature(enable = "avx2")]
-    pub(super) fn iir_block(sections: &[lowpass::Section], states: &mut [SectionState], inp: [&[f64]; LANES], out: [&mut [f64]; LANES]) {
-        debug_assert!(super::histories_shared(states), "the low-pass's sections share their histories only after {} samples", super::SHARED_FROM);
-        macro_rules! fixed {
-            ($s:literal) => {
-                if let (Ok(sections), Ok(states)) = (<&[lowpass::Section; $s]>::try_from(sections), <&mut [SectionState; $s]>::try_from(&mut *states)) {
-                    let [i0, i1, i2, i3, i4, i5] = inp;
-                    let [o0, o1, o2, o3, o4, o5] = out;
-                    four::<$s>(sections, states, [i0, i1, i2, i3], [o0, o1, o2, o3]);
-                    two::<$s>(sections, states, [i4, i5], [o4, o5]);
-                    return;
-                }
-            };
-        }
-        fixed!(1);
-        fixed!(2);
-        fixed!(3);
-        fixed!(4);
-        fixed!(5);
-        fixed!(6);
-        generic(sections, states, inp, out);
-    }
-
-    /// One group of `$w` lanes starting at lane `$first`, in `$v` registers.
-    macro_rules! group {
-        ($name:ident, $first:literal, $w:literal, $v:ty, $load:ident, $store:ident, $set1:ident, $add:ident, $sub:ident, $mul:ident) => {
-            #[inline]
-            #[target_feature(enable = "avx2")]
-            fn $name<const S: usize>(sections: &[lowpass::Section; S], states: &mut [SectionState; S], inp: [&[f64]; $w], out: [&mut [f64]; $w]) {
-                let n = out[0].len();
-                let inp = inp.map(|c| &c[..n]);
-                let mut out = out.map(|c| &mut c[..n]);
-                let load = |a: &[f64; LANES]| {
-                    let mut p = [0.0; $w];
-                    p.copy_from_slice(&a[$first..$first + $w]);
-                    // SAFETY: `p` holds the doubles read.
-                    unsafe { $load(p.as_ptr()) }
-                };
-                let coef: [[$v; 5]; S] = std::array::from_fn(|k| {
-                    let (b, a) = (sections[k].b, sections[k].a);
-                    [b[0], b[1], b[2], a[0], a[1]].map(|c| $set1(c))
-                });
-                let (mut in1, mut in2) = (load(&states[0].x1), load(&states[0].x2));
-                let mut y1: [$v; S] = std::array::from_fn(|k| load(&states[k].y1));
-                let mut y2: [$v; S] = std::array::from_fn(|k| load(&states[k].y2));
-                let mut rows = [[0.0; $w]; TILE];
-                let mut start = 0;
-                while start < n {
-                    let t = TILE.min(n - start);
-                    let rows = &mut rows[..t];
-                    for (l, c) in inp.iter().enumerate() {
-                        for (r, &v) in rows.iter_mut().zip(&c[start..start + t]) {
-                            r[l] = v;
-                        }
-                    }
-                    for r in rows.iter_mut() {
-                        // SAFETY: `r` holds the doubles read.
-                        let x0 = unsafe { $load(r.as_ptr()) };
-                        let (mut x, mut x1, mut x2) = (x0, in1, in2);
-                        for k in 0..S {
-                            let [b0, b1, b2, a1, a2] = coef[k];
-                            let acc = $add($mul(b0, x), $mul(b1, x1));
-                            let acc = $add(acc, $mul(b2, x2));
-                            let acc = $sub(acc, $mul(a1, y1[k]));
-                            let y = $sub(acc, $mul(a2, y2[k]));
-                            // The next section's input history is this one's output history.
-                            x1 = y1[k];
-                            x2 = y2[k];
-                            y2[k] = y1[k];
-                            y1[k] = y;
-                            x = y;
-                        }
-                        in2 = in1;
-                        in1 = x0;
-                        // SAFETY: `r` has room for the doubles written.
-                        unsafe { $store(r.as_mut_ptr(), x) };
-                    }
-                    for (l, c) in out.iter_mut().enumerate() {
-                        for (o, r) in c[start..start + t].iter_mut().zip(rows.iter()) {
-                            *o = r[l];
-                        }
-                    }
-                    start += t;
-                }
-                let lanes = |v: $v| -> [f64; $w] {
-                    let mut p = [0.0; $w];
-                    // SAFETY: `p` has room for the doubles written.
-                    unsafe { $store(p.as_mut_ptr(), v) };
-                    p
-                };
-                for k in 0..S {
-                    let (x1, x2) = if k == 0 { (lanes(in1), lanes(in2)) } else { (lanes(y1[k - 1]), lanes(y2[k - 1])) };
-                    let (y1, y2) = (lanes(y1[k]), lanes(y2[k]));
-                    let st = &mut states[k];
-                    st.x1[$first..$first + $w].copy_from_slice(&x1);
-                    st.x2[$first..$first + $w].copy_from_slice(&x2);
-                    st.y1[$first..$first + $w].copy_from_slice(&y1);
-                    st.y2[$first..$first + $w].copy_from_slice(&y2);
-                }
-            }
-        };
-    }
-
-    group!(four, 0, 4, __m256d, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_set1_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd);
-    group!(two, 4, 2, __m128d, _mm_loadu_pd, _mm_storeu_pd, _mm_set1_pd, _mm_add_pd, _mm_sub_pd, _mm_mul_pd);
-}
-
 #[cfg(test)]
 mod tests {
-    //! The block path against the chain as it ran before it (every stage scan by scan
-    //! through ring buffers, kept here verbatim as the reference): the same bits for every
-    //! cutting of the input, with out-of-range readings in it, on every compiled path.
+    //! The block path against the chain run scan by scan through ring buffers, written
+    //! plainly here as the reference: the same bits for every cutting of the input, with
+    //! out-of-range readings in it, on every instruction set.
 
     use super::*;
     use crate::pipeline;
+    use crate::simd::Isa;
     use oilfilm_physics::config::RigConfig;
 
     /// A ring of `N`-wide rows, indexed by an ever-growing counter.
@@ -1129,9 +603,11 @@ mod tests {
         }
     }
 
-    /// The scan-by-scan chain: a fresh [`CausalChain`]'s design and state, and the rings.
+    /// The scan-by-scan chain: a fresh [`CausalChain`]'s design and state, the low-pass's
+    /// state per section (`x[n-1]`, `y[n-1]`, `q[n]` of six lanes) and the rings.
     struct ScanByScan {
         c: CausalChain,
+        iir: Vec<[[f64; 6]; 3]>,
         raw: Ring<CHANNEL_COUNT>,
         filtered: Ring<8>,
         velocity: Ring<4>,
@@ -1139,14 +615,36 @@ mod tests {
 
     impl ScanByScan {
         fn new(fresh: &CausalChain) -> Self {
-            let (d, m) = (fresh.delays, fresh.sg.len());
-            Self { c: fresh.clone(), raw: Ring::new(d.lookahead + d.lookback + 1), filtered: Ring::new(4 * m + 1), velocity: Ring::new(2 * m + 1) }
+            let (d, m) = (fresh.delays, fresh.chain.derivative.half_length());
+            let sections = fresh.chain.lowpass.sections().len();
+            Self { c: fresh.clone(), iir: vec![[[0.0; 6]; 3]; sections], raw: Ring::new(d.lookahead + d.lookback + 1), filtered: Ring::new(4 * m + 1), velocity: Ring::new(2 * m + 1) }
         }
 
         fn push(&mut self, values: &[f64], out: &mut CausalOutput) {
             for row in values.chunks_exact(self.c.width) {
                 self.push_scan(row, out);
             }
+        }
+
+        /// One sample of six lanes through the sections; `first` starts each in the DC steady
+        /// state of its first input. `y = (b0 x + q) - a1 y[n-1]`, `q = (b1 x + b2 x[n-1]) -
+        /// a2 y[n-1]`.
+        fn lowpass(&mut self, mut x: [f64; 6], first: bool) -> [f64; 6] {
+            for (s, [x1, y1, q]) in self.c.chain.lowpass.sections().iter().zip(self.iir.iter_mut()) {
+                let ([b0, b1, b2], [a1, a2]) = (s.b, s.a);
+                if first {
+                    let g = (b0 + b1 + b2) / (1.0 + a1 + a2);
+                    *x1 = x;
+                    *y1 = x.map(|v| g * v);
+                    *q = std::array::from_fn(|l| b1 * x[l] + b2 * x[l] - a2 * y1[l]);
+                }
+                for l in 0..6 {
+                    let y = (b0 * x[l] + q[l]) - a1 * y1[l];
+                    q[l] = b1 * x[l] + b2 * x1[l] - a2 * y1[l];
+                    (x1[l], y1[l], x[l]) = (x[l], y, y);
+                }
+            }
+            x
         }
 
         fn push_scan(&mut self, row: &[f64], out: &mut CausalOutput) {
@@ -1183,32 +681,38 @@ mod tests {
             let mut s = [0.0; CHANNEL_COUNT];
             for (k, f) in self.c.fronts.iter().enumerate() {
                 let base = m as i64 + f.start as i64;
-                let mut acc = 0.0;
-                for (j, &w) in f.weights.iter().enumerate() {
+                let mut acc = f.weights[0] * self.raw.at(base as u64)[k];
+                for (j, &w) in f.weights.iter().enumerate().skip(1) {
                     acc += w * self.raw.at((base + j as i64) as u64)[k];
                 }
                 s[k] = acc;
             }
             let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = s;
-            let [fx, fy] = self.c.applied.at(f1, f2, f3);
-            let lanes = [0.5 * (a_x + b_x), 0.5 * (a_y + b_y), frame_x, frame_y, fx, fy];
+            let [fx, fy] = self.c.chain.applied.at(f1, f2, f3);
             let p = self.c.lowpassed;
             self.c.lowpassed += 1;
-            let y = lowpass_scan(&self.c.sections, &mut self.c.iir, lanes, p == 0);
+            let y = self.lowpass([0.5 * (a_x + b_x), 0.5 * (a_y + b_y), frame_x, frame_y, fx, fy], p == 0);
             self.filtered.set(p, [y[0], y[1], y[2], y[3], y[4], y[5], f3, temperature]);
             // Velocity at p - M, acceleration (and every output) at p - 2M.
-            let mh = self.c.sg.len() as u64;
+            let sg = self.c.chain.derivative.coefficients().to_vec();
+            let mh = sg.len() as u64;
             if p < 2 * mh {
                 return;
             }
+            let derivative = |at: &dyn Fn(u64) -> [f64; 4], i: u64| -> [f64; 4] {
+                std::array::from_fn(|l| {
+                    let mut acc = sg[0] * (at(i + 1)[l] - at(i - 1)[l]);
+                    for (k, &c) in sg.iter().enumerate().skip(1) {
+                        acc += c * (at(i + k as u64 + 1)[l] - at(i - k as u64 - 1)[l]);
+                    }
+                    acc
+                })
+            };
             let q = p - mh;
-            let mut v = [0.0; 4];
-            for (k, &c) in self.c.sg.iter().enumerate() {
-                let (ahead, behind) = (self.filtered.at(q + k as u64 + 1), self.filtered.at(q - k as u64 - 1));
-                for l in 0..4 {
-                    v[l] += c * (ahead[l] - behind[l]);
-                }
-            }
+            let v = derivative(&|i| {
+                let f = self.filtered.at(i);
+                [f[0], f[1], f[2], f[3]]
+            }, q);
             self.velocity.set(q, v);
             // Time index of the low-passed sample `r`: the first de-skewed one is `lookback`.
             let r = p - 2 * mh;
@@ -1216,13 +720,7 @@ mod tests {
             if r < (d.settling + d.derivative) as u64 {
                 return;
             }
-            let mut a = [0.0; 4];
-            for (k, &c) in self.c.sg.iter().enumerate() {
-                let (ahead, behind) = (self.velocity.at(r + k as u64 + 1), self.velocity.at(r - k as u64 - 1));
-                for l in 0..4 {
-                    a[l] += c * (ahead[l] - behind[l]);
-                }
-            }
+            let a = derivative(&|i| *self.velocity.at(i), r);
             let here = *self.filtered.at(r);
             let vel = *self.velocity.at(r);
             if out.is_empty() {
@@ -1234,8 +732,9 @@ mod tests {
             out.vy_m_s.push(vel[1]);
             out.ax_m_s2.push(a[0]);
             out.ay_m_s2.push(a[1]);
-            let fx = here[4] - self.c.mass_kg * a[2];
-            let fy = here[5] - self.c.mass_kg * a[3];
+            let mass = self.c.chain.mechanics().housing_mass_kg;
+            let fx = here[4] - mass * a[2];
+            let fy = here[5] - mass * a[3];
             out.fx_n.push(fx);
             out.fy_n.push(fy);
             out.static_load_n.push(here[6]);
@@ -1332,21 +831,6 @@ mod tests {
         (values, columns, width)
     }
 
-    /// The compiled paths this CPU can run.
-    fn paths() -> Vec<Isa> {
-        let mut p = vec![Isa::Baseline];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                p.push(Isa::Avx2);
-            }
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                p.push(Isa::Avx512);
-            }
-        }
-        p
-    }
-
     /// Block sizes (scans) for one cutting of `scans`: `fixed` if given, else varied.
     fn cutting(scans: usize, fixed: Option<usize>, noise: &mut Noise) -> Vec<usize> {
         let mut sizes = Vec::new();
@@ -1359,12 +843,14 @@ mod tests {
         sizes
     }
 
-    fn run_blocks(chain: &mut CausalChain, isa: Isa, values: &[f64], sizes: &[usize]) -> CausalOutput {
+    fn run_blocks(chain: &CausalChain, isa: Isa, values: &[f64], sizes: &[usize]) -> CausalOutput {
+        let mut chain = chain.clone();
+        chain.chain = chain.chain.with_isa(isa);
         let mut out = CausalOutput::default();
         let mut at = 0;
         for &s in sizes {
             let block = &values[at * chain.width..(at + s) * chain.width];
-            chain.push_with(isa, block, &mut out);
+            chain.push(block, &mut out).unwrap();
             at += s;
         }
         out
@@ -1399,12 +885,12 @@ mod tests {
             assert_eq!(expected.len(), scans - d.first_index() - d.delay_scans(), "config {n}");
             assert!(expected.violations.len() >= 6 && expected.violations.iter().any(|v| v.count == 40), "config {n}: {:?}", expected.violations);
             assert!(expected.valid.iter().any(|&v| v) && expected.valid.iter().any(|&v| !v), "config {n}");
-            for isa in paths() {
+            for isa in Isa::available() {
                 let mut cuttings: Vec<Vec<usize>> = [1, 7, 500, 1_024, 4_999, *scans].iter().map(|&b| cutting(*scans, Some(b), &mut noise)).collect();
                 cuttings.push(cutting(*scans, None, &mut noise));
                 cuttings.push(cutting(*scans, None, &mut noise));
                 for sizes in &cuttings {
-                    let got = run_blocks(&mut fresh.clone(), isa, &values, sizes);
+                    let got = run_blocks(&fresh, isa, &values, sizes);
                     if let Some(diff) = first_difference(&got, &expected) {
                         panic!("config {n}, {isa:?}, blocks {:?}...: {diff}", &sizes[..sizes.len().min(5)]);
                     }
@@ -1423,12 +909,12 @@ mod tests {
         let (values, columns, width) = record(&cal, RawUnits::Volts, 8_000, 0, 7);
         let fresh = CausalChain::new(&columns, width, RawUnits::Volts, cal.sample_rate_hz(), &cal, &pipeline::mechanics_of(&rig), &config).unwrap();
         let sizes = cutting(8_000, Some(500), &mut Noise(3));
-        let got = run_blocks(&mut fresh.clone(), Isa::detect(), &values, &sizes);
+        let got = run_blocks(&fresh, Isa::current(), &values, &sizes);
         type Coefficient = fn(&mut CausalChain) -> &mut f64;
         let coefficients: [(&str, Coefficient); 3] = [
             ("de-skew tap", |c| &mut c.fronts[2].weights[1]),
-            ("low-pass b1", |c| &mut c.sections[1].b[1]),
-            ("differentiator c2", |c| &mut c.sg[1]),
+            ("low-pass b1", |c| &mut c.chain.lowpass.sections_mut()[1].b[1]),
+            ("differentiator c2", |c| &mut c.chain.derivative.coefficients_mut()[1]),
         ];
         for (what, coefficient) in coefficients {
             let mut changed = fresh.clone();

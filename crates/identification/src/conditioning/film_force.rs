@@ -75,7 +75,7 @@ pub(crate) fn applied_in_place(f1_to_fx: &mut [f64], f2_to_fy: &mut [f64], f3: &
 }
 
 /// The applied part of eq. 2 at one sample, for a validated [`Mechanics`].
-#[derive(Copy, Clone)]
+#[derive(Copy, Clone, Debug)]
 pub(crate) struct Applied {
     c1: f64,
     s1: f64,

@@ -3,42 +3,30 @@
 //! state carried from call to call; each block's backward pass, derivatives and eq. 2's
 //! inertial part run over the block and the low-pass's settling past it.
 //!
-//! [`super::condition_window_into`] conditions a block as a record of its own with the
-//! chain's edge on either side: per 1 000-scan block at the launch files' 55.5 Hz, 2 234
-//! scans through the front end and the forward pass (started on an odd reflection 617 scans
-//! before the block) and the backward pass (started on a reflection past the window). Here a
-//! scan goes through the front end and the forward pass once, and the backward pass of a
-//! block starts in its DC steady state on the forward output `settling` scans past the
-//! block (plus the differentiators' reach), where the reflection stood: the same filter, its
-//! start transient decayed to 1e-7 by the block either way. The forward pass starts once, at
-//! the stream's first scan whose de-skew stencils are complete, in its steady state (no
-//! reflection): what it differs by from
-//! [`super::condition_window_into`]'s is that start's transient, below 1e-7 once a block is
-//! reached. Outputs are bit for bit independent of how the scans are cut into calls.
+//! Conditioning a block as a window ([`super::Chain::condition_window_into`]) would put
+//! `2 edge` more scans through the front end and both passes per block (at the launch files'
+//! 55.5 Hz and 1 000-scan blocks, 2 234 scans for 1 000). Here a scan goes through the front
+//! end and the forward pass once, and the backward pass of a block starts in its DC steady
+//! state on the forward output `settling` scans past the block (plus the differentiators'
+//! reach), where the reflection stood: the same filter, its start transient decayed to 1e-7
+//! by the block either way. The forward pass starts once, in its steady state, at the
+//! stream's first scan whose de-skew stencils are complete. Outputs are bit for bit
+//! independent of how the scans are cut into calls.
 //!
-//! What stays the windowed conditioning's: a block whose window (the block and `edge` scans
-//! on either side) holds a reading the front end cannot turn into a finite value is not
-//! conditioned here ([`ZeroPhaseStream::block`] returns `None`; the caller conditions that
-//! window as a record, which names the reading), and the forward pass starts again in steady
-//! state after such a reading. The range check (step 2) is the windowed one, on the block's
-//! window of raw readings.
+//! A block whose window (the block and `edge` scans on either side) holds a reading the
+//! front end cannot turn into a finite value is not conditioned here ([`ZeroPhaseStream::block`]
+//! returns `None`; the caller conditions that window as a record, which names the reading),
+//! and the forward pass starts again in steady state after such a reading. The range check
+//! (step 2) is the windowed one, on the block's window of raw readings.
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::{deskew, differentiate, film_force, front_tile, lowpass, range_check, ConditioningConfig, FrontChannel, Mechanics, RangeViolation, RawRecord, RawUnits, TILE};
+use super::chain::{front_tile, Constants, Derivatives, FrontChannel, TILE};
+use super::deskew::MAX_TAPS;
+use super::lowpass::ForwardStream;
+use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawRecord, RawUnits};
+use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
-
-/// One channel's constants for the front end.
-struct Channel {
-    id: ChannelId,
-    offset: f64,
-    gain: f64,
-    lo: f64,
-    hi: f64,
-    /// Every in-range reading converts to a finite value (`super::FrontChannel::si_bounded`).
-    si_bounded: bool,
-    delay: deskew::FractionalDelay,
-}
 
 /// A conditioned block ([`ZeroPhaseStream::block`]): the columns the estimator reads, one
 /// value per scan of the block, and the step-2 violations in the block's window (indices
@@ -59,18 +47,14 @@ pub struct Block {
 
 /// The zero-phase chain over a stream of scans (see the module's documentation).
 pub struct ZeroPhaseStream {
+    chain: Chain,
     units: RawUnits,
-    calibration: Calibration,
     col_of: [usize; CHANNEL_COUNT],
-    channels: Vec<Channel>,
-    applied: film_force::Applied,
-    lp: lowpass::Butterworth,
-    sg: differentiate::SavitzkyGolayDerivative,
-    mass_kg: f64,
+    /// By channel index.
+    constants: [Constants; CHANNEL_COUNT],
     /// How far the de-skew stencils reach before and after their output scan.
     lookback: usize,
     lookahead: usize,
-    edge: usize,
     /// The front end and the forward pass are done for stream scans `..produced`.
     produced: usize,
     /// Their outputs for scans `kept_from..produced`: the forward pass's eight lanes
@@ -79,20 +63,19 @@ pub struct ZeroPhaseStream {
     frames: Vec<[f64; 8]>,
     temperature: Vec<f64>,
     /// `None` until the next finite front-end output (at the start, and after one that is not).
-    forward: Option<lowpass::ForwardStream>,
+    forward: Option<ForwardStream>,
     /// Scans whose front-end output is not finite, ascending (dropped once no block's
     /// window can reach them).
     bad: Vec<usize>,
     // Working memory, reused.
     tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
-    input: Box<[f64; TILE + deskew::MAX_TAPS]>,
     lanes: [Vec<f64>; 8],
     load: Vec<f64>,
     temp: Vec<f64>,
     back: Vec<[f64; 8]>,
+    /// The block's final low-passed columns and `[first, second]` derivatives of x, y, X, Y.
     columns: [Vec<f64>; 8],
-    first: Vec<f64>,
-    second: Vec<f64>,
+    derived: [[Vec<f64>; 2]; 4],
 }
 
 impl ZeroPhaseStream {
@@ -107,11 +90,7 @@ impl ZeroPhaseStream {
         mechanics: &Mechanics,
         config: &ConditioningConfig,
     ) -> Result<Option<Self>, IdentificationError> {
-        config.validate(sample_rate_hz)?;
-        mechanics.validate()?;
-        if !config.deskew {
-            return Ok(None);
-        }
+        let chain = Chain::new(calibration, mechanics, config, sample_rate_hz)?;
         let mut col_of = [usize::MAX; CHANNEL_COUNT];
         for (k, c) in channels.iter().enumerate() {
             col_of[c.index()] = k;
@@ -122,44 +101,26 @@ impl ZeroPhaseStream {
                 reason: "missing from the stream; conditioning needs all ten channels".into(),
             });
         }
-        let (lp, sg) = config.designs(sample_rate_hz, None)?;
         let (mut lookback, mut lookahead) = (0usize, 0usize);
-        let mut chans = Vec::with_capacity(CHANNEL_COUNT);
-        for &id in &ChannelId::ALL {
-            let delay = deskew::FractionalDelay::for_offset(calibration.sample_offset_s(id)?, sample_rate_hz, config.deskew_taps)?;
+        let mut constants = [Constants::SI; CHANNEL_COUNT];
+        for ch in ChannelId::ALL {
+            let Some(delay) = &chain.delays[ch.index()] else { return Ok(None) };
             let start = delay.stencil_start();
             lookback = lookback.max((-start).max(0) as usize);
             lookahead = lookahead.max((start + delay.taps() as isize - 1).max(0) as usize);
-            let (offset, gain, lo, hi) = match units {
-                RawUnits::Volts => {
-                    let c = calibration.channel(id)?;
-                    let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
-                    if !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite()) {
-                        // Every reading would be unusable: the windowed conditioning says why.
-                        return Ok(None);
-                    }
-                    let (lo, hi) = range_check::volts_bounds(id, calibration)?;
-                    (offset, 1.0 / sensitivity, lo, hi)
-                }
-                // SI readings go through the same stencils as they are: `(v - 0) * 1 = v`.
-                RawUnits::Si => (0.0, 1.0, f64::NEG_INFINITY, f64::INFINITY),
-            };
-            let si_bounded = super::conversion_bounded(offset, gain, lo, hi);
-            chans.push(Channel { id, offset, gain, lo, hi, si_bounded, delay });
+            if units == RawUnits::Volts {
+                // Every reading would be unusable: the windowed conditioning says why.
+                let Some(k) = chain.volts[ch.index()] else { return Ok(None) };
+                constants[ch.index()] = k;
+            }
         }
-        let edge = super::edge_samples(calibration, config, sample_rate_hz)?;
         Ok(Some(Self {
+            chain,
             units,
-            calibration: calibration.clone(),
             col_of,
-            channels: chans,
-            applied: film_force::Applied::new(mechanics),
-            lp,
-            sg,
-            mass_kg: mechanics.housing_mass_kg,
+            constants,
             lookback,
             lookahead,
-            edge,
             produced: lookback,
             kept_from: lookback,
             frames: Vec::new(),
@@ -167,20 +128,18 @@ impl ZeroPhaseStream {
             forward: None,
             bad: Vec::new(),
             tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
-            input: Box::new([0.0; TILE + deskew::MAX_TAPS]),
             lanes: std::array::from_fn(|_| vec![0.0; TILE]),
             load: Vec::new(),
             temp: Vec::new(),
             back: Vec::new(),
             columns: Default::default(),
-            first: Vec::new(),
-            second: Vec::new(),
+            derived: Default::default(),
         }))
     }
 
     /// Scans a block needs on either side: [`super::edge_samples`].
     pub fn edge(&self) -> usize {
-        self.edge
+        self.chain.edge()
     }
 
     /// The first stream scan [`ZeroPhaseStream::advance`] still reads (the caller may drop
@@ -193,99 +152,7 @@ impl ZeroPhaseStream {
     /// covers; `raw.columns[*][0]` is stream scan `offset` (it must hold every scan from
     /// [`ZeroPhaseStream::first_needed`] on).
     pub fn advance(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the only requirement of a `target_feature` function is that the CPU
-                // has the feature, which was checked on the line above.
-                return unsafe { self.advance_avx512(raw, offset) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: as above.
-                return unsafe { self.advance_avx2(raw, offset) };
-            }
-        }
-        self.advance_body(raw, offset)
-    }
-
-    /// [`ZeroPhaseStream::advance`] compiled for AVX2: the same operations in the same order
-    /// (no fused multiply-add), so the same result bit for bit.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn advance_avx2(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
-        self.advance_body(raw, offset)
-    }
-
-    /// [`ZeroPhaseStream::advance`] compiled for AVX-512, as above.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn advance_avx512(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
-        self.advance_body(raw, offset)
-    }
-
-    #[inline(always)]
-    fn advance_body(&mut self, raw: &RawRecord, offset: usize) -> Result<(), IdentificationError> {
-        let end = (offset + raw.len()).saturating_sub(self.lookahead);
-        if self.produced < end && self.first_needed() < offset {
-            return Err(IdentificationError::BadInput {
-                what: "stream".into(),
-                reason: format!("scans from {} needed, the record starts at {offset}", self.first_needed()),
-            });
-        }
-        while self.produced < end {
-            let (p, q) = (self.produced, (self.produced + TILE).min(end));
-            let (w0, w1) = (p - self.lookback - offset, q + self.lookahead - offset);
-            let len = w1 - w0;
-            let mut chans = Vec::with_capacity(CHANNEL_COUNT);
-            for c in &self.channels {
-                let column = raw.columns.get(self.col_of[c.id.index()]).and_then(|v| v.get(w0..w1)).ok_or_else(|| IdentificationError::BadInput {
-                    what: format!("column `{}`", c.id),
-                    reason: format!("scans {w0}..{w1} of the record missing"),
-                })?;
-                chans.push(FrontChannel { volts: column, offset: c.offset, gain: c.gain, lo: c.lo, hi: c.hi, si_bounded: c.si_bounded, delay: &c.delay, interior: c.delay.interior(len) });
-            }
-            let (o0, o1) = (self.lookback, self.lookback + (q - p));
-            self.load.resize(o1, 0.0);
-            self.temp.resize(o1, 0.0);
-            let mut lanes = self.lanes.each_mut().map(|l| &mut l[..]);
-            front_tile(&chans, &self.applied, len, o0, o0, o1, &mut self.tile, &mut self.input, &mut lanes, &mut self.load, &mut self.temp);
-            let new_from = self.frames.len();
-            for i in 0..q - p {
-                self.frames.push(std::array::from_fn(|l| self.lanes[l][i]));
-            }
-            self.temperature.extend_from_slice(&self.temp[o0..o1]);
-            self.forward_over(new_from, p);
-            self.produced = q;
-        }
-        Ok(())
-    }
-
-    /// The forward pass over `frames[from..]` (stream scans from `scan`), restarting in steady
-    /// state after any frame (or temperature) that is not finite.
-    #[inline(always)]
-    fn forward_over(&mut self, from: usize, scan: usize) {
-        let mut i = from;
-        while i < self.frames.len() {
-            // The run of finite outputs from `i`.
-            let mut j = i;
-            while j < self.frames.len() && self.frames[j].iter().fold(self.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
-                j += 1;
-            }
-            if j > i {
-                if self.forward.is_none() {
-                    self.forward = Some(self.lp.forward_steady(self.frames[i]));
-                }
-                if let Some(st) = self.forward.as_mut() {
-                    self.lp.forward_run(st, &mut self.frames[i..j]);
-                }
-            }
-            if j < self.frames.len() {
-                self.bad.push(scan + (j - from));
-                self.forward = None;
-                j += 1;
-            }
-            i = j;
-        }
+        simd::dispatch(self.chain.isa(), Advance { s: self, raw, offset })
     }
 
     /// The block of `len` scans from stream scan `start`, once the stream has been advanced
@@ -294,40 +161,10 @@ impl ZeroPhaseStream {
     /// make every reading of the window finite (or the scans are not there yet); condition
     /// the window as a record instead ([`super::condition_window_into`]).
     pub fn block(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the only requirement of a `target_feature` function is that the CPU
-                // has the feature, which was checked on the line above.
-                return unsafe { self.block_avx512(start, len, raw, offset) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: as above.
-                return unsafe { self.block_avx2(start, len, raw, offset) };
-            }
-        }
-        self.block_body(start, len, raw, offset)
-    }
-
-    /// [`ZeroPhaseStream::block`] compiled for AVX2, as [`ZeroPhaseStream::advance_avx2`].
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn block_avx2(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
-        self.block_body(start, len, raw, offset)
-    }
-
-    /// [`ZeroPhaseStream::block`] compiled for AVX-512, as above.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn block_avx512(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
-        self.block_body(start, len, raw, offset)
-    }
-
-    #[inline(always)]
-    fn block_body(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
-        let m = self.sg.half_length();
-        let settle = self.lp.settling_samples();
-        let window = start.checked_sub(self.edge).map(|a| a..start + len + self.edge);
+        let edge = self.edge();
+        let m = self.chain.derivative.half_length();
+        let settle = self.chain.lowpass.settling_samples();
+        let window = start.checked_sub(edge).map(|a| a..start + len + edge);
         let back = start.checked_sub(2 * m).map(|a| a..start + len + 2 * m + settle);
         let (Some(window), Some(back)) = (window, back) else { return Ok(None) };
         if back.start < self.kept_from || back.end > self.produced || window.start < offset || window.end > offset + raw.len() {
@@ -340,42 +177,30 @@ impl ZeroPhaseStream {
         }
         self.back.clear();
         self.back.extend_from_slice(&self.frames[back.start - self.kept_from..back.end - self.kept_from]);
-        self.lp.backward_from_steady(&mut self.back);
         let n = len + 4 * m;
-        for (l, col) in self.columns.iter_mut().enumerate() {
-            col.clear();
-            col.extend(self.back[..n].iter().map(|f| f[l]));
+        for c in self.columns.iter_mut().chain(self.derived.iter_mut().flatten()) {
+            c.resize(n, 0.0);
         }
-        let out_range = 2 * m..2 * m + len;
-        let mut block = Block::default();
-        let [x, y, _, _, hx, hy, fx, fy] = &self.columns;
-        let (v, a) = (&mut self.first, &mut self.second);
-        v.resize(n, 0.0);
-        a.resize(n, 0.0);
-        self.sg.apply_twice_into(x, v, a)?;
-        block.vx_m_s = v[out_range.clone()].to_vec();
-        block.ax_m_s2 = a[out_range.clone()].to_vec();
-        self.sg.apply_twice_into(y, v, a)?;
-        block.vy_m_s = v[out_range.clone()].to_vec();
-        block.ay_m_s2 = a[out_range.clone()].to_vec();
-        // Eq. 2's inertial part, `F -= m X''`, as `subtract_inertia` does it.
-        let mass = self.mass_kg;
-        self.sg.apply_twice_into(hx, v, a)?;
-        block.fx_n = fx[out_range.clone()].to_vec();
-        for (f, &acc) in block.fx_n.iter_mut().zip(&a[out_range.clone()]) {
-            *f -= mass * acc;
-        }
-        self.sg.apply_twice_into(hy, v, a)?;
-        block.fy_n = fy[out_range.clone()].to_vec();
-        for (f, &acc) in block.fy_n.iter_mut().zip(&a[out_range.clone()]) {
-            *f -= mass * acc;
-        }
-        block.x_m = x[out_range.clone()].to_vec();
-        block.y_m = y[out_range].to_vec();
-        block.temperature_c = self.temperature[start - self.kept_from..start + len - self.kept_from].to_vec();
-        for c in &self.channels {
-            let column = &raw.columns[self.col_of[c.id.index()]][window.start - offset..window.end - offset];
-            if let Some(v) = range_check::check(c.id, column, self.units, &self.calibration)? {
+        simd::dispatch(self.chain.isa(), Backward { s: self, n })?;
+        let out = 2 * m..2 * m + len;
+        let cut = |c: &Vec<f64>| c[out.clone()].to_vec();
+        let [x, y, _, _, _, _, fx, fy] = &self.columns;
+        let [[vx, ax], [vy, ay], ..] = &self.derived;
+        let mut block = Block {
+            x_m: cut(x),
+            y_m: cut(y),
+            vx_m_s: cut(vx),
+            vy_m_s: cut(vy),
+            ax_m_s2: cut(ax),
+            ay_m_s2: cut(ay),
+            fx_n: cut(fx),
+            fy_n: cut(fy),
+            temperature_c: self.temperature[start - self.kept_from..start + len - self.kept_from].to_vec(),
+            range_violations: Vec::new(),
+        };
+        for ch in ChannelId::ALL {
+            let column = &raw.columns[self.col_of[ch.index()]][window.start - offset..window.end - offset];
+            if let Some(v) = range_check::check(ch, column, self.units, self.chain.calibration())? {
                 block.range_violations.push(v);
             }
         }
@@ -385,15 +210,105 @@ impl ZeroPhaseStream {
     /// Drops what no block from stream scan `next` on needs (in batches: a move of what is
     /// kept every few blocks).
     pub fn release_before(&mut self, next: usize) {
-        let keep = next.saturating_sub(2 * self.sg.half_length()).max(self.kept_from).min(self.produced);
+        let keep = next.saturating_sub(2 * self.chain.derivative.half_length()).max(self.kept_from).min(self.produced);
         let dead = keep - self.kept_from;
         if dead > 0 && dead >= 4 * (self.produced - keep) {
             self.frames.drain(..dead);
             self.temperature.drain(..dead);
             self.kept_from = keep;
         }
-        let reach_from = next.saturating_sub(self.edge + self.lookback);
+        let reach_from = next.saturating_sub(self.edge() + self.lookback);
         self.bad.retain(|&b| b >= reach_from);
+    }
+}
+
+/// [`ZeroPhaseStream::advance`] as a [`Kernel`].
+struct Advance<'a> {
+    s: &'a mut ZeroPhaseStream,
+    raw: &'a RawRecord,
+    offset: usize,
+}
+
+impl Kernel for Advance<'_> {
+    type Output = Result<(), IdentificationError>;
+
+    #[inline(always)]
+    fn run<S: Simd>(self, simd: S) -> Self::Output {
+        let Advance { s, raw, offset } = self;
+        let end = (offset + raw.len()).saturating_sub(s.lookahead);
+        if s.produced < end && s.first_needed() < offset {
+            return Err(IdentificationError::BadInput { what: "stream".into(), reason: format!("scans from {} needed, the record starts at {offset}", s.first_needed()) });
+        }
+        let mut input = [0.0; TILE + MAX_TAPS];
+        while s.produced < end {
+            let (p, q) = (s.produced, (s.produced + TILE).min(end));
+            let (w0, w1) = (p - s.lookback - offset, q + s.lookahead - offset);
+            let len = w1 - w0;
+            let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+            for ch in ChannelId::ALL {
+                let volts = raw.columns.get(s.col_of[ch.index()]).and_then(|v| v.get(w0..w1)).ok_or_else(|| IdentificationError::BadInput {
+                    what: format!("column `{ch}`"),
+                    reason: format!("scans {w0}..{w1} of the record missing"),
+                })?;
+                // `new` made a stream only with every stencil.
+                let Some(delay) = &s.chain.delays[ch.index()] else { return Ok(()) };
+                chans.push(FrontChannel { volts, k: s.constants[ch.index()], delay, interior: delay.interior(len) });
+            }
+            let (o0, o1) = (s.lookback, s.lookback + (q - p));
+            s.load.resize(o1, 0.0);
+            s.temp.resize(o1, 0.0);
+            let mut lanes = s.lanes.each_mut().map(|l| &mut l[..]);
+            front_tile(&chans, &s.chain.applied, len, o0, o0..o1, &mut s.tile, &mut input, &mut lanes, &mut s.load, &mut s.temp);
+            let new_from = s.frames.len();
+            s.frames.extend((0..q - p).map(|i| std::array::from_fn(|l| s.lanes[l][i])));
+            s.temperature.extend_from_slice(&s.temp[o0..o1]);
+            // The forward pass over the new frames, restarting in steady state after any
+            // frame (or temperature) that is not finite.
+            let mut i = new_from;
+            while i < s.frames.len() {
+                let mut j = i;
+                while j < s.frames.len() && s.frames[j].iter().fold(s.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
+                    j += 1;
+                }
+                if j > i {
+                    let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(s.frames[i]));
+                    s.chain.lowpass.forward_run(simd, st, &mut s.frames[i..j]);
+                }
+                if j < s.frames.len() {
+                    s.bad.push(p + (j - new_from));
+                    s.forward = None;
+                    j += 1;
+                }
+                i = j;
+            }
+            s.produced = q;
+        }
+        Ok(())
+    }
+}
+
+/// A block's backward pass, derivatives and eq. 2's inertial part as a [`Kernel`]: the
+/// forward output `back[..n]` is the block with the differentiators' reach on either side,
+/// `back[n..]` the low-pass's settling past it (where a record's reflection would stand).
+struct Backward<'a> {
+    s: &'a mut ZeroPhaseStream,
+    n: usize,
+}
+
+impl Kernel for Backward<'_> {
+    type Output = Result<(), IdentificationError>;
+
+    #[inline(always)]
+    fn run<S: Simd>(self, simd: S) -> Self::Output {
+        let s = self.s;
+        let (store, right) = s.back.split_at_mut(self.n);
+        let mut d = Derivatives::new(simd, &s.chain, s.derived.each_mut().map(|p| p.each_mut().map(|c| &mut c[..])));
+        let mut cols = s.columns.each_mut().map(|c| &mut c[..]);
+        s.chain.lowpass.backward_consumed(simd, &mut cols, store, right, &mut d)?;
+        if !d.complete() {
+            return Err(IdentificationError::invalid("conditioning", "the derivatives did not cover the block"));
+        }
+        Ok(())
     }
 }
 
@@ -413,12 +328,13 @@ mod tests {
         ConditioningConfig { lowpass_cutoff_hz: 55.5, ..ConditioningConfig::default() }
     }
 
-    /// Feeds `raw` to a fresh stream in cuts of `cut` scans (the stream's record keeps every
-    /// scan, as a node that never drops any), taking each block of `len` scans from `edge`
-    /// on as soon as its window is in; the blocks and their starts.
-    fn blocks(raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
+    /// Feeds `raw` to a fresh stream (on `isa`) in cuts of `cut` scans (the stream's record
+    /// keeps every scan, as a node that never drops any), taking each block of `len` scans
+    /// from `edge` on as soon as its window is in; the blocks and their starts.
+    fn blocks_on(isa: crate::simd::Isa, raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
         let calibration = DaqConfig::zhou2004().calibration();
         let mut zp = ZeroPhaseStream::new(&raw.channels, raw.units, raw.sample_rate_hz, &calibration, &mechanics(), &config()).unwrap().unwrap();
+        zp.chain = zp.chain.with_isa(isa);
         let mut fed = RawRecord { columns: vec![Vec::new(); raw.channels.len()], ..raw.clone() };
         let mut next = zp.edge();
         let mut out = Vec::new();
@@ -437,6 +353,10 @@ mod tests {
             }
         }
         out
+    }
+
+    fn blocks(raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
+        blocks_on(crate::simd::Isa::current(), raw, cut, len)
     }
 
     /// Largest difference of the block's columns from `reference`'s samples `at..` (the
@@ -464,9 +384,9 @@ mod tests {
     }
 
     /// Every block agrees with the whole record's conditioning and with the windowed
-    /// conditioning of its window (what the node published before ADR 0019) to within the
-    /// filters' settling tolerance, and the blocks' bits do not depend on how the scans
-    /// came in (one at a time, 7, 500 or all at once).
+    /// conditioning of its window to within the filters' settling tolerance, and the blocks'
+    /// bits do not depend on how the scans came in (one at a time, 7, 500 or all at once)
+    /// nor on the instruction set.
     #[test]
     fn blocks_match_the_windowed_conditioning_and_do_not_depend_on_the_cuts() {
         let calibration = DaqConfig::zhou2004().calibration();
@@ -492,6 +412,9 @@ mod tests {
         assert!(vs_window > 0.0);
         for cut in [1, 7, 9_000] {
             assert!(blocks(&raw, cut, 1_000) == reference, "cut {cut}");
+        }
+        for isa in crate::simd::Isa::available() {
+            assert!(blocks_on(isa, &raw, 500, 1_000) == reference, "{isa:?}");
         }
     }
 

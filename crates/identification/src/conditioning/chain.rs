@@ -1,0 +1,746 @@
+//! The prepared conditioning chain: its filters designed once from the calibration, the
+//! rig's mechanics and the configuration (as a planner prepares an FFT), and the front end
+//! and the record driver every way of running the chain shares (ADR 0021).
+//!
+//! [`Chain`] owns the de-skew stencils, the low-pass, the differentiator, eq. 2's constants
+//! and the instruction set its kernels run on. A record (or a window of one) goes through it
+//! in one fused pass per filter direction ([`Chain::condition_window_into`]); the zero-phase
+//! stream ([`super::stream`]) and the causal chain ([`super::causal`]) are drivers over the
+//! same object and the same kernels.
+//!
+//! ## The fused record
+//! Calibration, range count, de-skew and the linear combinations of steps 5 and 7 run scan
+//! tile by scan tile in L1 ([`front_tile`]), reading each raw column once; the tile goes
+//! straight into the low-pass's forward pass; the backward pass hands its final output, chunk
+//! by chunk, to both derivatives and eq. 2's inertial part ([`Derivatives`]). Each stage
+//! checks the finiteness of what it writes, so nothing is read again for that. Every value is
+//! formed by the same operations in the same order as the stages one by one (calibrate,
+//! de-skew, kinematics, applied force, filter, differentiate twice, inertia): the same bits
+//! (`fused_front_end_equals_the_stages_bit_for_bit`). When a reading is out of range or not
+//! finite, or the record is in SI units, the stages run one by one instead, so that the
+//! report names the sample; the filter and the derivatives are the same either way.
+
+use std::ops::Range;
+
+use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
+
+use super::deskew::{FractionalDelay, MAX_TAPS};
+use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
+use super::film_force::{self, Applied};
+use super::lowpass::{Butterworth, Consume8, FromColumns, Produce8, MAX_ORDER};
+use super::{
+    all_finite, calibrate, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned,
+    ConditioningConfig, Mechanics, RawRecord, RawUnits, COLUMNS,
+};
+use crate::simd::{self, Isa, Kernel, Simd};
+use crate::IdentificationError;
+
+/// Scans per tile of the front end (ten channels of 256 samples: 20 kB, L1-resident).
+pub(super) const TILE: usize = 256;
+
+/// The conditioning chain for one calibration, rig and configuration at one sample rate.
+#[derive(Clone, Debug)]
+pub struct Chain {
+    isa: Isa,
+    sample_rate_hz: f64,
+    calibration: Calibration,
+    mechanics: Mechanics,
+    pub(super) lowpass: Butterworth,
+    pub(super) derivative: SavitzkyGolayDerivative,
+    /// By channel index: the de-skew stencil (`None` without de-skew).
+    pub(super) delays: [Option<FractionalDelay>; CHANNEL_COUNT],
+    /// By channel index: the front end's constants for readings in volts (`None` when the
+    /// calibration is unusable: the stages one by one say why).
+    pub(super) volts: [Option<Constants>; CHANNEL_COUNT],
+    pub(super) applied: Applied,
+    edge: usize,
+}
+
+/// The filters a configuration asks for: the low-pass of `order`, the differentiator, the
+/// de-skew stencils, and the scans their edge effects spoil at each end of a record.
+type Designs = (Butterworth, SavitzkyGolayDerivative, [Option<FractionalDelay>; CHANNEL_COUNT], usize);
+
+fn designs(calibration: &Calibration, config: &ConditioningConfig, fs: f64, order: usize) -> Result<Designs, IdentificationError> {
+    let lowpass = Butterworth::design(order, config.lowpass_cutoff_hz, fs)?;
+    let derivative = SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
+    config.check_taps()?;
+    let mut delays: [Option<FractionalDelay>; CHANNEL_COUNT] = Default::default();
+    let mut trim = 0;
+    if config.deskew {
+        for ch in ChannelId::ALL {
+            let d = FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
+            trim = trim.max(d.edge_samples());
+            delays[ch.index()] = Some(d);
+        }
+    }
+    let edge = trim + lowpass.settling_samples() + 2 * derivative.half_length();
+    Ok((lowpass, derivative, delays, edge))
+}
+
+/// The scans at each end of a record that the stages' edge effects spoil (see
+/// [`super::edge_samples`]).
+pub(super) fn edge_of(calibration: &Calibration, config: &ConditioningConfig, fs: f64) -> Result<usize, IdentificationError> {
+    designs(calibration, config, fs, config.lowpass_order).map(|d| d.3)
+}
+
+impl Chain {
+    /// Designs the zero-phase chain. Every field is checked; errors name it
+    /// (`conditioning.lowpass_cutoff_hz`, `mechanics.housing_mass_kg`, ...).
+    pub fn new(calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, sample_rate_hz: f64) -> Result<Self, IdentificationError> {
+        Self::with_order(calibration, mechanics, config, sample_rate_hz, config.lowpass_order)
+    }
+
+    /// Designs the causal chain ([`super::causal`]): its low-pass runs once, forward, so it
+    /// has twice `lowpass_order` to fall as fast as the zero-phase `|H|^2`.
+    pub fn causal(calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, sample_rate_hz: f64) -> Result<Self, IdentificationError> {
+        let order = 2 * config.lowpass_order;
+        if order > MAX_ORDER {
+            return Err(IdentificationError::invalid(
+                "conditioning.lowpass_order",
+                format!(
+                    "the causal chain runs order 2 x lowpass_order, at most {MAX_ORDER}: lowpass_order must be <= {}, got {}",
+                    MAX_ORDER / 2,
+                    config.lowpass_order
+                ),
+            ));
+        }
+        Self::with_order(calibration, mechanics, config, sample_rate_hz, order)
+    }
+
+    fn with_order(calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, fs: f64, order: usize) -> Result<Self, IdentificationError> {
+        let (lowpass, derivative, delays, edge) = designs(calibration, config, fs, order)?;
+        mechanics.validate()?;
+        Ok(Self {
+            isa: Isa::current(),
+            sample_rate_hz: fs,
+            calibration: calibration.clone(),
+            mechanics: mechanics.clone(),
+            lowpass,
+            derivative,
+            delays,
+            volts: ChannelId::ALL.map(|ch| Constants::volts(ch, calibration)),
+            applied: Applied::new(mechanics),
+            edge,
+        })
+    }
+
+    /// The same chain with its kernels on `isa` (the widest this CPU has by default; a set
+    /// the CPU lacks runs as [`Isa::Scalar`]). The bits do not depend on it.
+    pub fn with_isa(mut self, isa: Isa) -> Self {
+        self.isa = if isa.supported() { isa } else { Isa::Scalar };
+        self
+    }
+
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    pub fn sample_rate_hz(&self) -> f64 {
+        self.sample_rate_hz
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    pub fn mechanics(&self) -> &Mechanics {
+        &self.mechanics
+    }
+
+    /// Scans at each end of a conditioned record that the edge effects spoil: the de-skew
+    /// stencils' reach, the low-pass's settling to 1e-7 and twice the differentiator's
+    /// half-length. A record of `n` scans is valid over `edge..n - edge`.
+    pub fn edge(&self) -> usize {
+        self.edge
+    }
+
+    /// Steps 1-7 on a whole record.
+    pub fn condition(&self, raw: &RawRecord) -> Result<Conditioned, IdentificationError> {
+        let mut out = Conditioned::default();
+        self.condition_window_into(raw, 0..raw.len(), &mut out)?;
+        // The result is kept by the caller; the low-pass's scratch is not part of it.
+        out.work.scratch = Vec::new();
+        Ok(out)
+    }
+
+    /// Steps 1-7 on the scans `window` of `raw`, into `out`'s buffers (nothing of size is
+    /// allocated once they are large enough). The result (indices, `valid`, range violations,
+    /// bits) is the one a record of only those scans, starting `window.start` scans later,
+    /// gives. On error `out` is left empty.
+    pub fn condition_window_into(&self, raw: &RawRecord, window: Range<usize>, out: &mut Conditioned) -> Result<(), IdentificationError> {
+        let mut pool = out.take_columns();
+        let mut work = std::mem::take(&mut out.work);
+        let mut violations = std::mem::take(&mut out.range_violations);
+        violations.clear();
+        *out = Conditioned::default();
+        raw.validate_shape()?;
+        if window.end > raw.len() || window.start > window.end {
+            return Err(IdentificationError::BadInput { what: "window".into(), reason: format!("scans {window:?} of a record of {} scans", raw.len()) });
+        }
+        if raw.sample_rate_hz.to_bits() != self.sample_rate_hz.to_bits() {
+            return Err(IdentificationError::invalid(
+                "sample_rate_hz",
+                format!("the record has {} Hz, the chain was designed for {} Hz", raw.sample_rate_hz, self.sample_rate_hz),
+            ));
+        }
+        let mut col_of = [usize::MAX; CHANNEL_COUNT];
+        for (k, &c) in raw.channels.iter().enumerate() {
+            col_of[c.index()] = k;
+        }
+        if let Some(missing) = ChannelId::ALL.iter().find(|c| col_of[c.index()] == usize::MAX) {
+            return Err(IdentificationError::BadInput {
+                what: format!("channel `{missing}`"),
+                reason: "missing from the record; conditioning needs all ten channels".into(),
+            });
+        }
+        let n = window.len();
+        if n <= 2 * self.edge {
+            return Err(too_short(n, self.edge));
+        }
+        let valid = self.edge..n - self.edge;
+
+        // Seventeen column buffers from the previous result, resized to `n` (their contents
+        // are overwritten by every stage), and the housing's y velocity from the work.
+        let mut used = 0;
+        let mut next = || -> Vec<f64> {
+            let mut v = pool.get_mut(used).map(std::mem::take).unwrap_or_default();
+            used += 1;
+            if v.capacity() < n {
+                // Fresh zeroed memory straight from the allocator (no separate fill pass).
+                return vec![0.0; n];
+            }
+            v.truncate(n);
+            v.resize(n, 0.0);
+            v
+        };
+        let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
+        // `t_s` holds the housing's x velocity until the times are written, last.
+        let [vx, ax, vy, ay, t_s, hax, hay] = std::array::from_fn(|_| next());
+        debug_assert_eq!(used, COLUMNS);
+        let mut hvy = std::mem::take(&mut work.velocity);
+        hvy.clear();
+        hvy.resize(n, 0.0);
+        let mut derived = [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]];
+        let mut scratch = std::mem::take(&mut work.scratch);
+        let t0 = raw.start_time_s + window.start as f64 / self.sample_rate_hz;
+        let fused = match FrontTiles::new(self, raw, &window, &col_of) {
+            Some(mut tiles) => {
+                tiles.load = std::mem::take(&mut front[8]);
+                tiles.temp = std::mem::take(&mut front[9]);
+                let outcome = self.filter(&mut tiles, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0);
+                front[8] = std::mem::take(&mut tiles.load);
+                front[9] = std::mem::take(&mut tiles.temp);
+                outcome?.filter(|_| tiles.bad == 0)
+            }
+            None => None,
+        };
+        let outcome = match fused {
+            Some(o) => o,
+            None => {
+                // Something to report (or a record of SI values): the stages one by one.
+                let staged = self.staged(raw, &window, &col_of, &mut violations)?;
+                front[8].copy_from_slice(&staged[8]);
+                front[9].copy_from_slice(&staged[9]);
+                let mut columns = FromColumns(std::array::from_fn(|l| &staged[l][..]));
+                let o = self.filter(&mut columns, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0)?;
+                o.map(|o| Outcome { finite: o.finite && all_finite(&front[9]), ..o })
+                    .ok_or_else(|| IdentificationError::invalid("conditioning", "the derivatives did not cover the record"))?
+            }
+        };
+        let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
+        // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
+        // non-finite number on. The stages checked their final outputs as they wrote them;
+        // only if one of them saw a non-finite value are the columns searched, to name it.
+        let [x_m, y_m, tilt_x_m, tilt_y_m, housing_x_m, housing_y_m, fx_n, fy_n, static_load_n, temperature_c] = front;
+        if !outcome.finite {
+            for (name, col) in [("x_m", &x_m), ("y_m", &y_m), ("tilt_x_m", &tilt_x_m), ("tilt_y_m", &tilt_y_m), ("ax_m_s2", &ax), ("ay_m_s2", &ay), ("fx_n", &fx_n), ("fy_n", &fy_n), ("temperature_c", &temperature_c)] {
+                if let Some(i) = first_non_finite(col) {
+                    return Err(IdentificationError::BadInput {
+                        what: format!("conditioned `{name}`, sample {i}"),
+                        reason: "not finite after conditioning: an input magnitude overflowed".into(),
+                    });
+                }
+            }
+        }
+        work.velocity = hvy;
+        work.scratch = scratch;
+        *out = Conditioned {
+            t_s,
+            x_m,
+            y_m,
+            tilt_x_m,
+            tilt_y_m,
+            vx_m_s: vx,
+            vy_m_s: vy,
+            ax_m_s2: ax,
+            ay_m_s2: ay,
+            housing_x_m,
+            housing_y_m,
+            housing_ax_m_s2: hax,
+            housing_ay_m_s2: hay,
+            fx_n,
+            fy_n,
+            static_force_n: outcome.static_force_n,
+            temperature_c,
+            static_load_n,
+            valid,
+            range_violations: violations,
+            work,
+        };
+        Ok(())
+    }
+
+    /// The low-pass, both derivatives and eq. 2 over the window `producer` writes, on this
+    /// chain's instruction set; `derived` are `[first, second]` derivative of x, y, X, Y.
+    fn filter<P: Produce8<Error = IdentificationError>>(
+        &self,
+        producer: &mut P,
+        dynamic: [&mut [f64]; 8],
+        derived: &mut [[Vec<f64>; 2]; 4],
+        scratch: &mut Vec<f64>,
+        valid: Range<usize>,
+        t0: f64,
+    ) -> Result<Option<Outcome>, IdentificationError> {
+        let derived = derived.each_mut().map(|p| p.each_mut().map(|c| &mut c[..]));
+        simd::dispatch(self.isa, Filter { chain: self, producer, dynamic, derived, scratch, valid, t0 })
+    }
+
+    /// Steps 3, 2, 4 and the linear combinations of steps 5 and 7, stage by stage on the
+    /// window's columns (each stage names what it refuses): `[x, y, tilt_x, tilt_y, X, Y,
+    /// fx (applied), fy (applied), f3, temperature]`; violations of step 2 into `violations`.
+    fn staged(&self, raw: &RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT], violations: &mut Vec<super::RangeViolation>) -> Result<[Vec<f64>; CHANNEL_COUNT], IdentificationError> {
+        let n = window.len();
+        let mut si: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| vec![0.0; n]);
+        let mut tmp = vec![0.0; n];
+        for (ch, buf) in ChannelId::ALL.into_iter().zip(si.iter_mut()) {
+            let column = &raw.columns[col_of[ch.index()]][window.clone()];
+            match raw.units {
+                RawUnits::Volts => calibrate::to_si_into(ch, column, &self.calibration, buf)?,
+                RawUnits::Si => {
+                    if let Some(i) = first_non_finite(column) {
+                        return Err(non_finite_error(ch, i, column[i], "si"));
+                    }
+                    buf.copy_from_slice(column);
+                }
+            }
+            if let Some(v) = range_check::check(ch, column, raw.units, &self.calibration)? {
+                violations.push(v);
+            }
+            if let Some(d) = &self.delays[ch.index()] {
+                d.apply_into(buf, &mut tmp)?;
+                std::mem::swap(buf, &mut tmp);
+            }
+        }
+        let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature] = si;
+        kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x)?;
+        kinematics::mean_and_difference_in_place(&mut a_y, &mut b_y)?;
+        film_force::applied_in_place(&mut f1, &mut f2, &f3, &self.mechanics)?;
+        Ok([a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature])
+    }
+}
+
+/// The eight columns of `[x, y, tilt_x, tilt_y, X, Y, fx, fy, f3, temperature]` the
+/// low-pass filters.
+fn dynamic(front: &mut [Vec<f64>; CHANNEL_COUNT]) -> [&mut [f64]; 8] {
+    let [x, y, tx, ty, hx, hy, fx, fy, _, _] = front;
+    [x, y, tx, ty, hx, hy, fx, fy].map(|c| &mut c[..])
+}
+
+/// What the filter pass tells the record driver: whether every final output is finite, and
+/// eq. 2's static part.
+#[derive(Clone, Copy, Default)]
+struct Outcome {
+    finite: bool,
+    static_force_n: [f64; 2],
+}
+
+/// The low-pass, the derivatives and eq. 2 over a window fed by `producer`, as a [`Kernel`].
+struct Filter<'a, P> {
+    chain: &'a Chain,
+    producer: &'a mut P,
+    dynamic: [&'a mut [f64]; 8],
+    /// `[first, second]` derivative of x, y, X, Y (the first of X in the times' column).
+    derived: [[&'a mut [f64]; 2]; 4],
+    scratch: &'a mut Vec<f64>,
+    valid: Range<usize>,
+    t0: f64,
+}
+
+impl<P: Produce8<Error = IdentificationError>> Kernel for Filter<'_, P> {
+    /// `None`: the derivatives did not cover the window.
+    type Output = Result<Option<Outcome>, IdentificationError>;
+
+    #[inline(always)]
+    fn run<S: Simd>(self, simd: S) -> Self::Output {
+        let Filter { chain, producer, mut dynamic, derived, scratch, valid, t0 } = self;
+        let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
+        let mut d = Derivatives::new(simd, chain, [[vx, ax], [vy, ay], [&mut t_s[..], hax], [hvy, hay]]);
+        let filtered = chain.lowpass.filtfilt8_fed(simd, dynamic.each_mut().map(|c| &mut **c), scratch, TILE, producer, &mut d)?;
+        if !d.complete() {
+            return Ok(None);
+        }
+        let finite = filtered && d.finite();
+        let [.., fx, fy] = &dynamic;
+        Ok(Some(Outcome { finite, static_force_n: static_part_and_times(fx, fy, valid, t0, chain.sample_rate_hz, t_s) }))
+    }
+}
+
+/// What the backward pass hands its final output to ([`Consume8`]), range by range while it
+/// is in cache: the first and second derivatives of `x`, `y` (r', r'') and of the housing's
+/// `X`, `Y` (velocity, `X''`), and eq. 2's inertial part `F -= m X''` on the film force. The
+/// same operations on the same values as the stages after the low-pass, only in another order
+/// of samples, so the same bits.
+pub(super) struct Derivatives<'a, S> {
+    simd: S,
+    sg: &'a SavitzkyGolayDerivative,
+    mass_kg: f64,
+    /// `[first, second]` derivative of x, y, X, Y.
+    out: [[&'a mut [f64]; 2]; 4],
+    state: [TwiceDescending; 4],
+    /// r'' (x, y) and the forces all finite so far.
+    finite: [bool; 3],
+    /// Every column had the length of the filtered ones.
+    fits: bool,
+    /// The last call had `from == 0`.
+    at_start: bool,
+}
+
+impl<'a, S: Simd> Derivatives<'a, S> {
+    pub(super) fn new(simd: S, chain: &'a Chain, out: [[&'a mut [f64]; 2]; 4]) -> Self {
+        Self { simd, sg: &chain.derivative, mass_kg: chain.mechanics.housing_mass_kg, out, state: Default::default(), finite: [true; 3], fits: true, at_start: false }
+    }
+
+    /// Every output is written.
+    pub(super) fn complete(&self) -> bool {
+        self.fits && self.at_start
+    }
+
+    pub(super) fn finite(&self) -> bool {
+        self.finite.iter().all(|&ok| ok)
+    }
+}
+
+impl<S: Simd> Consume8 for Derivatives<'_, S> {
+    type Error = IdentificationError;
+
+    #[inline(always)]
+    fn consume(&mut self, from: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), IdentificationError> {
+        let [x, y, _, _, hx, hy, fx, fy] = cols;
+        let [[vx, ax], [vy, ay], [hvx, hax], [hvy, hay]] = &mut self.out;
+        let [sx, sy, shx, shy] = &mut self.state;
+        let (sg, simd, m) = (self.sg, self.simd, self.mass_kg);
+        let results = [
+            sg.twice_descending(simd, sx, from, x, vx, ax),
+            sg.twice_descending(simd, sy, from, y, vy, ay),
+            sg.twice_descending(simd, shx, from, hx, hvx, hax),
+            sg.twice_descending(simd, shy, from, hy, hvy, hay),
+        ];
+        // Eq. 2's inertial part on the housing accelerations made final just now.
+        let mut force_finite = true;
+        for (result, force, acc) in [(&results[2], &mut **fx, &**hax), (&results[3], &mut **fy, &**hay)] {
+            if let Some((_, made)) = result {
+                force_finite &= subtract_inertia(&mut force[made.clone()], &acc[made.clone()], m);
+            }
+        }
+        self.fits &= results.iter().all(Option::is_some);
+        self.finite[0] &= results[0].as_ref().is_some_and(|r| r.0);
+        self.finite[1] &= results[1].as_ref().is_some_and(|r| r.0);
+        self.finite[2] &= force_finite;
+        self.at_start = from == 0;
+        Ok(())
+    }
+}
+
+/// Eq. 2's inertial part on a block, `f -= m a`; whether every result is finite.
+#[inline(always)]
+fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
+    // Locals, not captured state: written through a reference on every sample they kept
+    // this loop scalar (a store and a reload per sample).
+    let (m, mut finite) = (mass_kg, true);
+    for (f, &a) in force.iter_mut().zip(acc) {
+        *f -= m * a;
+        finite &= f.is_finite();
+    }
+    finite
+}
+
+/// Eq. 2's static part ([`film_force::static_part`]) and the scans' times, `t[i] = t0 + i /
+/// fs`, in one pass: the static part's two sums are chains of dependent adds in index order,
+/// bound by an add's latency per sample, and the times' divisions, four at a time, run beside
+/// them in the pipes the chains leave idle. The same operations in the same order as
+/// `static_part` and a plain loop over the times, so the same bits.
+#[inline(always)]
+pub(super) fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
+    #[inline(always)]
+    fn times(t: &mut [f64], from: usize, t0: f64, fs: f64) {
+        for (i, t) in t.iter_mut().enumerate() {
+            *t = t0 + (from + i) as f64 / fs;
+        }
+    }
+    // `valid` lies inside the columns (checked by the caller); clamped anyway.
+    let b = valid.end.min(t.len()).min(fx.len()).min(fy.len());
+    let a = valid.start.min(b);
+    let (fx, fy) = (&fx[a..b], &fy[a..b]);
+    let (before, rest) = t.split_at_mut(a);
+    let (inside, after) = rest.split_at_mut(b - a);
+    times(before, 0, t0, fs);
+    // From -0.0, as `Iterator::sum` (and `static_part`).
+    let (mut sx, mut sy) = (-0.0, -0.0);
+    let (tc, tr) = inside.as_chunks_mut::<4>();
+    let (xc, xr) = fx.as_chunks::<4>();
+    let (yc, yr) = fy.as_chunks::<4>();
+    for (q, ((tq, xq), yq)) in tc.iter_mut().zip(xc).zip(yc).enumerate() {
+        let i = a + 4 * q;
+        *tq = std::array::from_fn(|l| t0 + (i + l) as f64 / fs);
+        for l in 0..4 {
+            sx += xq[l];
+            sy += yq[l];
+        }
+    }
+    times(tr, a + 4 * tc.len(), t0, fs);
+    for (&x, &y) in xr.iter().zip(yr) {
+        sx += x;
+        sy += y;
+    }
+    times(after, b, t0, fs);
+    let k = (b - a) as f64;
+    [sx / k, sy / k]
+}
+
+/// One channel's front-end constants.
+#[derive(Copy, Clone, Debug)]
+pub(super) struct Constants {
+    pub(super) offset: f64,
+    pub(super) gain: f64,
+    /// Readings `v` with `v > lo && v < hi` are in the linear range.
+    pub(super) lo: f64,
+    pub(super) hi: f64,
+    /// Every reading in the linear range converts to a finite value: `(v - offset) gain` is
+    /// monotone in `v` (rounding is), so its values there lie between those at `lo` and `hi`,
+    /// and those are finite. The per-reading check of the converted value is then skipped.
+    pub(super) si_bounded: bool,
+}
+
+impl Constants {
+    /// For readings in volts; `None` when the calibration cannot convert them.
+    pub(super) fn volts(ch: ChannelId, calibration: &Calibration) -> Option<Self> {
+        let c = calibration.channel(ch).ok()?;
+        let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
+        if !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite()) {
+            return None;
+        }
+        let (lo, hi) = range_check::volts_bounds(ch, calibration).ok()?;
+        Some(Self::new(offset, 1.0 / sensitivity, lo, hi))
+    }
+
+    /// For readings already in SI: `(v - 0) 1 = v`, no range (the stream checks step 2 on
+    /// the raw window), non-finite readings counted.
+    pub(super) const SI: Self = Self { offset: 0.0, gain: 1.0, lo: f64::NEG_INFINITY, hi: f64::INFINITY, si_bounded: false };
+
+    fn new(offset: f64, gain: f64, lo: f64, hi: f64) -> Self {
+        let si_bounded = ((lo - offset) * gain).is_finite() && ((hi - offset) * gain).is_finite();
+        Self { offset, gain, lo, hi, si_bounded }
+    }
+}
+
+/// One channel of a front-end call: its constants, stencil and raw readings.
+pub(super) struct FrontChannel<'a> {
+    pub(super) volts: &'a [f64],
+    pub(super) k: Constants,
+    pub(super) delay: &'a FractionalDelay,
+    pub(super) interior: Range<usize>,
+}
+
+/// The fused record's producer: the front end tile by tile as the low-pass asks for samples.
+struct FrontTiles<'a> {
+    chans: Vec<FrontChannel<'a>>,
+    applied: Applied,
+    len: usize,
+    tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
+    input: [f64; TILE + MAX_TAPS],
+    load: Vec<f64>,
+    temp: Vec<f64>,
+    /// Readings out of range or not finite so far.
+    bad: usize,
+}
+
+impl<'a> FrontTiles<'a> {
+    /// `None` unless the window is in volts, de-skewed, with usable calibrations and at
+    /// least a stencil long: the stages one by one handle the rest.
+    fn new(chain: &'a Chain, raw: &'a RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT]) -> Option<Self> {
+        let len = window.len();
+        if raw.units != RawUnits::Volts || len < 2 {
+            return None;
+        }
+        let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+        for ch in ChannelId::ALL {
+            let (delay, k) = (chain.delays[ch.index()].as_ref()?, chain.volts[ch.index()]?);
+            let volts = raw.columns.get(col_of[ch.index()])?.get(window.clone())?;
+            if len < delay.taps() {
+                return None;
+            }
+            chans.push(FrontChannel { volts, k, delay, interior: delay.interior(len) });
+        }
+        Some(Self { chans, applied: chain.applied, len, tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]), input: [0.0; TILE + MAX_TAPS], load: Vec::new(), temp: Vec::new(), bad: 0 })
+    }
+}
+
+impl Produce8 for FrontTiles<'_> {
+    type Error = IdentificationError;
+
+    #[inline(always)]
+    fn produce(&mut self, from: usize, to: usize, cols: &mut [&mut [f64]; 8]) -> Result<(), IdentificationError> {
+        let mut o0 = from;
+        while o0 < to {
+            let o1 = (o0 + TILE).min(to);
+            self.bad += front_tile(&self.chans, &self.applied, self.len, from, o0..o1, &mut self.tile, &mut self.input, cols, &mut self.load, &mut self.temp);
+            o0 = o1;
+        }
+        Ok(())
+    }
+}
+
+/// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
+/// that order (as [`FractionalDelay::apply_into`]), with `T` taps known at compile time so
+/// each output is summed in registers and stored once.
+#[inline(always)]
+pub(super) fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let Ok(w) = <&[f64; T]>::try_from(w) else {
+        return stencil_passes(w, x, dst);
+    };
+    for (o, xs) in dst.iter_mut().zip(x.windows(T)) {
+        let mut acc = w[0] * xs[0];
+        for j in 1..T {
+            acc += w[j] * xs[j];
+        }
+        *o = acc;
+    }
+}
+
+/// [`stencil`] for any number of taps: a pass over the tile per tap, the same sums.
+#[inline(always)]
+fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let m = dst.len();
+    for (o, &x) in dst.iter_mut().zip(&x[..m]) {
+        *o = w[0] * x;
+    }
+    for (j, &wj) in w.iter().enumerate().skip(1) {
+        for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
+            *o += wj * x;
+        }
+    }
+}
+
+/// [`stencil`] for the usual numbers of taps, the passes for the others.
+#[inline(always)]
+pub(super) fn stencil_any(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    match w.len() {
+        2 => stencil::<2>(w, x, dst),
+        3 => stencil::<3>(w, x, dst),
+        4 => stencil::<4>(w, x, dst),
+        5 => stencil::<5>(w, x, dst),
+        6 => stencil::<6>(w, x, dst),
+        8 => stencil::<8>(w, x, dst),
+        _ => stencil_passes(w, x, dst),
+    }
+}
+
+/// Asks the CPU to bring `x[range]` (clamped to `x`) into its caches ahead of use: a hint
+/// that changes no value.
+#[inline(always)]
+fn prefetch(x: &[f64], range: Range<usize>) {
+    let end = range.end.min(x.len());
+    let r = &x[range.start.min(end)..end];
+    #[cfg(target_arch = "x86_64")]
+    for line in r.chunks(8) {
+        // SAFETY: SSE is part of every x86_64 CPU; a prefetch of an address inside `x` never
+        // faults and reads nothing into Rust.
+        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr().cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
+}
+
+/// Calibration (step 3), range count (step 2), de-skew (step 4) and the linear combinations
+/// of steps 5 and 7 for the scans `o.start..o.end` (at most [`TILE`]) of a window of `len`
+/// scans whose dynamic columns start at scan `base`: `dynamic` = `[x, y, tilt_x, tilt_y,
+/// frame_x, frame_y, fx (applied), fy (applied)]`, `load` and `temp` indexed by scan. Returns
+/// how many readings it found out of range or not finite: zero exactly when every reading of
+/// the tile is usable (a reading just past the tile, which its stencil reads, may be counted
+/// too; the callers only ask for zero).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tile's inputs and its four kinds of output, all plain
+pub(super) fn front_tile(
+    chans: &[FrontChannel<'_>],
+    applied: &Applied,
+    len: usize,
+    base: usize,
+    o: Range<usize>,
+    tile: &mut [[f64; TILE]; CHANNEL_COUNT],
+    input: &mut [f64; TILE + MAX_TAPS],
+    dynamic: &mut [&mut [f64]; 8],
+    load: &mut [f64],
+    temp: &mut [f64],
+) -> usize {
+    let (o0, o1) = (o.start, o.end);
+    let mut bad = 0;
+    for (k, (c, t)) in chans.iter().zip(tile.iter_mut()).enumerate() {
+        prefetch(c.volts, o1..o1 + (o1 - o0));
+        // The frame probes, the bellows' load and the temperature are not combined with
+        // other channels: de-skewed straight into their columns.
+        let t: &mut [f64] = match k {
+            4 => &mut dynamic[4][o0 - base..o1 - base],
+            5 => &mut dynamic[5][o0 - base..o1 - base],
+            8 => &mut load[o0..o1],
+            9 => &mut temp[o0..o1],
+            _ => &mut t[..o1 - o0],
+        };
+        let Constants { offset, gain, lo, hi, si_bounded } = c.k;
+        let si = |v: f64| (v - offset) * gain;
+        // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record).
+        let a = o0.max(c.interior.start).min(o1);
+        let b = o1.min(c.interior.end).max(a);
+        let (w, taps) = (c.delay.weights(), c.delay.taps());
+        let i0 = (a as isize + c.delay.stencil_start()).max(0) as usize;
+        let i1 = i0 + (b - a) + taps - 1;
+        // Where the stencil's readings cover the tile's (every tile but those at the record's
+        // ends), the range check runs in the loop that converts them: one pass instead of
+        // two. `&` and `|`, not `&&`: no branch per reading, so the count vectorises.
+        let check_while_converting = si_bounded && a == o0 && b == o1 && i0 <= o0 && i1 >= o1;
+        if !check_while_converting {
+            for &v in &c.volts[o0..o1] {
+                bad += (!((v > lo) & (v < hi)) | (!si_bounded & !si(v).is_finite())) as usize;
+            }
+        }
+        if a < b {
+            let x = &mut input[..i1 - i0];
+            if check_while_converting {
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                    bad += !((v > lo) & (v < hi)) as usize;
+                }
+            } else {
+                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                    *x = si(v);
+                }
+            }
+            stencil_any(w, x, &mut t[a - o0..b - o0]);
+        }
+        for n in (o0..a).chain(b..o1) {
+            t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
+        }
+    }
+    let [a_x, a_y, b_x, b_y, _, _, f1, f2, _, _] = &*tile;
+    let [x, y, tilt_x, tilt_y, _, _, fx, fy] = dynamic;
+    let f3 = &load[o0..o1];
+    for (i, n) in (o0 - base..o1 - base).enumerate() {
+        [x[n], tilt_x[n]] = kinematics::mean_and_difference(a_x[i], b_x[i]);
+        [y[n], tilt_y[n]] = kinematics::mean_and_difference(a_y[i], b_y[i]);
+        [fx[n], fy[n]] = applied.at(f1[i], f2[i], f3[i]);
+    }
+    // The temperature is final here (it is not filtered): checked while it is in L1.
+    for v in &temp[o0..o1] {
+        bad += !v.is_finite() as usize;
+    }
+    bad
+}

@@ -1,0 +1,586 @@
+//! The CPU's vector instructions, chosen in one place.
+//!
+//! The crate's hot loops are written once. Where the compiler's own vectorisation serves, a
+//! loop is plain Rust marked `#[inline(always)]`; where it was measured slower (register
+//! transposes, the differentiator's shifted loads, the low-pass's recursion with sixteen AVX2
+//! registers), the loop is a method of [`Simd`] with one implementation per instruction set.
+//! [`dispatch`] is the one place that asks the CPU: it runs a [`Kernel`] inside a function
+//! compiled for the chosen set, so that every loop the kernel inlines is compiled for it too,
+//! and hands the kernel that set's token, whose [`Simd`] methods are the set's kernels. Only
+//! [`dispatch`] makes a token, and only after the CPU was found to have its set: that is what
+//! makes the intrinsics behind the tokens sound.
+//!
+//! No kernel uses a fused multiply-add and every sum is formed in the same order in every
+//! implementation, so a result is the same bit for bit whichever set runs (the tests force
+//! each set this CPU has and compare it with [`Isa::Scalar`]). `OILFILM_SIMD=scalar`, `avx2`
+//! or `avx512` caps the set for a whole process; `tests/run-all.sh` uses it to check that an
+//! identification does not depend on it.
+
+use std::cell::Cell;
+use std::sync::OnceLock;
+
+use crate::conditioning::lowpass::Cascade;
+
+/// An instruction set a [`Kernel`] can be compiled for.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Isa {
+    /// The target's baseline (SSE2 on x86-64).
+    Scalar,
+    /// x86-64 with AVX2 (four `f64` lanes, sixteen registers).
+    Avx2,
+    /// x86-64 with AVX-512F (eight `f64` lanes, 32 registers).
+    Avx512,
+}
+
+impl Isa {
+    pub const ALL: [Isa; 3] = [Isa::Scalar, Isa::Avx2, Isa::Avx512];
+
+    /// Whether this CPU can run kernels compiled for the set.
+    pub fn supported(self) -> bool {
+        match self {
+            Isa::Scalar => true,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => std::arch::is_x86_feature_detected!("avx2"),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// Every set this CPU has, narrowest first.
+    pub fn available() -> Vec<Isa> {
+        Isa::ALL.into_iter().filter(|i| i.supported()).collect()
+    }
+
+    /// The set kernels run on: the one [`with_isa`] set for this thread, else the widest this
+    /// CPU has, capped by `OILFILM_SIMD` when that names a set.
+    pub fn current() -> Isa {
+        static PROCESS: OnceLock<Isa> = OnceLock::new();
+        FORCED.with(Cell::get).unwrap_or_else(|| {
+            *PROCESS.get_or_init(|| {
+                let cap = std::env::var("OILFILM_SIMD").ok().and_then(|v| Isa::ALL.into_iter().find(|i| i.name() == v.trim()));
+                let widest = Isa::ALL.into_iter().rev().find(|i| i.supported()).unwrap_or(Isa::Scalar);
+                match cap {
+                    Some(c) if c.supported() && (c as u8) < (widest as u8) => c,
+                    _ => widest,
+                }
+            })
+        })
+    }
+
+    /// `scalar`, `avx2`, `avx512`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Scalar => "scalar",
+            Isa::Avx2 => "avx2",
+            Isa::Avx512 => "avx512",
+        }
+    }
+}
+
+thread_local! {
+    static FORCED: Cell<Option<Isa>> = const { Cell::new(None) };
+}
+
+/// Runs `f` with [`Isa::current`] answering `isa` on this thread (a set the CPU lacks runs as
+/// [`Isa::Scalar`]): how the tests run one computation on every set and compare the bits.
+pub fn with_isa<R>(isa: Isa, f: impl FnOnce() -> R) -> R {
+    let isa = if isa.supported() { isa } else { Isa::Scalar };
+    let before = FORCED.with(|c| c.replace(Some(isa)));
+    let out = f();
+    FORCED.with(|c| c.set(before));
+    out
+}
+
+/// A computation to compile once per instruction set: `run` and everything it calls
+/// `#[inline(always)]` become part of the set's copy.
+pub(crate) trait Kernel {
+    type Output;
+    fn run<S: Simd>(self, simd: S) -> Self::Output;
+}
+
+/// Runs `kernel` compiled for `isa`, or for [`Isa::Scalar`] when the CPU lacks `isa`.
+pub(crate) fn dispatch<K: Kernel>(isa: Isa, kernel: K) -> K::Output {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if isa == Isa::Avx512 && isa.supported() {
+            // SAFETY: a `target_feature` function's only requirement is that the CPU has the
+            // feature, checked on the line above.
+            return unsafe { x86::on_avx512(kernel) };
+        }
+        if isa == Isa::Avx2 && isa.supported() {
+            // SAFETY: as above.
+            return unsafe { x86::on_avx2(kernel) };
+        }
+    }
+    let _ = isa;
+    kernel.run(Scalar(()))
+}
+
+/// The kernels one instruction set implements its own way; the default of each is the
+/// portable loop every set's results are compared with.
+pub(crate) trait Simd: Copy {
+    /// Moves samples `start .. start + frames.len()` of eight columns into frames of eight
+    /// lanes (`to_frames`) or back: plain data movement.
+    #[inline(always)]
+    fn transpose8(self, cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
+        for (i, f) in frames.iter_mut().enumerate() {
+            for (l, c) in cols.iter_mut().enumerate() {
+                if to_frames {
+                    f[l] = c[start + i];
+                } else {
+                    c[start + i] = f[l];
+                }
+            }
+        }
+    }
+
+    /// Two second-order sections over frames of eight lanes in place, forward in time or
+    /// (`reverse`) backward, their state carried in `cascade`: the low-pass's recursion.
+    #[inline(always)]
+    fn cascade2(self, cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
+        cascade.run(frames, reverse);
+    }
+
+    /// The Savitzky-Golay interior `dst[i] = sum_k c[k - 1] (x[i + M + k] - x[i + M - k])`,
+    /// `k = 1..=M` summed in that order (`x` reaches `M` past `dst` on each side).
+    #[inline(always)]
+    fn derivative<const M: usize>(self, c: &[f64; M], x: &[f64], dst: &mut [f64]) {
+        derivative_lanes::<M, 4>(c, x, dst);
+    }
+}
+
+/// [`Simd::derivative`] `W` outputs at a time as arrays, left to the compiler to vectorise.
+#[inline(always)]
+fn derivative_lanes<const M: usize, const W: usize>(c: &[f64; M], x: &[f64], dst: &mut [f64]) {
+    let body = dst.len() / W * W;
+    for (q, o) in dst[..body].chunks_exact_mut(W).enumerate() {
+        let i = W * q + M;
+        let d = |k: usize, l: usize| x[i + l + k] - x[i + l - k];
+        let mut acc: [f64; W] = std::array::from_fn(|l| c[0] * d(1, l));
+        for k in 2..M + 1 {
+            for (l, a) in acc.iter_mut().enumerate() {
+                *a += c[k - 1] * d(k, l);
+            }
+        }
+        o.copy_from_slice(&acc);
+    }
+    for (j, o) in dst.iter_mut().enumerate().skip(body) {
+        *o = derivative_point(c, x, j + M);
+    }
+}
+
+/// One output of [`Simd::derivative`], centred on `x[i]`.
+#[inline(always)]
+pub(crate) fn derivative_point<const M: usize>(c: &[f64; M], x: &[f64], i: usize) -> f64 {
+    let mut acc = c[0] * (x[i + 1] - x[i - 1]);
+    for k in 2..M + 1 {
+        acc += c[k - 1] * (x[i + k] - x[i - k]);
+    }
+    acc
+}
+
+/// The baseline's token: every kernel is the portable default.
+#[derive(Copy, Clone)]
+pub(crate) struct Scalar(());
+
+#[cfg(test)]
+impl Scalar {
+    /// The baseline needs no check: its token is always sound.
+    pub(crate) fn token() -> Self {
+        Scalar(())
+    }
+}
+
+impl Simd for Scalar {}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use std::arch::x86_64::*;
+
+    use super::{derivative_point, Kernel, Simd};
+    use crate::conditioning::lowpass::Cascade;
+
+    /// AVX2's token. Made only by [`on_avx2`], which runs only on a CPU with AVX2.
+    #[derive(Copy, Clone)]
+    pub(crate) struct Avx2(());
+
+    /// AVX-512F's token. Made only by [`on_avx512`], which runs only on a CPU with AVX-512F.
+    #[derive(Copy, Clone)]
+    pub(crate) struct Avx512(());
+
+    #[target_feature(enable = "avx2")]
+    pub(super) fn on_avx2<K: Kernel>(kernel: K) -> K::Output {
+        kernel.run(Avx2(()))
+    }
+
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn on_avx512<K: Kernel>(kernel: K) -> K::Output {
+        kernel.run(Avx512(()))
+    }
+
+    impl Simd for Avx2 {
+        #[inline(always)]
+        fn transpose8(self, cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
+            // SAFETY: an `Avx2` token exists only on a CPU with AVX2.
+            unsafe { transpose8_avx2(cols, start, frames, to_frames) }
+        }
+
+        #[inline(always)]
+        fn cascade2(self, cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
+            // SAFETY: as above.
+            unsafe { cascade2_avx2(cascade, frames, reverse) }
+        }
+
+        #[inline(always)]
+        fn derivative<const M: usize>(self, c: &[f64; M], x: &[f64], dst: &mut [f64]) {
+            // SAFETY: as above.
+            unsafe { derivative_avx2(c, x, dst) }
+        }
+    }
+
+    impl Simd for Avx512 {
+        #[inline(always)]
+        fn transpose8(self, cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
+            // SAFETY: an `Avx512` token exists only on a CPU with AVX-512F.
+            unsafe { transpose8_avx512(cols, start, frames, to_frames) }
+        }
+
+        #[inline(always)]
+        fn derivative<const M: usize>(self, c: &[f64; M], x: &[f64], dst: &mut [f64]) {
+            // SAFETY: as above.
+            unsafe { derivative_avx512(c, x, dst) }
+        }
+    }
+
+    /// [`Simd::transpose8`] by 4 x 4 register transposes: per four samples of four columns,
+    /// four vector loads, eight shuffles, four vector stores instead of sixteen scalar moves.
+    #[target_feature(enable = "avx2")]
+    fn transpose8_avx2(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        fn tr(r: [__m256d; 4]) -> [__m256d; 4] {
+            let (t0, t1) = (_mm256_unpacklo_pd(r[0], r[1]), _mm256_unpackhi_pd(r[0], r[1]));
+            let (t2, t3) = (_mm256_unpacklo_pd(r[2], r[3]), _mm256_unpackhi_pd(r[2], r[3]));
+            [
+                _mm256_permute2f128_pd::<0x20>(t0, t2),
+                _mm256_permute2f128_pd::<0x20>(t1, t3),
+                _mm256_permute2f128_pd::<0x31>(t0, t2),
+                _mm256_permute2f128_pd::<0x31>(t1, t3),
+            ]
+        }
+        let t = frames.len();
+        let mut c: [&mut [f64]; 8] = cols.each_mut().map(|c| &mut c[start..start + t]);
+        let body = t / 4 * 4;
+        let f = frames.as_flattened_mut();
+        for i in (0..body).step_by(4) {
+            for l0 in [0, 4] {
+                // SAFETY: i + 4 <= t, every `c[j]` holds t values and `f` 8 t: the accesses are
+                // c[l0 + j][i .. i + 4] and f[8 (i + k) + l0 ..][..4] for j, k < 4.
+                unsafe {
+                    if to_frames {
+                        let r = std::array::from_fn(|j| _mm256_loadu_pd(c[l0 + j].as_ptr().add(i)));
+                        for (k, v) in tr(r).into_iter().enumerate() {
+                            _mm256_storeu_pd(f.as_mut_ptr().add(8 * (i + k) + l0), v);
+                        }
+                    } else {
+                        let r = std::array::from_fn(|k| _mm256_loadu_pd(f.as_ptr().add(8 * (i + k) + l0)));
+                        for (j, v) in tr(r).into_iter().enumerate() {
+                            _mm256_storeu_pd(c[l0 + j].as_mut_ptr().add(i), v);
+                        }
+                    }
+                }
+            }
+        }
+        tail(&mut c, f, body, t, to_frames);
+    }
+
+    /// [`Simd::transpose8`] by 8 x 8 register transposes (its own inverse, so one shuffle
+    /// network serves both directions): eight loads, 24 shuffles, eight stores per eight
+    /// samples of the eight columns.
+    #[target_feature(enable = "avx512f")]
+    fn transpose8_avx512(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn pick(v: [__m512d; 4]) -> [__m512d; 4] {
+            let e0 = _mm512_shuffle_f64x2::<0x88>(v[0], v[1]);
+            let e1 = _mm512_shuffle_f64x2::<0xDD>(v[0], v[1]);
+            let f0 = _mm512_shuffle_f64x2::<0x88>(v[2], v[3]);
+            let f1 = _mm512_shuffle_f64x2::<0xDD>(v[2], v[3]);
+            [
+                _mm512_shuffle_f64x2::<0x88>(e0, f0),
+                _mm512_shuffle_f64x2::<0x88>(e1, f1),
+                _mm512_shuffle_f64x2::<0xDD>(e0, f0),
+                _mm512_shuffle_f64x2::<0xDD>(e1, f1),
+            ]
+        }
+        #[inline]
+        #[target_feature(enable = "avx512f")]
+        fn tr(r: [__m512d; 8]) -> [__m512d; 8] {
+            // 128-bit lane k of lo[j] holds rows 2j, 2j + 1 at value 2k; of hi[j], at 2k + 1.
+            let even = pick(std::array::from_fn(|j| _mm512_unpacklo_pd(r[2 * j], r[2 * j + 1])));
+            let odd = pick(std::array::from_fn(|j| _mm512_unpackhi_pd(r[2 * j], r[2 * j + 1])));
+            [even[0], odd[0], even[1], odd[1], even[2], odd[2], even[3], odd[3]]
+        }
+        let t = frames.len();
+        let mut c: [&mut [f64]; 8] = cols.each_mut().map(|c| &mut c[start..start + t]);
+        let body = t / 8 * 8;
+        let f = frames.as_flattened_mut();
+        for i in (0..body).step_by(8) {
+            // SAFETY: i + 8 <= t: the accesses are c[j][i .. i + 8] and f[8 (i + k) ..][..8].
+            unsafe {
+                if to_frames {
+                    let r = std::array::from_fn(|j| _mm512_loadu_pd(c[j].as_ptr().add(i)));
+                    for (k, v) in tr(r).into_iter().enumerate() {
+                        _mm512_storeu_pd(f.as_mut_ptr().add(8 * (i + k)), v);
+                    }
+                } else {
+                    let r = std::array::from_fn(|k| _mm512_loadu_pd(f.as_ptr().add(8 * (i + k))));
+                    for (j, v) in tr(r).into_iter().enumerate() {
+                        _mm512_storeu_pd(c[j].as_mut_ptr().add(i), v);
+                    }
+                }
+            }
+        }
+        tail(&mut c, f, body, t, to_frames);
+    }
+
+    /// The samples past the transposed blocks, one by one.
+    #[inline(always)]
+    fn tail(c: &mut [&mut [f64]; 8], f: &mut [f64], from: usize, to: usize, to_frames: bool) {
+        for i in from..to {
+            for (l, col) in c.iter_mut().enumerate() {
+                if to_frames {
+                    f[8 * i + l] = col[i];
+                } else {
+                    col[i] = f[8 * i + l];
+                }
+            }
+        }
+    }
+
+    /// [`Simd::cascade2`] with AVX2 intrinsics. The generic step compiled for AVX2 needs two
+    /// sections x three state vectors x two halves of eight lanes, twelve of the sixteen
+    /// registers, for state alone; the compiler kept some of it on the stack, a store and a
+    /// reload on the recursion's loop-carried path at every sample. Here each section keeps
+    /// only `y[n-1]` and `q` in registers (eight vectors for the pair): `b2 x[n-1]` is the
+    /// product `b0 x[n-1]` formed one sample earlier when `b2 == b0` bit for bit (every
+    /// Butterworth section: `b = [g, 2 g, g]`), so `x[n-1]` itself is not kept. Every output
+    /// is `(b0 x + q) - a1 y[n-1]` and every `q` is `(b1 x + b2 x[n-1]) - a2 y[n-1]`, as in
+    /// the generic `Lanes::step`: the same operations in the same order, the same bits. Sections
+    /// with `b2 != b0` take the generic loop.
+    #[target_feature(enable = "avx2")]
+    fn cascade2_avx2(cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
+        let s = cascade.sections;
+        let Some(&last) = (if reverse { frames.first() } else { frames.last() }) else { return };
+        if s.iter().any(|s| s.b[2].to_bits() != s.b[0].to_bits()) {
+            return cascade.run(frames, reverse);
+        }
+        let set = |v: f64| _mm256_set1_pd(v);
+        // Coefficients [b0, b1, a1, a2] of each section.
+        let c: [[__m256d; 4]; 2] = std::array::from_fn(|k| [set(s[k].b[0]), set(s[k].b[1]), set(s[k].a[0]), set(s[k].a[1])]);
+        let half = |v: &[f64; 8], h: usize| -> __m256d {
+            // SAFETY: `v[4 h ..]` holds the four values loaded.
+            unsafe { _mm256_loadu_pd(v.as_ptr().add(4 * h)) }
+        };
+        // State by [section][half]: y[n-1], q[n], and p = b2 x[n-1].
+        let lanes = &cascade.lanes;
+        let mut y1: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| half(&lanes[k].y1, h)));
+        let mut q: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| half(&lanes[k].q, h)));
+        let mut p: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| _mm256_mul_pd(set(s[k].b[2]), half(&lanes[k].x1, h))));
+        let mut step = |f: &mut [f64; 8]| {
+            for h in 0..2 {
+                // SAFETY: `f[4 h ..]` holds the four values loaded and stored.
+                let mut x = unsafe { _mm256_loadu_pd(f.as_ptr().add(4 * h)) };
+                for k in 0..2 {
+                    let [b0, b1, a1, a2] = c[k];
+                    let bx = _mm256_mul_pd(b0, x);
+                    let y = _mm256_sub_pd(_mm256_add_pd(bx, q[k][h]), _mm256_mul_pd(a1, y1[k][h]));
+                    q[k][h] = _mm256_sub_pd(_mm256_add_pd(_mm256_mul_pd(b1, x), p[k][h]), _mm256_mul_pd(a2, y1[k][h]));
+                    p[k][h] = bx;
+                    y1[k][h] = y;
+                    x = y;
+                }
+                // SAFETY: as above.
+                unsafe { _mm256_storeu_pd(f.as_mut_ptr().add(4 * h), x) };
+            }
+        };
+        if reverse {
+            frames.iter_mut().rev().for_each(&mut step);
+        } else {
+            frames.iter_mut().for_each(&mut step);
+        }
+        // Back to the generic state: `x[n-1]` of the first section is the last input, of the
+        // second the first section's last output.
+        let put = |v: &mut [f64; 8], h: usize, x: __m256d| {
+            // SAFETY: `v[4 h ..]` has room for the four values stored.
+            unsafe { _mm256_storeu_pd(v.as_mut_ptr().add(4 * h), x) }
+        };
+        let lanes = &mut cascade.lanes;
+        lanes[0].x1 = last;
+        for k in 0..2 {
+            for h in 0..2 {
+                put(&mut lanes[k].y1, h, y1[k][h]);
+                put(&mut lanes[k].q, h, q[k][h]);
+            }
+        }
+        lanes[1].x1 = lanes[0].y1;
+    }
+
+    /// [`Simd::derivative`] with intrinsics, `$w` outputs per vector: four vectors of
+    /// outputs per step share their loads (`4 W` outputs read `3 W + 2 M + 1` distinct
+    /// shifted vectors; the compiler's own vectorisation built each from half loads and
+    /// blends). Each output's sum in the order of [`derivative_point`], the same bits.
+    macro_rules! derivative_kernel {
+        ($name:ident, $feature:literal, $w:literal, $v:ty, $set1:ident, $load:ident, $store:ident, $add:ident, $sub:ident, $mul:ident) => {
+            #[target_feature(enable = $feature)]
+            fn $name<const M: usize>(c: &[f64; M], x: &[f64], dst: &mut [f64]) {
+                assert!(x.len() >= dst.len() + 2 * M, "the differentiator's input reaches M past its output");
+                let cv: [$v; M] = std::array::from_fn(|k| $set1(c[k]));
+                let wide = dst.len() / (4 * $w) * (4 * $w);
+                let body = dst.len() / $w * $w;
+                let mut j = 0;
+                while j < wide {
+                    // SAFETY: j + 4 W <= dst.len(): the loads read x[j + M + s ..][..W] for
+                    // -M <= s <= 3 W + M, inside x[.. dst.len() + 2 M] (asserted above).
+                    unsafe {
+                        let p = x.as_ptr().add(j + M);
+                        let d = |q: usize, k: usize| $sub($load(p.add(q * $w + k)), $load(p.add(q * $w).sub(k)));
+                        let mut acc: [$v; 4] = std::array::from_fn(|q| $mul(cv[0], d(q, 1)));
+                        for k in 2..M + 1 {
+                            for q in 0..4 {
+                                acc[q] = $add(acc[q], $mul(cv[k - 1], d(q, k)));
+                            }
+                        }
+                        for q in 0..4 {
+                            $store(dst.as_mut_ptr().add(j + q * $w), acc[q]);
+                        }
+                    }
+                    j += 4 * $w;
+                }
+                while j < body {
+                    // SAFETY: j + W <= dst.len(), the loads as above.
+                    unsafe {
+                        let p = x.as_ptr().add(j + M);
+                        let d = |k: usize| $sub($load(p.add(k)), $load(p.sub(k)));
+                        let mut acc = $mul(cv[0], d(1));
+                        for k in 2..M + 1 {
+                            acc = $add(acc, $mul(cv[k - 1], d(k)));
+                        }
+                        $store(dst.as_mut_ptr().add(j), acc);
+                    }
+                    j += $w;
+                }
+                for (j, o) in dst.iter_mut().enumerate().skip(body) {
+                    *o = derivative_point(c, x, j + M);
+                }
+            }
+        };
+    }
+
+    derivative_kernel!(derivative_avx2, "avx2", 4, __m256d, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd);
+    derivative_kernel!(derivative_avx512, "avx512f", 8, __m512d, _mm512_set1_pd, _mm512_loadu_pd, _mm512_storeu_pd, _mm512_add_pd, _mm512_sub_pd, _mm512_mul_pd);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::conditioning::lowpass::{Butterworth, Section};
+
+    /// xorshift values over many magnitudes, with zeros and subnormals among them.
+    fn values(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed | 1;
+        (0..n)
+            .map(|i| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                let unit = (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                match i % 97 {
+                    0 => 0.0,
+                    1 => f64::MIN_POSITIVE * unit,
+                    _ => unit * 10f64.powi((s % 13) as i32 - 6),
+                }
+            })
+            .collect()
+    }
+
+    struct Kernels<'a> {
+        sections: &'a [Section; 2],
+        frames: Vec<[f64; 8]>,
+        x: Vec<f64>,
+    }
+
+    /// Every [`Simd`] kernel on the same data, its outputs as bits.
+    impl Kernel for Kernels<'_> {
+        type Output = Vec<u64>;
+        fn run<S: Simd>(self, simd: S) -> Vec<u64> {
+            let mut bits = Vec::new();
+            let n = self.frames.len();
+            let mut cols: Vec<Vec<f64>> = (0..8).map(|l| self.frames.iter().map(|f| f[l]).collect()).collect();
+            let mut frames = vec![[0.0; 8]; n - 3];
+            let mut c: [&mut [f64]; 8] = {
+                let mut it = cols.iter_mut();
+                std::array::from_fn(|_| it.next().map(Vec::as_mut_slice).unwrap_or_default())
+            };
+            simd.transpose8(&mut c, 3, &mut frames, true);
+            bits.extend(frames.as_flattened().iter().map(|v| v.to_bits()));
+            for (reverse, start) in [(false, self.frames[0]), (true, self.frames[n - 1])] {
+                let mut cascade = Cascade::steady(self.sections, start);
+                simd.cascade2(&mut cascade, &mut frames, reverse);
+                bits.extend(frames.as_flattened().iter().map(|v| v.to_bits()));
+                for l in cascade.lanes {
+                    bits.extend(l.x1.iter().chain(&l.y1).chain(&l.q).map(|v| v.to_bits()));
+                }
+            }
+            simd.transpose8(&mut c, 2, &mut frames, false);
+            bits.extend(c.iter().flat_map(|c| c.iter().map(|v| v.to_bits())));
+            for m in [4usize, 5, 6] {
+                let cf = values(m, m as u64);
+                let mut dst = vec![0.0; self.x.len() - 2 * m];
+                match m {
+                    4 => simd.derivative::<4>(&cf[..].try_into().unwrap(), &self.x, &mut dst),
+                    5 => simd.derivative::<5>(&cf[..].try_into().unwrap(), &self.x, &mut dst),
+                    _ => simd.derivative::<6>(&cf[..].try_into().unwrap(), &self.x, &mut dst),
+                }
+                bits.extend(dst.iter().map(|v| v.to_bits()));
+            }
+            bits
+        }
+    }
+
+    /// Each instruction set this CPU has gives the portable kernels' bits (transposes both
+    /// ways at odd offsets, the two-section recursion both ways with its state, the
+    /// differentiator at every compiled half-length, lengths that leave tails).
+    #[test]
+    fn every_instruction_set_gives_the_scalar_bits() {
+        let lp = Butterworth::design(8, 900.0, 5000.0).unwrap();
+        for n in [4, 5, 37, 1029] {
+            let flat = values(8 * n, n as u64);
+            let (frames, _) = flat.as_chunks::<8>();
+            for g in lp.sections().chunks_exact(2) {
+                let run = |isa| {
+                    let k = Kernels { sections: g.try_into().unwrap(), frames: frames.to_vec(), x: values(n + 40, 3) };
+                    dispatch(isa, k)
+                };
+                let scalar = run(Isa::Scalar);
+                assert!(scalar.len() > 8 * n);
+                for isa in Isa::available() {
+                    assert!(run(isa) == scalar, "{isa:?}, {n} frames");
+                }
+            }
+        }
+        println!("sets compared with the scalar kernels: {:?}", Isa::available());
+    }
+
+    #[test]
+    fn forcing_a_set_is_undone_and_a_missing_set_runs_scalar() {
+        let before = Isa::current();
+        for isa in Isa::ALL {
+            let seen = with_isa(isa, Isa::current);
+            assert_eq!(seen, if isa.supported() { isa } else { Isa::Scalar });
+        }
+        assert_eq!(Isa::current(), before);
+    }
+}
