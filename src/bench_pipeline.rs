@@ -89,10 +89,16 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     let mut block_out = Conditioned::default();
     let mut block_kxx = Vec::with_capacity(n_windows);
     let edge = valid.start;
-    let mut by_block = |kxx: &mut Vec<f64>| {
+    let chain = conditioning::Chain::new(&cal, &mech, &ccfg, raw.sample_rate_hz)?;
+    let mut by_block = |kxx: &mut Vec<f64>| -> Result<()> {
         kxx.clear();
         let mut builder = SummaryBuilder::new(6);
-        conditioning::blocks::condition_by_block(&raw, &cal, &mech, &ccfg, BLOCK, &mut block_out, |range, c| -> Result<()> {
+        // Each block conditioned as a window reaching the chain's edge past it on either
+        // side (so the whole block is valid), into the same buffers.
+        let mut range = edge..(edge + BLOCK).min(scans - edge);
+        while !range.is_empty() {
+            let c = &mut block_out;
+            chain.condition_window_into(&raw, range.start - edge..range.end + edge, c)?;
             // The block's scans window by window (a block straddles a window's end when
             // BLOCK does not divide the window); scans past the last whole window are
             // conditioned, as above, and not solved.
@@ -110,8 +116,9 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
                 }
                 a = b;
             }
-            Ok(())
-        })
+            range = range.end..(range.end + BLOCK).min(scans - edge);
+        }
+        Ok(())
     };
     by_block(&mut block_kxx)?;
     anyhow::ensure!(block_kxx.len() == n_windows, "{} windows solved block by block for {n_windows}", block_kxx.len());

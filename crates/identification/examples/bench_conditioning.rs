@@ -3,7 +3,8 @@
 //!
 //! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into|causal|blocks]`
 //! (`into`: only the whole `condition_into`, `causal`: only the causal chain, e.g. under
-//! `perf record`; `blocks`: the whole record against `blocks::condition_by_block`, alternating)
+//! `perf record`; `blocks`: the whole record against windows of it conditioned block by block
+//! by one prepared `Chain`, alternating)
 //!
 //! "samples" are channel samples: a 50 000-scan record has 500 000. Each figure is the best
 //! of `repeats` runs (default 15), to show the code's speed rather than the machine's load.
@@ -13,9 +14,8 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
-use oilfilm_identification::IdentificationError;
 use oilfilm_identification::conditioning::{
-    blocks, calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
+    calibrate, condition, Chain, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
     range_check, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -111,6 +111,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // in alternating rounds so that both see the same machine.
         let mut whole = condition(&raw, &cal, &mech, &conf)?;
         let mut out = whole.clone();
+        let chain = Chain::new(&cal, &mech, &conf, raw.sample_rate_hz)?;
+        let edge = chain.edge();
         let sizes = [50_000usize, 25_000, 12_500, 10_000, 5_000];
         let mut best = [f64::INFINITY; 6];
         for _ in 0..repeats {
@@ -120,17 +122,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }));
             for (b, &size) in best[1..].iter_mut().zip(&sizes) {
                 *b = b.min(best_of(1, || {
-                    blocks::condition_by_block(&raw, &cal, &mech, &conf, size, &mut out, |_, c| -> Result<(), IdentificationError> {
-                        black_box(c);
-                        Ok(())
-                    })
-                    .unwrap(); // the same record conditions whole above
+                    // Each block with the chain's edge on either side, so the whole block is valid.
+                    let mut a = edge;
+                    while a < raw.len() - edge {
+                        let e = (a + size).min(raw.len() - edge);
+                        chain.condition_window_into(&raw, a - edge..e + edge, &mut out).unwrap(); // conditions whole above
+                        black_box(&out);
+                        a = e;
+                    }
                 }));
             }
         }
         report("condition_into, the whole record", all, best[0]);
         for (b, size) in best[1..].iter().zip(sizes) {
-            report(&format!("condition_by_block, {size}-scan blocks"), all, *b);
+            report(&format!("block by block, {size}-scan blocks"), all, *b);
         }
         return Ok(());
     }
