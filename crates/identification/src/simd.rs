@@ -2,8 +2,8 @@
 //!
 //! The crate's hot loops are written once. Where the compiler's own vectorisation serves, a
 //! loop is plain Rust marked `#[inline(always)]`; where it was measured slower (register
-//! transposes, the differentiator's shifted loads, the low-pass's recursion with sixteen AVX2
-//! registers), the loop is a method of [`Simd`] with one implementation per instruction set.
+//! transposes, the differentiator's shifted loads), the loop is a method of [`Simd`] with
+//! one implementation per instruction set.
 //! [`dispatch`] is the one place that asks the CPU: it runs a [`Kernel`] inside a function
 //! compiled for the chosen set, so that every loop the kernel inlines is compiled for it too,
 //! and hands the kernel that set's token, whose [`Simd`] methods are the set's kernels. Only
@@ -19,7 +19,6 @@
 use std::cell::Cell;
 use std::sync::OnceLock;
 
-use crate::conditioning::lowpass::Cascade;
 
 /// An instruction set a [`Kernel`] can be compiled for.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
@@ -136,13 +135,6 @@ pub(crate) trait Simd: Copy {
         }
     }
 
-    /// Two second-order sections over frames of eight lanes in place, forward in time or
-    /// (`reverse`) backward, their state carried in `cascade`: the low-pass's recursion.
-    #[inline(always)]
-    fn cascade2(self, cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
-        cascade.run(frames, reverse);
-    }
-
     /// The Savitzky-Golay interior `dst[i] = sum_k c[k - 1] (x[i + M + k] - x[i + M - k])`,
     /// `k = 1..=M` summed in that order (`x` reaches `M` past `dst` on each side).
     #[inline(always)]
@@ -200,8 +192,7 @@ mod x86 {
     use std::arch::x86_64::*;
 
     use super::{derivative_point, Kernel, Simd};
-    use crate::conditioning::lowpass::Cascade;
-
+    
     /// AVX2's token. Made only by [`on_avx2`], which runs only on a CPU with AVX2.
     #[derive(Copy, Clone)]
     pub(crate) struct Avx2(());
@@ -225,12 +216,6 @@ mod x86 {
         fn transpose8(self, cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
             // SAFETY: an `Avx2` token exists only on a CPU with AVX2.
             unsafe { transpose8_avx2(cols, start, frames, to_frames) }
-        }
-
-        #[inline(always)]
-        fn cascade2(self, cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
-            // SAFETY: as above.
-            unsafe { cascade2_avx2(cascade, frames, reverse) }
         }
 
         #[inline(always)]
@@ -360,74 +345,6 @@ mod x86 {
         }
     }
 
-    /// [`Simd::cascade2`] with AVX2 intrinsics. The generic step compiled for AVX2 needs two
-    /// sections x three state vectors x two halves of eight lanes, twelve of the sixteen
-    /// registers, for state alone; the compiler kept some of it on the stack, a store and a
-    /// reload on the recursion's loop-carried path at every sample. Here each section keeps
-    /// only `y[n-1]` and `q` in registers (eight vectors for the pair): `b2 x[n-1]` is the
-    /// product `b0 x[n-1]` formed one sample earlier when `b2 == b0` bit for bit (every
-    /// Butterworth section: `b = [g, 2 g, g]`), so `x[n-1]` itself is not kept. Every output
-    /// is `(b0 x + q) - a1 y[n-1]` and every `q` is `(b1 x + b2 x[n-1]) - a2 y[n-1]`, as in
-    /// the generic `Lanes::step`: the same operations in the same order, the same bits. Sections
-    /// with `b2 != b0` take the generic loop.
-    #[target_feature(enable = "avx2")]
-    fn cascade2_avx2(cascade: &mut Cascade<'_, 8, 2>, frames: &mut [[f64; 8]], reverse: bool) {
-        let s = cascade.sections;
-        let Some(&last) = (if reverse { frames.first() } else { frames.last() }) else { return };
-        if s.iter().any(|s| s.b[2].to_bits() != s.b[0].to_bits()) {
-            return cascade.run(frames, reverse);
-        }
-        let set = |v: f64| _mm256_set1_pd(v);
-        // Coefficients [b0, b1, a1, a2] of each section.
-        let c: [[__m256d; 4]; 2] = std::array::from_fn(|k| [set(s[k].b[0]), set(s[k].b[1]), set(s[k].a[0]), set(s[k].a[1])]);
-        let half = |v: &[f64; 8], h: usize| -> __m256d {
-            // SAFETY: `v[4 h ..]` holds the four values loaded.
-            unsafe { _mm256_loadu_pd(v.as_ptr().add(4 * h)) }
-        };
-        // State by [section][half]: y[n-1], q[n], and p = b2 x[n-1].
-        let lanes = &cascade.lanes;
-        let mut y1: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| half(&lanes[k].y1, h)));
-        let mut q: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| half(&lanes[k].q, h)));
-        let mut p: [[__m256d; 2]; 2] = std::array::from_fn(|k| std::array::from_fn(|h| _mm256_mul_pd(set(s[k].b[2]), half(&lanes[k].x1, h))));
-        let mut step = |f: &mut [f64; 8]| {
-            for h in 0..2 {
-                // SAFETY: `f[4 h ..]` holds the four values loaded and stored.
-                let mut x = unsafe { _mm256_loadu_pd(f.as_ptr().add(4 * h)) };
-                for k in 0..2 {
-                    let [b0, b1, a1, a2] = c[k];
-                    let bx = _mm256_mul_pd(b0, x);
-                    let y = _mm256_sub_pd(_mm256_add_pd(bx, q[k][h]), _mm256_mul_pd(a1, y1[k][h]));
-                    q[k][h] = _mm256_sub_pd(_mm256_add_pd(_mm256_mul_pd(b1, x), p[k][h]), _mm256_mul_pd(a2, y1[k][h]));
-                    p[k][h] = bx;
-                    y1[k][h] = y;
-                    x = y;
-                }
-                // SAFETY: as above.
-                unsafe { _mm256_storeu_pd(f.as_mut_ptr().add(4 * h), x) };
-            }
-        };
-        if reverse {
-            frames.iter_mut().rev().for_each(&mut step);
-        } else {
-            frames.iter_mut().for_each(&mut step);
-        }
-        // Back to the generic state: `x[n-1]` of the first section is the last input, of the
-        // second the first section's last output.
-        let put = |v: &mut [f64; 8], h: usize, x: __m256d| {
-            // SAFETY: `v[4 h ..]` has room for the four values stored.
-            unsafe { _mm256_storeu_pd(v.as_mut_ptr().add(4 * h), x) }
-        };
-        let lanes = &mut cascade.lanes;
-        lanes[0].x1 = last;
-        for k in 0..2 {
-            for h in 0..2 {
-                put(&mut lanes[k].y1, h, y1[k][h]);
-                put(&mut lanes[k].q, h, q[k][h]);
-            }
-        }
-        lanes[1].x1 = lanes[0].y1;
-    }
-
     /// [`Simd::derivative`] with intrinsics, `$w` outputs per vector: four vectors of
     /// outputs per step share their loads (`4 W` outputs read `3 W + 2 M + 1` distinct
     /// shifted vectors; the compiler's own vectorisation built each from half loads and
@@ -486,7 +403,6 @@ mod x86 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::conditioning::lowpass::{Butterworth, Section};
 
     /// xorshift values over many magnitudes, with zeros and subnormals among them.
     fn values(n: usize, seed: u64) -> Vec<f64> {
@@ -506,14 +422,13 @@ mod tests {
             .collect()
     }
 
-    struct Kernels<'a> {
-        sections: &'a [Section; 2],
+    struct Kernels {
         frames: Vec<[f64; 8]>,
         x: Vec<f64>,
     }
 
     /// Every [`Simd`] kernel on the same data, its outputs as bits.
-    impl Kernel for Kernels<'_> {
+    impl Kernel for Kernels {
         type Output = Vec<u64>;
         fn run<S: Simd>(self, simd: S) -> Vec<u64> {
             let mut bits = Vec::new();
@@ -526,14 +441,6 @@ mod tests {
             };
             simd.transpose8(&mut c, 3, &mut frames, true);
             bits.extend(frames.as_flattened().iter().map(|v| v.to_bits()));
-            for (reverse, start) in [(false, self.frames[0]), (true, self.frames[n - 1])] {
-                let mut cascade = Cascade::steady(self.sections, start);
-                simd.cascade2(&mut cascade, &mut frames, reverse);
-                bits.extend(frames.as_flattened().iter().map(|v| v.to_bits()));
-                for l in cascade.lanes {
-                    bits.extend(l.x1.iter().chain(&l.y1).chain(&l.q).map(|v| v.to_bits()));
-                }
-            }
             simd.transpose8(&mut c, 2, &mut frames, false);
             bits.extend(c.iter().flat_map(|c| c.iter().map(|v| v.to_bits())));
             for m in [4usize, 5, 6] {
@@ -551,24 +458,18 @@ mod tests {
     }
 
     /// Each instruction set this CPU has gives the portable kernels' bits (transposes both
-    /// ways at odd offsets, the two-section recursion both ways with its state, the
-    /// differentiator at every compiled half-length, lengths that leave tails).
+    /// ways at odd offsets, the differentiator at every compiled half-length, lengths that
+    /// leave tails). The whole chain's drivers are compared the same way in their own tests.
     #[test]
     fn every_instruction_set_gives_the_scalar_bits() {
-        let lp = Butterworth::design(8, 900.0, 5000.0).unwrap();
         for n in [4, 5, 37, 1029] {
             let flat = values(8 * n, n as u64);
             let (frames, _) = flat.as_chunks::<8>();
-            for g in lp.sections().chunks_exact(2) {
-                let run = |isa| {
-                    let k = Kernels { sections: g.try_into().unwrap(), frames: frames.to_vec(), x: values(n + 40, 3) };
-                    dispatch(isa, k)
-                };
-                let scalar = run(Isa::Scalar);
-                assert!(scalar.len() > 8 * n);
-                for isa in Isa::available() {
-                    assert!(run(isa) == scalar, "{isa:?}, {n} frames");
-                }
+            let run = |isa| dispatch(isa, Kernels { frames: frames.to_vec(), x: values(n + 40, 3) });
+            let scalar = run(Isa::Scalar);
+            assert!(scalar.len() > 8 * n);
+            for isa in Isa::available() {
+                assert!(run(isa) == scalar, "{isa:?}, {n} frames");
             }
         }
         println!("sets compared with the scalar kernels: {:?}", Isa::available());

@@ -189,17 +189,19 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
     }
 }
 
-/// A group of sections over frames of eight lanes: a pair through [`Simd::cascade2`], the
-/// lone last section of an odd order through the generic loop.
+/// A group of sections (a pair, or the lone last section of an odd order) over frames of
+/// eight lanes, compiled for the caller's instruction set. (An AVX2 kernel that kept the
+/// pair's state in registers by volatile accesses, ADR 0016 amendment 4, measured within
+/// noise of this loop and went: ADR 0021.)
 #[inline(always)]
-fn run_group<S: Simd>(simd: S, sections: &[Section], lanes: &mut [Lanes<8>], frames: &mut [[f64; 8]], reverse: bool) {
-    if let Ok(pair) = <&[Section; 2]>::try_from(sections) {
-        if let Ok(l) = <&mut [Lanes<8>; 2]>::try_from(lanes) {
-            let mut c = Cascade { sections: pair, lanes: *l };
-            simd.cascade2(&mut c, frames, reverse);
-            *l = c.lanes;
-        }
-    } else if let (Ok(one), Ok(l)) = (<&[Section; 1]>::try_from(sections), <&mut [Lanes<8>; 1]>::try_from(lanes)) {
+fn run_group(sections: &[Section], lanes: &mut [Lanes<8>], frames: &mut [[f64; 8]], reverse: bool) {
+    if let (Ok(pair), Ok(l)) = (<&[Section; 2]>::try_from(sections), <&mut [Lanes<8>; 2]>::try_from(&mut *lanes)) {
+        let mut c = Cascade { sections: pair, lanes: *l };
+        c.run(frames, reverse);
+        *l = c.lanes;
+        return;
+    }
+    if let (Ok(one), Ok(l)) = (<&[Section; 1]>::try_from(sections), <&mut [Lanes<8>; 1]>::try_from(lanes)) {
         let mut c = Cascade { sections: one, lanes: *l };
         c.run(frames, reverse);
         *l = c.lanes;
@@ -532,7 +534,7 @@ impl Butterworth {
     #[inline(always)]
     pub(crate) fn forward_run<S: Simd>(&self, simd: S, st: &mut ForwardStream, frames: &mut [[f64; 8]]) {
         for (sections, lanes) in self.sections.chunks(FUSED).zip(st.lanes.chunks_mut(FUSED)) {
-            run_group(simd, sections, lanes, frames, false);
+            run_group(sections, lanes, frames, false);
         }
     }
 
@@ -584,7 +586,7 @@ impl Butterworth {
         for g in first {
             let lanes = &mut lanes[..g.len()];
             start(g, right, store, lanes);
-            run_group(simd, g, lanes, store, true);
+            run_group(g, lanes, store, true);
         }
         let lanes = &mut lanes[..last.len()];
         start(last, right, store, lanes);
@@ -593,7 +595,7 @@ impl Butterworth {
         while end > 0 {
             let from = end.saturating_sub(CONSUME_CHUNK);
             let chunk = &mut store[from..end];
-            run_group(simd, last, lanes, chunk, true);
+            run_group(last, lanes, chunk, true);
             finite &= all_finite(chunk.as_flattened());
             simd.transpose8(cols, from, chunk, false);
             consumer.consume(from, cols)?;
