@@ -15,6 +15,7 @@
 //! * [`pipeline`]: a raw record and its rig in, windowed coefficients with their operating
 //!   point and dimensionless forms out: the one path the CLI, the nodes and replay share.
 //! * [`simulate`]: a seeded record from the simulated rig under an excitation plan.
+//! * [`fft`]: the one Fourier transform (rustfft's scalar plans: the same bits on every CPU).
 //! * [`simd`]: the one place that picks the CPU's vector instructions for every hot loop
 //!   (results are the same bits on every instruction set).
 //! * [`campaign`]: the paper's two studies on the simulated rig (coefficients against the load
@@ -27,6 +28,7 @@ pub mod conditioning;
 pub mod error;
 pub mod estimator;
 pub mod excitation;
+pub mod fft;
 pub mod pipeline;
 pub mod simd;
 pub mod simulate;

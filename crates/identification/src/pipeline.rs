@@ -401,22 +401,15 @@ pub fn window_report(
 /// Where squares could under- or overflow (largest square not a normal number above 1e-280 and
 /// finite) every sample goes through `hypot`.
 pub fn orbit_amplitude(x: &[f64], y: &[f64], centre: [f64; 2]) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has the feature the function is compiled for (checked above).
-            return unsafe { orbit_amplitude_avx2(x, y, centre) };
+    struct K<'a>(&'a [f64], &'a [f64], [f64; 2]);
+    impl crate::simd::Kernel for K<'_> {
+        type Output = f64;
+        #[inline(always)]
+        fn run<S: crate::simd::Simd>(self, _: S) -> f64 {
+            orbit_amplitude_kernel(self.0, self.1, self.2)
         }
     }
-    orbit_amplitude_kernel(x, y, centre)
-}
-
-/// [`orbit_amplitude`] compiled for AVX2: the same subtractions, products, sums and
-/// comparisons (no fused multiply-add), so the same result in wider registers.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn orbit_amplitude_avx2(x: &[f64], y: &[f64], centre: [f64; 2]) -> f64 {
-    orbit_amplitude_kernel(x, y, centre)
+    crate::simd::dispatch(crate::simd::Isa::current(), K(x, y, centre))
 }
 
 #[inline(always)]

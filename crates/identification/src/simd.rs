@@ -135,6 +135,13 @@ pub(crate) trait Simd: Copy {
         }
     }
 
+    /// The mean of a column, summed relative to its first value with eight partial sums
+    /// combined pairwise ([`crate::estimator::window::mean`]).
+    #[inline(always)]
+    fn mean(self, c: &[f64]) -> f64 {
+        crate::estimator::window::mean_inline(c)
+    }
+
     /// The Savitzky-Golay interior `dst[i] = sum_k c[k - 1] (x[i + M + k] - x[i + M - k])`,
     /// `k = 1..=M` summed in that order (`x` reaches `M` past `dst` on each side).
     #[inline(always)]
@@ -223,6 +230,12 @@ mod x86 {
             // SAFETY: as above.
             unsafe { derivative_avx2(c, x, dst) }
         }
+
+        #[inline(always)]
+        fn mean(self, c: &[f64]) -> f64 {
+            // SAFETY: as above.
+            unsafe { mean_avx2(c) }
+        }
     }
 
     impl Simd for Avx512 {
@@ -236,6 +249,12 @@ mod x86 {
         fn derivative<const M: usize>(self, c: &[f64; M], x: &[f64], dst: &mut [f64]) {
             // SAFETY: as above.
             unsafe { derivative_avx512(c, x, dst) }
+        }
+
+        #[inline(always)]
+        fn mean(self, c: &[f64]) -> f64 {
+            // SAFETY: AVX-512F implies AVX2.
+            unsafe { mean_avx2(c) }
         }
     }
 
@@ -394,6 +413,33 @@ mod x86 {
                 }
             }
         };
+    }
+
+    /// [`Simd::mean`] with its eight partial sums in two AVX registers (lanes 0-3 and 4-7):
+    /// each lane adds the same differences in the same order, and they are combined as the
+    /// portable mean combines them, so the same bits. (The compiler's own vectorisation of the
+    /// portable mean shuffled two-lane halves and cost as much as the QR of the chunk.)
+    #[target_feature(enable = "avx2")]
+    fn mean_avx2(c: &[f64]) -> f64 {
+        let Some(&shift) = c.first() else { return f64::NAN };
+        let mut chunks = c.chunks_exact(8);
+        let s = _mm256_set1_pd(shift);
+        let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        for ch in &mut chunks {
+            // SAFETY: `ch` holds 8 doubles; unaligned loads.
+            let (a, b) = unsafe { (_mm256_loadu_pd(ch.as_ptr()), _mm256_loadu_pd(ch.as_ptr().add(4))) };
+            lo = _mm256_add_pd(lo, _mm256_sub_pd(a, s));
+            hi = _mm256_add_pd(hi, _mm256_sub_pd(b, s));
+        }
+        let mut acc = [0.0f64; 8];
+        // SAFETY: `acc` holds 8 doubles; unaligned stores.
+        unsafe {
+            _mm256_storeu_pd(acc.as_mut_ptr(), lo);
+            _mm256_storeu_pd(acc.as_mut_ptr().add(4), hi);
+        }
+        let tail: f64 = chunks.remainder().iter().map(|v| v - shift).sum();
+        let total = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail;
+        shift + total / c.len() as f64
     }
 
     derivative_kernel!(derivative_avx2, "avx2", 4, __m256d, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd);

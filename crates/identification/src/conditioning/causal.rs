@@ -432,7 +432,7 @@ impl Kernel for Push<'_> {
             let p0 = c.lowpassed;
             c.lowpassed += count as u64;
             let st = c.forward.get_or_insert_with(|| c.chain.lowpass.forward_steady(buf.frames[0]));
-            c.chain.lowpass.forward_run(simd, st, &mut buf.frames);
+            c.chain.lowpass.forward_run(st, &mut buf.frames);
             let fe = (p0 - buf.filtered_first) as usize;
             for col in buf.filtered.iter_mut() {
                 col.resize(fe + count, 0.0);

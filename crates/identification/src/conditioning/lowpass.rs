@@ -146,21 +146,6 @@ pub(crate) struct Cascade<'a, const L: usize, const S: usize> {
 }
 
 impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
-    /// Every section in its DC steady state for its own first input, when the cascade's first
-    /// input is `x0`: section `k`'s first input is section `k - 1`'s first output, computed
-    /// here by the same arithmetic as the step that will produce it.
-    #[cfg(test)]
-    pub(crate) fn steady(sections: &'a [Section; S], x0: [f64; L]) -> Self {
-        let mut v = x0;
-        let lanes = std::array::from_fn(|k| {
-            let mut st = Lanes::steady(&sections[k], v);
-            let first = st;
-            v = st.step(&sections[k], v);
-            first
-        });
-        Self { sections, lanes }
-    }
-
     #[inline(always)]
     fn step(&mut self, x: [f64; L]) -> [f64; L] {
         let mut v = x;
@@ -480,7 +465,7 @@ impl Butterworth {
         // Each group of sections in steady state for its first input (the previous group's
         // first output of the left reflection), run over the left reflection.
         let mut st = self.forward_steady(left[0]);
-        self.forward_run(simd, &mut st, left);
+        self.forward_run(&mut st, left);
         // Forward over each produced range: first copy aside what the right reflection needs
         // (samples n-1-pad .. n-1, unfiltered), then move the range into frames and filter it.
         let mut last_sample = [0.0; L];
@@ -497,7 +482,7 @@ impl Butterworth {
             }
             let range = &mut store[a..produced];
             simd.transpose8(&mut fresh, 0, range, true);
-            self.forward_run(simd, &mut st, range);
+            self.forward_run(&mut st, range);
             if produced == n {
                 break;
             }
@@ -512,7 +497,7 @@ impl Butterworth {
                 f[l] = 2.0 * last_sample[l] - f[l];
             }
         }
-        self.forward_run_generic(&mut st, right);
+        self.forward_run(&mut st, right);
         self.backward_consumed(simd, &mut cols, store, right, consumer)
     }
 
@@ -532,19 +517,9 @@ impl Butterworth {
     /// The forward pass over `frames` (in place, in time order), its state carried in `st`:
     /// frames fed in any cuts give the same outputs, bit for bit.
     #[inline(always)]
-    pub(crate) fn forward_run<S: Simd>(&self, simd: S, st: &mut ForwardStream, frames: &mut [[f64; 8]]) {
+    pub(crate) fn forward_run(&self, st: &mut ForwardStream, frames: &mut [[f64; 8]]) {
         for (sections, lanes) in self.sections.chunks(FUSED).zip(st.lanes.chunks_mut(FUSED)) {
             run_group(sections, lanes, frames, false);
-        }
-    }
-
-    /// [`Butterworth::forward_run`] on the reflections: few frames, not worth the kernels.
-    #[inline(always)]
-    fn forward_run_generic(&self, st: &mut ForwardStream, frames: &mut [[f64; 8]]) {
-        for (s, lanes) in self.sections.iter().zip(st.lanes.iter_mut()) {
-            for f in frames.iter_mut() {
-                *f = lanes.step(s, *f);
-            }
         }
     }
 

@@ -233,7 +233,7 @@ impl Kernel for Advance<'_> {
     type Output = Result<(), IdentificationError>;
 
     #[inline(always)]
-    fn run<S: Simd>(self, simd: S) -> Self::Output {
+    fn run<S: Simd>(self, _: S) -> Self::Output {
         let Advance { s, raw, offset } = self;
         let end = (offset + raw.len()).saturating_sub(s.lookahead);
         if s.produced < end && s.first_needed() < offset {
@@ -272,7 +272,7 @@ impl Kernel for Advance<'_> {
                 }
                 if j > i {
                     let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(s.frames[i]));
-                    s.chain.lowpass.forward_run(simd, st, &mut s.frames[i..j]);
+                    s.chain.lowpass.forward_run(st, &mut s.frames[i..j]);
                 }
                 if j < s.frames.len() {
                     s.bad.push(p + (j - new_from));

@@ -64,7 +64,6 @@
 
 mod explain;
 pub mod feed;
-pub mod fft;
 pub mod frequency;
 pub mod normal_equations;
 pub mod qr;

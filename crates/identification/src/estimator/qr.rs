@@ -86,16 +86,7 @@ impl Triangle {
         if rows == 0 || block.len() != rows * q {
             return;
         }
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                // SAFETY: the only requirement of a `target_feature` function is that the CPU
-                // has the features, which was checked on the line above.
-                unsafe { absorb_avx2_fma(&mut self.r, q, block, rows) };
-                return;
-            }
-        }
-        absorb_kernel::<false>(&mut self.r, q, block, rows);
+        crate::simd::dispatch(crate::simd::Isa::current(), Absorb { r: &mut self.r, q, block, rows });
     }
 
     /// Stack another factor below this one and re-triangularise: afterwards `self` is the
@@ -134,21 +125,32 @@ impl Triangle {
     }
 }
 
-/// The Householder sweep compiled for AVX2 and FMA (selected at run time).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn absorb_avx2_fma(r: &mut [f64], q: usize, block: &mut [f64], rows: usize) {
-    absorb_kernel::<true>(r, q, block, rows);
+/// [`absorb_kernel`] as a [`crate::simd::Kernel`]: compiled for the CPU's vector
+/// instructions, with separate multiplies and adds (no fused multiply-add), so the factor is
+/// the same bits on every CPU.
+struct Absorb<'a> {
+    r: &'a mut [f64],
+    q: usize,
+    block: &'a mut [f64],
+    rows: usize,
+}
+
+impl crate::simd::Kernel for Absorb<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: crate::simd::Simd>(self, _: S) {
+        absorb_kernel(self.r, self.q, self.block, self.rows);
+    }
 }
 
 /// One Householder reflector per column `j` annihilates `block[:, j]` into `r[j][j]`; see
-/// [`Triangle::absorb`]. `FMA` selects fused multiply-adds (only where the CPU has them).
+/// [`Triangle::absorb`].
 #[inline(always)]
-fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], rows: usize) {
+fn absorb_kernel(r: &mut [f64], q: usize, block: &mut [f64], rows: usize) {
     for j in 0..q {
         let (head, tail) = block.split_at_mut((j + 1) * rows);
         let v = &mut head[j * rows..];
-        let sigma = dot_k::<FMA>(v, v);
+        let sigma = dot_k(v, v);
         if sigma == 0.0 {
             continue; // column already zero below the diagonal: identity reflector
         }
@@ -172,18 +174,18 @@ fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], ro
         loop {
             match (cols.next(), cols.next()) {
                 (Some(c1), Some(c2)) => {
-                    let (d1, d2) = dot2_k::<FMA>(v, c1, c2);
+                    let (d1, d2) = dot2_k(v, c1, c2);
                     let tw1 = tau * (r[j * q + k] + d1);
                     let tw2 = tau * (r[j * q + k + 1] + d2);
                     r[j * q + k] -= tw1;
                     r[j * q + k + 1] -= tw2;
-                    axpy2_k::<FMA>(-tw1, -tw2, v, c1, c2);
+                    axpy2_k(-tw1, -tw2, v, c1, c2);
                     k += 2;
                 }
                 (Some(c1), None) => {
-                    let tw = tau * (r[j * q + k] + dot_k::<FMA>(v, c1));
+                    let tw = tau * (r[j * q + k] + dot_k(v, c1));
                     r[j * q + k] -= tw;
-                    axpy_k::<FMA>(-tw, v, c1);
+                    axpy_k(-tw, v, c1);
                     break;
                 }
                 _ => break,
@@ -193,7 +195,7 @@ fn absorb_kernel<const FMA: bool>(r: &mut [f64], q: usize, block: &mut [f64], ro
 }
 
 #[inline(always)]
-fn dot2_k<const FMA: bool>(v: &[f64], a: &[f64], b: &[f64]) -> (f64, f64) {
+fn dot2_k(v: &[f64], a: &[f64], b: &[f64]) -> (f64, f64) {
     let n = v.len().min(a.len()).min(b.len());
     let (v, a, b) = (&v[..n], &a[..n], &b[..n]);
     let mut s1 = [0.0f64; 8];
@@ -203,13 +205,8 @@ fn dot2_k<const FMA: bool>(v: &[f64], a: &[f64], b: &[f64]) -> (f64, f64) {
     let mut cb = b.chunks_exact(8);
     for ((xv, xa), xb) in (&mut cv).zip(&mut ca).zip(&mut cb) {
         for l in 0..8 {
-            if FMA {
-                s1[l] = xv[l].mul_add(xa[l], s1[l]);
-                s2[l] = xv[l].mul_add(xb[l], s2[l]);
-            } else {
-                s1[l] += xv[l] * xa[l];
-                s2[l] += xv[l] * xb[l];
-            }
+            s1[l] += xv[l] * xa[l];
+            s2[l] += xv[l] * xb[l];
         }
     }
     let (mut t1, mut t2) = (0.0, 0.0);
@@ -222,20 +219,15 @@ fn dot2_k<const FMA: bool>(v: &[f64], a: &[f64], b: &[f64]) -> (f64, f64) {
 }
 
 #[inline(always)]
-fn axpy2_k<const FMA: bool>(alpha: f64, beta: f64, x: &[f64], a: &mut [f64], b: &mut [f64]) {
+fn axpy2_k(alpha: f64, beta: f64, x: &[f64], a: &mut [f64], b: &mut [f64]) {
     for ((xi, ai), bi) in x.iter().zip(a.iter_mut()).zip(b.iter_mut()) {
-        if FMA {
-            *ai = alpha.mul_add(*xi, *ai);
-            *bi = beta.mul_add(*xi, *bi);
-        } else {
-            *ai += alpha * xi;
-            *bi += beta * xi;
-        }
+        *ai += alpha * xi;
+        *bi += beta * xi;
     }
 }
 
 #[inline(always)]
-fn dot_k<const FMA: bool>(a: &[f64], b: &[f64]) -> f64 {
+fn dot_k(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len().min(b.len());
     let (a, b) = (&a[..n], &b[..n]);
     let mut acc = [0.0f64; 16];
@@ -243,7 +235,7 @@ fn dot_k<const FMA: bool>(a: &[f64], b: &[f64]) -> f64 {
     let mut cb = b.chunks_exact(16);
     for (xa, xb) in (&mut ca).zip(&mut cb) {
         for l in 0..16 {
-            acc[l] = if FMA { xa[l].mul_add(xb[l], acc[l]) } else { acc[l] + xa[l] * xb[l] };
+            acc[l] += xa[l] * xb[l];
         }
     }
     let mut tail = 0.0;
@@ -258,9 +250,9 @@ fn dot_k<const FMA: bool>(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[inline(always)]
-fn axpy_k<const FMA: bool>(alpha: f64, x: &[f64], y: &mut [f64]) {
+fn axpy_k(alpha: f64, x: &[f64], y: &mut [f64]) {
     for (yi, xi) in y.iter_mut().zip(x) {
-        *yi = if FMA { alpha.mul_add(*xi, *yi) } else { *yi + alpha * xi };
+        *yi += alpha * xi;
     }
 }
 

@@ -20,7 +20,8 @@
 
 use rustfft::num_complex::Complex;
 
-use super::fft;
+use crate::fft;
+use crate::simd::{self, Isa, Kernel, Simd};
 
 /// Half-width of the Blackman–Harris main lobe, in bins.
 pub const MAIN_LOBE_BINS: usize = 4;
@@ -116,85 +117,28 @@ impl LineAnalysis {
     }
 }
 
-/// Twiddle factors of every stage of an `n`-point radix-2 FFT, concatenated: the stage of
-/// length `len` uses `exp(-2πik/len)`, `k < len/2`, stored from offset `len/2 - 1` (so each
-/// stage reads its factors contiguously). `n - 1` entries of each of cos and sin.
-pub fn twiddles(n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut tc = Vec::with_capacity(n.saturating_sub(1));
-    let mut ts = Vec::with_capacity(n.saturating_sub(1));
-    let mut len = 2;
-    while len <= n {
-        for k in 0..len / 2 {
-            let ang = -2.0 * std::f64::consts::PI * k as f64 / len as f64;
-            tc.push(ang.cos());
-            ts.push(ang.sin());
-        }
-        len *= 2;
-    }
-    (tc, ts)
+/// Kept for callers of the former radix-2 transform: the tables [`fft_with`] no longer
+/// needs (empty).
+pub fn twiddles(_n: usize) -> (Vec<f64>, Vec<f64>) {
+    (Vec::new(), Vec::new())
 }
 
-/// In-place iterative radix-2 complex FFT (decimation in time). `re.len()` must be a power of
-/// two equal to `im.len()`; otherwise nothing is done.
+/// In-place complex forward DFT of `re + i im` through [`crate::fft`]; `re` and `im` of one
+/// length, else nothing is done.
 pub fn fft(re: &mut [f64], im: &mut [f64]) {
-    let (tc, ts) = twiddles(re.len());
-    fft_with(re, im, &tc, &ts);
-}
-
-/// [`fft`] with precomputed [`twiddles`] of the same length.
-pub fn fft_with(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
-    let n = re.len();
-    if n < 2 || !n.is_power_of_two() || im.len() != n || tc.len() != n - 1 || ts.len() != n - 1 {
+    if re.len() != im.len() {
         return;
     }
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU has the features the function is compiled for (checked above).
-            unsafe { fft_avx2(re, im, tc, ts) };
-            return;
-        }
+    let mut z: Vec<Complex<f64>> = re.iter().zip(im.iter()).map(|(&r, &i)| Complex::new(r, i)).collect();
+    fft::forward(&mut z);
+    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(z) {
+        (*r, *i) = (c.re, c.im);
     }
-    fft_kernel(re, im, tc, ts);
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn fft_avx2(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
-    fft_kernel(re, im, tc, ts);
-}
-
-#[inline(always)]
-fn fft_kernel(re: &mut [f64], im: &mut [f64], tc: &[f64], ts: &[f64]) {
-    let n = re.len();
-    let bits = n.trailing_zeros();
-    for i in 0..n {
-        let j = i.reverse_bits() >> (usize::BITS - bits);
-        if j > i {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let mut len = 2;
-    while len <= n {
-        let h = len / 2;
-        let (wc, ws) = (&tc[h - 1..len - 1], &ts[h - 1..len - 1]);
-        for (rblk, iblk) in re.chunks_exact_mut(len).zip(im.chunks_exact_mut(len)) {
-            let (ra, rb) = rblk.split_at_mut(h);
-            let (ia, ib) = iblk.split_at_mut(h);
-            for (((((ar, ai), br), bi), wr), wi) in
-                ra.iter_mut().zip(ia.iter_mut()).zip(rb.iter_mut()).zip(ib.iter_mut()).zip(wc).zip(ws)
-            {
-                let xr = *br * wr - *bi * wi;
-                let xi = *br * wi + *bi * wr;
-                *br = *ar - xr;
-                *bi = *ai - xi;
-                *ar += xr;
-                *ai += xi;
-            }
-        }
-        len *= 2;
-    }
+/// [`fft`]; the tables are not used (kept for the callers of the former radix-2 transform).
+pub fn fft_with(re: &mut [f64], im: &mut [f64], _tc: &[f64], _ts: &[f64]) {
+    fft(re, im);
 }
 
 /// Per-segment-length tables shared by the Welch passes of one window.
@@ -296,23 +240,15 @@ impl WelchPair {
 /// the tapered segment with exactly zero DC: a plain mean would leave a small constant that
 /// leaks into the lowest bins). All slices one segment long.
 fn taper_into(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tables) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has the feature the function is compiled for (checked above).
-            unsafe { taper_into_avx2(z, a, b, tables) };
-            return;
+    struct K<'a>(&'a mut [Complex<f64>], &'a [f64], &'a [f64], &'a Tables);
+    impl Kernel for K<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn run<S: Simd>(self, _: S) {
+            taper_into_kernel(self.0, self.1, self.2, self.3);
         }
     }
-    taper_into_kernel(z, a, b, tables);
-}
-
-/// [`taper_into`] compiled for AVX2: the same multiplications and additions in the same order
-/// (no fused multiply-add), so the same bits as the baseline kernel, in wider registers.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn taper_into_avx2(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tables) {
-    taper_into_kernel(z, a, b, tables);
+    simd::dispatch(Isa::current(), K(z, a, b, tables));
 }
 
 #[inline(always)]
@@ -330,22 +266,15 @@ fn taper_into_kernel(z: &mut [Complex<f64>], a: &[f64], b: &[f64], tables: &Tabl
 /// of the real and imaginary parts of the signal whose transform is `z`:
 /// `X_k = (Z_k + conj Z_{N-k}) / 2`, `Y_k = (Z_k - conj Z_{N-k}) / (2i)`; `Z_N` is `Z_0`.
 fn accumulate(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has the feature the function is compiled for (checked above).
-            unsafe { accumulate_avx2(pa, pb, z) };
-            return;
+    struct K<'a>(&'a mut [f64], &'a mut [f64], &'a [Complex<f64>]);
+    impl Kernel for K<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn run<S: Simd>(self, _: S) {
+            accumulate_kernel(self.0, self.1, self.2);
         }
     }
-    accumulate_kernel(pa, pb, z);
-}
-
-/// [`accumulate`] compiled for AVX2 (same operations, same order: the same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn accumulate_avx2(pa: &mut [f64], pb: &mut [f64], z: &[Complex<f64>]) {
-    accumulate_kernel(pa, pb, z);
+    simd::dispatch(Isa::current(), K(pa, pb, z));
 }
 
 #[inline(always)]

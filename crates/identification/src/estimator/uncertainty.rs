@@ -145,7 +145,7 @@
 
 use rustfft::num_complex::Complex;
 
-use super::fft;
+use crate::fft;
 
 /// Standard errors of one window.
 #[derive(Debug, Clone)]

@@ -18,6 +18,7 @@
 //! each hop-sized block is factored once and windows are combinations of block factors.
 
 use super::qr::Triangle;
+use crate::simd::{self, Isa, Kernel, Simd};
 
 /// Rows per Householder sweep: a block of `CHUNK_ROWS × cols` doubles (24 KiB for the six
 /// columns of the Kc model, 32 KiB for eight) stays in the level-1 cache while all its
@@ -31,9 +32,10 @@ pub fn mean(c: &[f64]) -> f64 {
     mean_inline(c)
 }
 
-/// [`mean`], inlined into its callers (so that it is compiled with their target features).
+/// [`mean`], inlined into its callers (so that it is compiled with their target features):
+/// the portable [`Simd::mean`].
 #[inline(always)]
-fn mean_inline(c: &[f64]) -> f64 {
+pub(crate) fn mean_inline(c: &[f64]) -> f64 {
     let Some(&shift) = c.first() else { return f64::NAN };
     let mut acc = [0.0f64; 8];
     let mut chunks = c.chunks_exact(8);
@@ -210,86 +212,49 @@ impl SummaryBuilder {
 /// Column `j`'s mean into `means[j]` and its rows `0..rows` minus that mean into
 /// `block[j rows..(j + 1) rows]` (column-major), for every column.
 fn centre_into(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has the feature the function is compiled for (checked above).
-            unsafe { centre_into_avx2(block, cols, rows, means) };
-            return;
+    struct K<'a>(&'a mut [f64], &'a [&'a [f64]], usize, &'a mut [f64]);
+    impl Kernel for K<'_> {
+        type Output = ();
+        /// The means by [`Simd::mean`], the same bits as [`mean`] on every instruction set.
+        #[inline(always)]
+        fn run<S: Simd>(self, simd: S) {
+            let K(block, cols, rows, means) = self;
+            for ((c, dst), m_out) in cols.iter().zip(block.chunks_exact_mut(rows)).zip(means.iter_mut()) {
+                let src = &c[..rows];
+                let m = simd.mean(src);
+                *m_out = m;
+                for (d, v) in dst.iter_mut().zip(src) {
+                    *d = v - m;
+                }
+            }
         }
     }
-    centre_into_kernel(block, cols, rows, means, mean_inline);
-}
-
-/// [`centre_into`] compiled for AVX2, the means by [`mean_avx2`]: the same subtractions and
-/// partial sums in the same order (no fused multiply-add), so the same bits in wider registers.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn centre_into_avx2(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64]) {
-    centre_into_kernel(block, cols, rows, means, |c| mean_avx2(c));
-}
-
-#[inline(always)]
-fn centre_into_kernel(block: &mut [f64], cols: &[&[f64]], rows: usize, means: &mut [f64], mean_of: impl Fn(&[f64]) -> f64) {
-    for ((c, dst), m_out) in cols.iter().zip(block.chunks_exact_mut(rows)).zip(means.iter_mut()) {
-        let src = &c[..rows];
-        let m = mean_of(src);
-        *m_out = m;
-        for (d, v) in dst.iter_mut().zip(src) {
-            *d = v - m;
-        }
-    }
-}
-
-/// [`mean`] with its eight partial sums in two AVX registers (lanes 0-3 and 4-7): each lane
-/// adds the same differences in the same order, and they are combined as [`mean`] combines
-/// them, so the result is [`mean`]'s, bit for bit (tested). (The compiler's own vectorisation
-/// of [`mean`] shuffled two-lane halves and cost as much as the QR of the chunk.)
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn mean_avx2(c: &[f64]) -> f64 {
-    use std::arch::x86_64::*;
-    let Some(&shift) = c.first() else { return f64::NAN };
-    let mut chunks = c.chunks_exact(8);
-    let s = _mm256_set1_pd(shift);
-    let (mut lo, mut hi) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    for ch in &mut chunks {
-        // SAFETY: `ch` holds 8 doubles; unaligned loads.
-        let (a, b) = unsafe { (_mm256_loadu_pd(ch.as_ptr()), _mm256_loadu_pd(ch.as_ptr().add(4))) };
-        lo = _mm256_add_pd(lo, _mm256_sub_pd(a, s));
-        hi = _mm256_add_pd(hi, _mm256_sub_pd(b, s));
-    }
-    let mut acc = [0.0f64; 8];
-    // SAFETY: `acc` holds 8 doubles; unaligned stores.
-    unsafe {
-        _mm256_storeu_pd(acc.as_mut_ptr(), lo);
-        _mm256_storeu_pd(acc.as_mut_ptr().add(4), hi);
-    }
-    let tail: f64 = chunks.remainder().iter().map(|v| v - shift).sum();
-    let total = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail;
-    shift + total / c.len() as f64
+    simd::dispatch(Isa::current(), K(block, cols, rows, means));
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The AVX2 mean is the portable one, bit for bit, at every tail length and scale.
-    #[cfg(target_arch = "x86_64")]
+    /// [`Simd::mean`] on every instruction set this CPU has is the portable mean, bit for
+    /// bit, at every tail length and scale.
     #[test]
-    fn mean_avx2_is_mean() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
-            return;
-        }
-        for n in [1usize, 2, 7, 8, 9, 15, 16, 17, 511, 512] {
-            for scale in [1e-6, 1.0, 3e4] {
-                let c: Vec<f64> = (0..n).map(|t| scale * (2.0 + (t as f64 * 0.77).sin() + 1e-3 * t as f64)).collect();
-                // SAFETY: AVX2 checked above.
-                let fast = unsafe { mean_avx2(&c) };
-                assert_eq!(fast.to_bits(), mean(&c).to_bits(), "n {n} scale {scale}");
+    fn mean_is_the_same_on_every_instruction_set() {
+        struct K<'a>(&'a [f64]);
+        impl Kernel for K<'_> {
+            type Output = f64;
+            fn run<S: Simd>(self, simd: S) -> f64 {
+                simd.mean(self.0)
             }
         }
-        assert!(unsafe { mean_avx2(&[]) }.is_nan());
+        for n in [0usize, 1, 2, 7, 8, 9, 15, 16, 17, 511, 512] {
+            for scale in [1e-6, 1.0, 3e4] {
+                let c: Vec<f64> = (0..n).map(|t| scale * (2.0 + (t as f64 * 0.77).sin() + 1e-3 * t as f64)).collect();
+                for isa in Isa::available() {
+                    assert_eq!(simd::dispatch(isa, K(&c)).to_bits(), mean(&c).to_bits(), "n {n} scale {scale} {isa:?}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -17,6 +17,8 @@
 
 use std::f64::consts::PI;
 
+use rustfft::num_complex::Complex;
+
 use super::LineSet;
 
 /// The highest harmonic number a multisine may use (`band_hz[1] * period_s`): at 80 Hz a
@@ -195,19 +197,16 @@ impl Design {
     /// The signal at `m` equally spaced points of one period (`u = j / m`), by an inverse FFT.
     /// `m` must be a power of two above twice the highest harmonic (the callers ensure it).
     fn samples(&self, m: usize) -> Vec<f64> {
-        let mut re = vec![0.0; m];
-        let mut im = vec![0.0; m];
+        let mut z = vec![Complex::new(0.0, 0.0); m];
         for (&k, &phi) in self.harmonics.iter().zip(&self.phases_rad) {
             let k = k as usize; // k <= MAX_HARMONIC < m / 2
             let (s, c) = phi.sin_cos();
             let half = 0.5 * self.amplitude_n;
-            re[k] += half * c;
-            im[k] += half * s;
-            re[m - k] += half * c;
-            im[m - k] -= half * s;
+            z[k] += Complex::new(half * c, half * s);
+            z[m - k] += Complex::new(half * c, -half * s);
         }
-        inverse_fft(&mut re, &mut im);
-        re
+        crate::fft::inverse(&mut z);
+        z.iter().map(|c| c.re).collect()
     }
 
     /// Upper bound of `|second derivative|` with respect to the period fraction `u`:
@@ -246,49 +245,6 @@ impl Design {
         let rms = (x.iter().map(|v| v * v).sum::<f64>() / m as f64).sqrt();
         let bound = peak + self.curvature_bound() / (8.0 * (m as f64).powi(2));
         (peak, rms, bound)
-    }
-}
-
-/// In-place inverse DFT `x_j = sum_k X_k exp(+2 pi i j k / n)` (no 1/n factor), radix-2,
-/// `n` a power of two. Twiddles come from one table, so the error does not grow with `n`.
-fn inverse_fft(re: &mut [f64], im: &mut [f64]) {
-    let n = re.len();
-    if n < 2 || im.len() != n || !n.is_power_of_two() {
-        return;
-    }
-    // Bit-reversal permutation.
-    let mut j = 0usize;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let table: Vec<(f64, f64)> =
-        (0..n / 2).map(|k| (2.0 * PI * k as f64 / n as f64).sin_cos()).collect();
-    let mut len = 2;
-    while len <= n {
-        let half = len / 2;
-        let stride = n / len;
-        for start in (0..n).step_by(len) {
-            for k in 0..half {
-                let (s, c) = table[k * stride];
-                let (a, b) = (start + k, start + k + half);
-                let br = re[b] * c - im[b] * s;
-                let bi = re[b] * s + im[b] * c;
-                re[b] = re[a] - br;
-                im[b] = im[a] - bi;
-                re[a] += br;
-                im[a] += bi;
-            }
-        }
-        len <<= 1;
     }
 }
 
