@@ -291,3 +291,51 @@ fn bench_pipeline_runs_and_its_blocks_agree_with_the_whole_record() {
     let kxx: Vec<f64> = line.split_whitespace().filter_map(|w| w.parse().ok()).collect();
     assert!(kxx.len() >= 2 && kxx[0] > 1e7 && kxx[1] > 1e7, "two film stiffnesses of the Zhou point expected: {line}");
 }
+
+/// The largest relative difference of the numbers of two JSON documents of one shape whose
+/// other values are equal; `Err` names the first place they are not.
+fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, at: &str) -> Result<f64, String> {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
+            Ok(if x == y { 0.0 } else { (x - y).abs() / x.abs().max(y.abs()) })
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
+            x.iter().zip(y).enumerate().try_fold(0.0f64, |m, (i, (p, q))| largest_difference(p, q, &format!("{at}[{i}]")).map(|d| m.max(d)))
+        }
+        (Value::Object(x), Value::Object(y)) if x.len() == y.len() => x.iter().try_fold(0.0f64, |m, (k, p)| {
+            let q = y.get(k).ok_or_else(|| format!("{at}.{k} missing"))?;
+            largest_difference(p, q, &format!("{at}.{k}")).map(|d| m.max(d))
+        }),
+        _ if a == b => Ok(0.0),
+        _ => Err(format!("{at}: {a} against {b}")),
+    }
+}
+
+/// `oilfilm identify` with the baseline instruction set (`OILFILM_SIMD=scalar`: no AVX, no
+/// fused multiply-add, `rustfft`'s scalar transforms: what a CPU without AVX2 and FMA runs)
+/// gives what it gives on this CPU: the same lines, flags and refusals, every number within
+/// a relative 1e-12 (the transforms' rounding, ADR 0022).
+#[test]
+fn identify_without_avx_or_fma_gives_the_same_estimates() {
+    let record = scratch("simd.txt");
+    let out = oilfilm(&["simulate", "--seconds", "6", "-o", record.to_str().unwrap()]);
+    assert!(out.status.success(), "simulate failed: {}", String::from_utf8_lossy(&out.stderr));
+    let identify = |simd: Option<&str>| -> serde_json::Value {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_oilfilm"));
+        cmd.args(["identify", record.to_str().unwrap(), "--json", "--window", "10000", "--hop", "5000"]).env_remove("OILFILM_SIMD");
+        if let Some(s) = simd {
+            cmd.env("OILFILM_SIMD", s);
+        }
+        let out = cmd.output().expect("the oilfilm binary runs");
+        assert!(out.status.success(), "identify failed: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).expect("identify --json prints JSON")
+    };
+    let (baseline, widest) = (identify(Some("scalar")), identify(None));
+    let solved = widest["windows"].as_array().map_or(0, |w| w.iter().filter(|w| w["estimate"]["result"]["Ok"].is_object()).count());
+    assert!(solved >= 2, "windows to compare: {widest}");
+    let d = largest_difference(&baseline, &widest, "identification").unwrap_or_else(|e| panic!("OILFILM_SIMD=scalar: {e}"));
+    println!("{solved} windows; OILFILM_SIMD=scalar against this CPU's widest set: largest relative difference {d:.1e}");
+    assert!(d <= 1e-12, "{d:e}");
+}
