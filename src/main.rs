@@ -4,16 +4,11 @@
 //! lives in `oilfilm-physics`.
 
 mod launch;
-mod bench;
-mod bench_bag;
-mod bench_nodes;
-mod bench_pipeline;
 mod records;
 mod record;
 mod campaign;
 mod figures;
 mod report;
-mod bench_diagnose;
 mod ascii_input;
 mod diagnose;
 mod diagnose_report;
@@ -88,8 +83,6 @@ enum Command {
     /// catalog and judged on held-out data, the extended model's parameters and its gain,
     /// with a report (figures + report.md). `--json` prints the stable contract.
     Diagnose(diagnose::DiagnoseArgs),
-    /// Benchmarks that print a table (film coefficient set, rig simulation speed).
-    Bench(bench::BenchArgs),
     /// Zhou et al. (2004)'s two studies on the simulated rig: coefficients against the load
     /// parameter (Figs 5-6) and against the excitation amplitude (Figs 7-10), with fits,
     /// the film model's coefficients, JSON of every number and SVG figures.
@@ -183,7 +176,6 @@ fn main() -> Result<()> {
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),
         Command::Diagnose(args) => diagnose::run(&args),
-        Command::Bench(args) => bench::run(&args),
         Command::Campaign(args) => campaign::run(&args.source.load()?, &args.out, args.quick, args.json),
     }
 }

@@ -1,10 +1,33 @@
-//! `oilfilm bench`: benchmarks that print a table. Wall-clock numbers vary with the machine;
-//! the ratios measured in one run (speed-up over a reference, multiple of real time) are the
-//! numbers to compare between runs.
+//! `oilfilm-bench`: benchmarks that print a table, kept out of the `oilfilm` command.
+//! Wall-clock numbers vary with the machine; the ratios measured in one run (speed-up over a
+//! reference measured beside it, multiple of real time) are the numbers to compare between
+//! runs.
+//!
+//! `cargo run --release -p oilfilm-bench -- pipeline` (or `physics`, `nodes`, `bag`,
+//! `diagnose`; each takes `--help`).
+
+mod bench_bag;
+mod bench_diagnose;
+mod bench_nodes;
+mod bench_pipeline;
+
+// What `bench_diagnose` uses of the command's diagnosis code, compiled from its sources (they
+// are modules of the `oilfilm` binary, not of its library).
+#[allow(dead_code)] // the reader's whole result: only the record and rig are used here
+#[path = "../../src/ascii_input.rs"]
+mod ascii_input;
+#[path = "../../src/diagnose_report.rs"]
+mod diagnose_report;
+#[allow(dead_code)] // the campaign's figures: only `padded` is used here
+#[path = "../../src/figures.rs"]
+mod figures;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use nalgebra::Vector2;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::film::finite::{FiniteBearing, GridSpec};
@@ -14,11 +37,10 @@ use oilfilm_physics::rig::RigInput;
 use oilfilm_physics::simulation::SimulatedRig;
 use oilfilm_physics::validation;
 
-/// ROS 3.1's time for one coefficient set, s (the measurement of the open peer).
-const ROSS_COEFFICIENT_SET_S: f64 = 0.06;
-
-#[derive(Debug, clap::Args)]
-pub struct BenchArgs {
+/// Benchmarks of oilfilm that print a table.
+#[derive(Debug, clap::Parser)]
+#[command(name = "oilfilm-bench", version, about, long_about = None)]
+struct BenchArgs {
     #[command(subcommand)]
     what: BenchWhat,
 }
@@ -69,24 +91,31 @@ enum BenchWhat {
         #[arg(long)]
         zstd_sweep: bool,
     },
-    /// Film coefficient set at the Zhou point and rig simulation speed.
+    /// Film coefficient set at the Zhou point beside ROSS's on the same bearing and grid
+    /// (measured in the same run: `bash bench/ross/setup-venv.sh` once), the Lund & Thomsen
+    /// comparison, and rig simulation speed.
     Physics {
-        /// Repeats of the coefficient set (the median is reported).
+        /// Repeats of the coefficient set (the median is reported), ours and ROSS's.
         #[arg(long, default_value_t = 30)]
         repeats: usize,
         /// Simulated seconds for each rig-speed row (the direct finite film runs a tenth).
         #[arg(long, default_value_t = 2.0)]
         seconds: f64,
+        /// Python interpreter with ROSS (default: .venv-ross/bin/python, made by
+        /// bench/ross/setup-venv.sh).
+        #[arg(long)]
+        ross_python: Option<PathBuf>,
     },
 }
 
-pub fn run(args: &BenchArgs) -> Result<()> {
+fn main() -> Result<()> {
+    let args = <BenchArgs as clap::Parser>::parse();
     match args.what {
-        BenchWhat::Physics { repeats, seconds } => physics(repeats.max(1), seconds),
-        BenchWhat::Pipeline { seconds, ref python } => crate::bench_pipeline::run(seconds, python.clone()),
-        BenchWhat::Nodes { seconds } => crate::bench_nodes::run(seconds),
-        BenchWhat::Diagnose { repeats, seconds, ref records } => crate::bench_diagnose::run(repeats, seconds, records.as_deref()),
-        BenchWhat::Bag { seconds, zstd_sweep } => crate::bench_bag::run(seconds, zstd_sweep),
+        BenchWhat::Physics { repeats, seconds, ref ross_python } => physics(repeats.max(1), seconds, ross_python.as_deref()),
+        BenchWhat::Pipeline { seconds, ref python } => bench_pipeline::run(seconds, python.clone()),
+        BenchWhat::Nodes { seconds } => bench_nodes::run(seconds),
+        BenchWhat::Diagnose { repeats, seconds, ref records } => bench_diagnose::run(repeats, seconds, records.as_deref()),
+        BenchWhat::Bag { seconds, zstd_sweep } => bench_bag::run(seconds, zstd_sweep),
     }
 }
 
@@ -95,7 +124,50 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn physics(repeats: usize, seconds: f64) -> Result<()> {
+/// ROSS's time for one coefficient set on `rig`'s bearing and grid, measured now by
+/// `bench/ross/ross_film.py` under `python`, with its coefficients.
+struct Ross {
+    version: String,
+    python: String,
+    median_s: f64,
+    warmup_s: f64,
+    eccentricity: f64,
+    stiffness: [[f64; 2]; 2],
+    damping: [[f64; 2]; 2],
+}
+
+fn ross(python: &Path, rig: &RigConfig, grid: GridSpec, running: &Running, load_n: f64, repeats: usize) -> Result<Ross> {
+    let oilfilm_physics::geometry::BearingKind::TwoAxialGroove { groove_arc_deg, .. } = rig.bearing.kind else {
+        anyhow::bail!("ROSS's PlainJournal is compared on the two-axial-groove bearing; the rig's is {:?}", rig.bearing.kind);
+    };
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("ross/ross_film.py");
+    let input = serde_json::json!({
+        "diameter_m": rig.bearing.diameter_m, "length_m": rig.bearing.length_m, "clearance_m": rig.bearing.clearance_m,
+        "groove_arc_deg": groove_arc_deg, "n_theta": grid.n_theta, "n_z": grid.n_z,
+        "speed_rpm": running.omega_rad_s * 30.0 / std::f64::consts::PI, "load_n": load_n, "viscosity_pa_s": running.viscosity_pa_s,
+        "density_kg_m3": rig.oil.density_kg_m3, "repeats": repeats,
+    });
+    let out = Command::new(python).arg(&script).arg(input.to_string()).output().with_context(|| format!("running {}", python.display()))?;
+    anyhow::ensure!(out.status.success(), "{} {}: {}", python.display(), script.display(), String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or(""));
+    let line = String::from_utf8_lossy(&out.stdout).lines().last().unwrap_or("").to_string();
+    let v: serde_json::Value = serde_json::from_str(&line).with_context(|| format!("ROSS's output: {line}"))?;
+    let m = |key: &str| -> Result<[[f64; 2]; 2]> {
+        let at = |i: usize, j: usize| v[key][i][j].as_f64().with_context(|| format!("ROSS's {key}[{i}][{j}]"));
+        Ok([[at(0, 0)?, at(0, 1)?], [at(1, 0)?, at(1, 1)?]])
+    };
+    let num = |key: &str| v[key].as_f64().with_context(|| format!("ROSS's {key}"));
+    Ok(Ross {
+        version: v["ross"].as_str().unwrap_or("?").into(),
+        python: v["python"].as_str().unwrap_or("?").into(),
+        median_s: num("median_s")?,
+        warmup_s: num("warmup_s")?,
+        eccentricity: num("eccentricity")?,
+        stiffness: m("stiffness_n_m")?,
+        damping: m("damping_n_s_m")?,
+    })
+}
+
+fn physics(repeats: usize, seconds: f64, ross_python: Option<&Path>) -> Result<()> {
     anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "--seconds must be positive");
     let base = RigConfig::zhou2004()?;
     let FilmModelConfig::Finite { n_theta, n_z, .. } = base.film else {
@@ -166,14 +238,37 @@ fn physics(repeats: usize, seconds: f64) -> Result<()> {
         rig_rows.push((label, secs, wall, build_s));
     }
 
-    println!("oilfilm bench physics (one core; wall-clock, median of {repeats} for the coefficient set)");
+    println!("oilfilm-bench physics (one core; wall-clock, median of {repeats} for the coefficient set)");
     println!();
     println!("| measurement | value |");
     println!("|---|---|");
     println!("| grid (per pad: n_theta x n_z half-length) | {n_theta} x {n_z} |");
     println!("| coefficient set, Zhou point (1500 rpm, 5 kN, 0.03 Pa s), cold start | {:.3} ms |", set_s * 1e3);
     println!("| ... eccentricity, attitude | {:.4}, {:.2} deg |", op.eccentricity, op.attitude_deg);
-    println!("| speed-up over ROSS 3.1 (0.06 s per set) | {:.0}x (target >= 10x) |", ROSS_COEFFICIENT_SET_S / set_s);
+    let python = ross_python.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".venv-ross/bin/python"));
+    match ross(&python, &base, grid, &running, load.norm(), repeats.min(10)) {
+        Ok(r) => {
+            println!(
+                "| ROSS {} (Python {}) PlainJournal, same bearing and grid, isothermal, median of {} | {:.1} ms (first solve, compiling its kernels, {:.1} s) |",
+                r.version,
+                r.python,
+                repeats.min(10),
+                r.median_s * 1e3,
+                r.warmup_s
+            );
+            println!("| speed-up over ROSS, measured in this run | {:.0}x (target >= 10x) |", r.median_s / set_s);
+            let k = op.coefficients.stiffness_n_m;
+            let c = op.coefficients.damping_n_s_m;
+            let worst = (0..4)
+                .map(|i| {
+                    let (a, b) = (i / 2, i % 2);
+                    ((k[(a, b)] - r.stiffness[a][b]) / r.stiffness[a][b]).abs().max(((c[(a, b)] - r.damping[a][b]) / r.damping[a][b]).abs())
+                })
+                .fold(0.0, f64::max);
+            println!("| ... ROSS's eccentricity; largest relative difference of the 8 coefficients from ours | {:.4}; {:.1} % |", r.eccentricity, 100.0 * worst);
+        }
+        Err(e) => println!("| speed-up over ROSS | not measured ({e}; `bash bench/ross/setup-venv.sh` makes .venv-ross) |"),
+    }
     println!(
         "| Lund & Thomsen 1978, 80 coefficients: outside 5 % (or 0.005 below 0.2) | {} of 80{} |",
         outside.len(),

@@ -1,4 +1,4 @@
-//! `oilfilm bench pipeline`: the identification pipeline's speed beside the Python pipeline a
+//! `oilfilm-bench pipeline`: the identification pipeline's speed beside the Python pipeline a
 //! user would write instead, and the paper's method beside ours, on one simulated rig.
 //!
 //! All rows run in one process invocation on the same record, so their ratios are the numbers
@@ -20,7 +20,7 @@ use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
 use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::config::RigConfig;
 
-use crate::records::Progress;
+use oilfilm::progress::Progress;
 
 const WINDOW: usize = 50_000;
 /// Scans per block of the block-by-block pipeline (ADR 0020); 10 000-25 000 measured best
@@ -134,7 +134,7 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     let paper = compare_methods(&rig)?;
 
     let lean = t_cond + t_ls;
-    println!("oilfilm bench pipeline: {scans} scans x {} channels ({seconds} s at 5 kHz, two-tone), {n_windows} window(s) of {window}; one core", raw.channels.len());
+    println!("oilfilm-bench pipeline: {scans} scans x {} channels ({seconds} s at 5 kHz, two-tone), {n_windows} window(s) of {window}; one core", raw.channels.len());
     println!();
     println!("| stage | oilfilm | M scans/s | M channel-samples/s |");
     println!("|---|---|---|---|");

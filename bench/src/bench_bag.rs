@@ -1,4 +1,4 @@
-//! `oilfilm bench bag`: how fast rig data goes into a bag, and how fast `oilfilm identify BAG`
+//! `oilfilm-bench bag`: how fast rig data goes into a bag, and how fast `oilfilm identify BAG`
 //! re-analyses one, on the simulated rig's own messages.
 //!
 //! * Record: the DAQ frames the `daq` node publishes (5 kHz x 10 channels, 500-scan frames of
@@ -171,7 +171,7 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
     let _ = std::fs::remove_dir_all(&tmp);
     let (rows, re) = result?;
 
-    println!("oilfilm bench bag: {seconds} s of the simulated rig graph (simulated in {sim_s:.1} s), bags in {}", std::env::temp_dir().display());
+    println!("oilfilm-bench bag: {seconds} s of the simulated rig graph (simulated in {sim_s:.1} s), bags in {}", std::env::temp_dir().display());
     println!(
         "rig data: {} DAQ frames of {} scans x {channels} channels at 5 kHz, as the DAQ node sends them (the 16-bit ADC's int16 counts, ADR 0018) {:.1} kB each on the wire ({:.2} MB), as float64 volts (a card of more bits, an ASCII record) {:.1} kB ({:.2} MB); the whole graph: {} messages, {:.2} MB",
         frames.len(),
@@ -207,8 +207,8 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
         re.estimates,
         re.solved,
         if re.rows.iter().all(|r| r.equal_to_live) { "yes" } else { "NO" },
-        crate::records::reader_threads(),
-        crate::records::reader_threads_beside_analysis(),
+        oilfilm::bags::reader_threads(),
+        oilfilm::bags::reader_threads_beside_analysis(),
     );
     println!(
         "the conditioner (zero-phase chain, as in every row but the last) + estimator alone, on frames already in memory, one thread: {:.1} ms ({:.0}x real time); the conditioner core alone {:.1} ms, the estimator core alone {:.1} ms",
@@ -287,10 +287,10 @@ fn causal_row(tmp: &Path, rig: &RigConfig, seconds: f64) -> Result<ReanalysisRow
     let mut row = ReanalysisRow::new("whole graph, zstd, causal chain (the launch files')", bag_bytes);
     for _ in 0..REANALYSIS_PASSES {
         let started = Instant::now();
-        let inputs = crate::records::read_bag_inputs(&dir, crate::records::reader_threads())?;
+        let inputs = oilfilm::bags::read_bag_inputs(&dir, oilfilm::bags::reader_threads())?;
         row.read_s = row.read_s.min(started.elapsed().as_secs_f64());
         drop(inputs);
-        let ((out, _, _), timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
+        let ((out, _, _), timing) = timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
         row.keep_if_faster(timing);
         row.equal_to_live &= out.estimates == rec.estimates;
     }
@@ -479,7 +479,7 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, d
         let bag_bytes = write_bag(&dir, msgs, &with(*compression))?;
         re_rows.push(ReanalysisRow::new(what, bag_bytes));
     }
-    let threads = crate::records::reader_threads();
+    let threads = oilfilm::bags::reader_threads();
     let (mut analyse_s, mut all_messages_s) = (f64::INFINITY, f64::INFINITY);
     let (mut condition_s, mut estimate_s) = (f64::INFINITY, f64::INFINITY);
     let mut last = None;
@@ -488,7 +488,7 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, d
         for (i, row) in re_rows.iter_mut().enumerate() {
             let dir = tmp.join(format!("reanalyse_{i}"));
             let started = Instant::now();
-            let (frames, status) = crate::records::read_bag_inputs(&dir, threads)?;
+            let (frames, status) = oilfilm::bags::read_bag_inputs(&dir, threads)?;
             row.read_s = row.read_s.min(started.elapsed().as_secs_f64());
             if i == 0 {
                 let started = Instant::now();
@@ -503,7 +503,7 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, d
                 all_messages_s = all_messages_s.min(started.elapsed().as_secs_f64());
             }
             drop((frames, status));
-            let ((out, _, _), timing) = timed(|| crate::records::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, crate::records::reader_threads_beside_analysis()))?;
+            let ((out, _, _), timing) = timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
             row.keep_if_faster(timing);
             row.equal_to_live &= out.estimates == rec.estimates;
         }

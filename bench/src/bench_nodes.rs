@@ -1,4 +1,4 @@
-//! `oilfilm bench nodes`: the conditioner and estimator node binaries on loopback DDS, fed
+//! `oilfilm-bench nodes`: the conditioner and estimator node binaries on loopback DDS, fed
 //! DAQ frames at real-time pace by this process, which also receives what they publish.
 //!
 //! Reported per configuration: frame-to-conditioned and frame-to-estimate latency (median,
@@ -92,7 +92,7 @@ pub fn run(seconds: f64) -> Result<()> {
             bail!("{exe} not found in {} (cargo build --release --workspace)", bin_dir.display());
         }
     }
-    println!("oilfilm bench nodes: conditioner and estimator binaries on loopback DDS (ros2-client), frames published at real-time pace, {seconds} s per row");
+    println!("oilfilm-bench nodes: conditioner and estimator binaries on loopback DDS (ros2-client), frames published at real-time pace, {seconds} s per row");
     println!("machine: {} cores; the publisher, the two nodes and this receiver share them", std::thread::available_parallelism().map_or(1, |n| n.get()));
     println!();
     println!("| configuration | frames/s | frame->conditioned median / p99 / max (ms) | frame->estimate median / p99 / max (ms) | zero-phase edge / causal delay wait (ms) | acquisition->estimate median / p99 (ms) | estimates | drops | CPU conditioner / estimator (% of a core) |");
