@@ -13,8 +13,7 @@ use nalgebra::DMatrix;
 use oilfilm_identification::estimator::solve::ScaledFactor;
 use oilfilm_identification::estimator::window::BlockSummary;
 use oilfilm_identification::estimator::{
-    estimate_window, normal_equations, EstimatorConfig, ModelOrder, Sample, Signals, Solver, StreamingEstimator,
-    WindowFactors,
+    estimate_window, normal_equations, EstimatorConfig, ModelOrder, Signals, Solver,
 };
 
 const FS: f64 = 5000.0;
@@ -101,31 +100,6 @@ fn main() {
     });
     row("one-shot QR window (Householder, blocked)", t_qr, WINDOW, "factor + cond + solve");
 
-    // 2. Streaming with hop = window/10: each hop factors 5 000 new rows and combines 10 block
-    //    factors (TSQR); cost per emitted window.
-    let hops = 20;
-    let mut per_window: Vec<f64> = (0..7)
-        .map(|_| {
-            let mut wf = WindowFactors::new(WINDOW, HOP, 6).expect("valid");
-            let first: Vec<&[f64]> = d.cols.iter().map(|c| &c[..WINDOW - HOP]).collect();
-            black_box(wf.push_rows(&first));
-            let rest: Vec<&[f64]> = d.cols.iter().map(|c| &c[WINDOW - HOP..WINDOW - HOP + hops * HOP]).collect();
-            let t0 = Instant::now();
-            let mut emitted = 0;
-            for (_, s) in wf.push_rows(&rest) {
-                let f = ScaledFactor::new(&s, 4).expect("finite");
-                black_box(f.solve(Solver::Qr));
-                emitted += 1;
-            }
-            assert_eq!(emitted, hops);
-            t0.elapsed().as_secs_f64() / hops as f64
-        })
-        .collect();
-    per_window.sort_by(|a, b| a.total_cmp(b));
-    let steady = per_window[per_window.len() / 2];
-    row("streaming QR, hop = window/10 (window samples)", steady, WINDOW, "window-equivalent throughput");
-    row("streaming QR, hop = window/10 (new samples)", steady, HOP, "new samples per second");
-
     // 3. SVD: the solver option (SVD of the scaled triangular factor) and, for reference,
     //    nalgebra's SVD of the whole centred window.
     let t_rsvd = median_time(reps, || {
@@ -173,38 +147,6 @@ fn main() {
         black_box(estimate_window(&s, 0..WINDOW, &cfg).ok());
     });
     row("full estimate_window (lines + QR + HAC)", t_full, WINDOW, "what a user calls");
-    let samples: Vec<Sample> = (0..n)
-        .map(|i| Sample {
-            x_m: d.cols[0][i],
-            y_m: d.cols[1][i],
-            vx_m_s: d.cols[2][i],
-            vy_m_s: d.cols[3][i],
-            ax_m_s2: 0.0,
-            ay_m_s2: 0.0,
-            fx_n: d.cols[4][i],
-            fy_n: d.cols[5][i],
-        })
-        .collect();
-    let mut se = StreamingEstimator::new(cfg.clone()).expect("valid");
-    for smp in &samples[..WINDOW - HOP] {
-        black_box(se.push(smp));
-    }
-    let t0 = Instant::now();
-    let mut emitted = 0;
-    for smp in &samples[WINDOW - HOP..WINDOW - HOP + hops * HOP] {
-        if se.push(smp).is_some() {
-            emitted += 1;
-        }
-    }
-    let per_window = t0.elapsed().as_secs_f64() / emitted.max(1) as f64;
-    row("full StreamingEstimator (new samples)", per_window, HOP, "push() one sample at a time");
-
     println!();
-    println!(
-        "one-shot QR {:.3} ms vs numpy {NUMPY_MS} ms: {:.1}x; streaming (hop = window/10) window-equivalent {:.0} M samples/s: {:.1}x numpy",
-        t_qr * 1e3,
-        NUMPY_MS * 1e-3 / t_qr,
-        WINDOW as f64 / steady / 1e6,
-        NUMPY_MS * 1e-3 / steady
-    );
+    println!("one-shot QR {:.3} ms vs numpy {NUMPY_MS} ms: {:.1}x", t_qr * 1e3, NUMPY_MS * 1e-3 / t_qr);
 }

@@ -9,8 +9,7 @@
 //!   (calibration, linear-range check, deskew, zero-phase low-pass, FIR differentiation).
 //! * [`excitation`]: waveforms for the two exciters and the hard limits no waveform exceeds.
 //! * [`estimator`]: windowed least squares (QR/SVD, never normal equations unless the paper's
-//!   method is asked for), uncertainties, refusals, the frequency-domain cross-check and the
-//!   streaming form.
+//!   method is asked for), uncertainties, refusals, and the frequency-domain cross-check.
 //! * [`ascii`]: the documented, versioned text format for records from any DAQ.
 //! * [`pipeline`]: a raw record and its rig in, windowed coefficients with their operating
 //!   point and dimensionless forms out: the one path the CLI, the nodes and replay share.

@@ -6,8 +6,8 @@ use std::f64::consts::PI;
 
 use nalgebra::{DMatrix, Matrix2};
 use oilfilm_identification::estimator::{
-    estimate_window, estimate_windows, frequency_domain, Coefficients, EstimatorConfig, ModelOrder, Refusal, Sample,
-    Signals, Solver, StreamingEstimator, WindowEstimate,
+    estimate_window, estimate_windows, frequency_domain, Coefficients, EstimatorConfig, ModelOrder, Refusal,
+    Signals, Solver, WindowEstimate,
 };
 use oilfilm_identification::IdentificationError;
 use rand::{RngExt, SeedableRng};
@@ -62,19 +62,6 @@ impl Record {
             ay_m_s2: Some(&self.ay),
             fx_n: &self.fx,
             fy_n: &self.fy,
-        }
-    }
-
-    fn sample(&self, i: usize) -> Sample {
-        Sample {
-            x_m: self.x[i],
-            y_m: self.y[i],
-            vx_m_s: self.vx[i],
-            vy_m_s: self.vy[i],
-            ax_m_s2: self.ax[i],
-            ay_m_s2: self.ay[i],
-            fx_n: self.fx[i],
-            fy_n: self.fy[i],
         }
     }
 }
@@ -422,67 +409,6 @@ fn normal_equations_lose_digits_that_qr_keeps() {
     }
 }
 
-fn assert_same(a: &WindowEstimate, b: &WindowEstimate, tol: f64) {
-    assert_eq!((a.start, a.end, a.rank), (b.start, b.end, b.rank));
-    assert_eq!(a.frequencies_hz, b.frequencies_hz);
-    assert_eq!(a.flags, b.flags);
-    let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= tol * scale.max(f64::MIN_POSITIVE) || (x.is_nan() && y.is_nan());
-    assert!(close(a.condition_number, b.condition_number, a.condition_number.abs()), "{} vs {}", a.condition_number, b.condition_number);
-    for k in 0..2 {
-        assert!(close(a.residual_rms_n[k], b.residual_rms_n[k], a.residual_rms_n[k]), "{:?} vs {:?}", a.residual_rms_n, b.residual_rms_n);
-    }
-    match (&a.result, &b.result) {
-        (Ok(x), Ok(y)) => {
-            let pairs = [
-                (x.stiffness_n_m, y.stiffness_n_m),
-                (x.damping_n_s_m, y.damping_n_s_m),
-                (x.stiffness_se, y.stiffness_se),
-                (x.damping_se, y.damping_se),
-            ];
-            for (p, q) in pairs {
-                assert!(max_abs(&(p - q)) <= tol * max_abs(&p), "{p} vs {q}");
-            }
-            match (x.added_mass_kg, y.added_mass_kg) {
-                (Some(p), Some(q)) => assert!(max_abs(&(p - q)) <= tol * max_abs(&p)),
-                (None, None) => {}
-                _ => panic!("added mass present in one only"),
-            }
-        }
-        (Err(x), Err(y)) => assert_eq!(x, y),
-        (x, y) => panic!("{x:?} vs {y:?}"),
-    }
-}
-
-#[test]
-fn streaming_windows_equal_batch_windows() {
-    let n = 24_000;
-    for (model, window, hop) in [(ModelOrder::Kc, 8_000, 2_000), (ModelOrder::Kcm, 6_000, 4_000), (ModelOrder::Kc, 5_000, 7_000)] {
-        let f = film(model == ModelOrder::Kcm);
-        let mut rec = record(&f, &TONES_X, &TONES_Y, n);
-        let mut rng = ChaCha8Rng::seed_from_u64(42);
-        for v in [&mut rec.x, &mut rec.y, &mut rec.vx, &mut rec.vy, &mut rec.fx, &mut rec.fy] {
-            add_coloured(v, 40.0, 0.8, &mut rng);
-        }
-        let cfg = config(window, hop, model, Solver::Qr);
-        let batch = estimate_windows(&rec.signals(), &cfg).unwrap();
-        let mut stream = StreamingEstimator::new(cfg.clone()).unwrap();
-        let streamed: Vec<WindowEstimate> = (0..n).filter_map(|i| stream.push(&rec.sample(i))).collect();
-        println!(
-            "{model:?} window {window} hop {hop} (blocks of {}): {} batch windows, {} streamed",
-            stream.block_len(),
-            batch.len(),
-            streamed.len()
-        );
-        assert_eq!(batch.len(), streamed.len());
-        assert!(batch.len() >= 3);
-        for (a, b) in batch.iter().zip(&streamed) {
-            let (ka, kb) = (solved(a).stiffness_n_m[(0, 1)], solved(b).stiffness_n_m[(0, 1)]);
-            println!("  {}..{}: kxy batch {ka:.9e} stream {kb:.9e}", a.start, a.end);
-            assert_same(a, b, 1e-9);
-        }
-    }
-}
-
 #[test]
 fn frequency_domain_agrees_with_time_domain_on_noise_free_multitone() {
     let lines = [17.0, 23.0, 37.0, 43.0];
@@ -568,7 +494,6 @@ fn bad_input_gives_clear_errors_and_never_panics() {
     let e = estimate_windows(&rec.signals(), &config(4_000, 0, ModelOrder::Kc, Solver::Qr)).unwrap_err();
     println!("hop = 0: {e}");
     assert!(matches!(&e, IdentificationError::InvalidParameter { field, .. } if field == "hop"));
-    assert!(matches!(StreamingEstimator::new(config(4_000, 0, ModelOrder::Kc, Solver::Qr)), Err(IdentificationError::InvalidParameter { field, .. }) if field == "hop"));
     let mut c = cfg.clone();
     c.max_condition = f64::NAN;
     assert!(matches!(c.validate(), Err(IdentificationError::InvalidParameter { field, .. }) if field == "max_condition"));
@@ -582,10 +507,6 @@ fn bad_input_gives_clear_errors_and_never_panics() {
     // Absurd sizes: a huge hop gives one window, a window too large to buffer is an error.
     let ws = estimate_windows(&rec.signals(), &config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap();
     assert_eq!(ws.len(), 1);
-    let e = StreamingEstimator::new(config(usize::MAX / 2, 1, ModelOrder::Kc, Solver::Qr)).unwrap_err();
-    println!("huge streaming window: {e}");
-    let mut huge_hop = StreamingEstimator::new(config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap();
-    assert_eq!((0..9_000).filter_map(|i| huge_hop.push(&rec.sample(i))).count(), 1);
 
     // Kcm without accelerations.
     let mut s = rec.signals();
@@ -617,15 +538,6 @@ fn bad_input_gives_clear_errors_and_never_panics() {
     huge.fx.iter_mut().for_each(|v| *v *= 1e300);
     let ws = estimate_windows(&huge.signals(), &cfg).unwrap();
     println!("absurd forces: {:?}", ws[0].result.as_ref().err().map(|r| r.to_string()));
-
-    // Streaming: a NaN refuses the windows that hold it, and the stream recovers after.
-    let mut stream = StreamingEstimator::new(cfg.clone()).unwrap();
-    let out: Vec<WindowEstimate> = (0..12_000).filter_map(|i| stream.push(&bad.sample(i))).collect();
-    let batch = estimate_windows(&bad.signals(), &cfg).unwrap();
-    assert_eq!(out.len(), 3);
-    for (a, b) in batch.iter().zip(&out) {
-        assert_same(a, b, 1e-9);
-    }
 
     // Config files: every field named, unknown fields rejected, hop required.
     let ok: EstimatorConfig = serde_json::from_str(r#"{"window": 1000, "hop": 100}"#).unwrap();

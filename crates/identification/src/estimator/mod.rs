@@ -19,8 +19,9 @@
 //!   blue residuals it overstated the scatter by up to 1.7×;
 //! * finds the **excitation lines** in the motion ([`spectrum`]) and uses them both to explain
 //!   refusals and for a frequency-domain cross-check ([`frequency`]);
-//! * runs as a **stream** whose overlapping windows reuse the factors of hop-sized blocks
-//!   ([`streaming`], TSQR: Demmel, Grigori, Hoemmen & Langou, SIAM J. Sci. Comput. 34 (2012)).
+//! * is fed as samples arrive ([`feed`]: the estimator node's window analysis); factors of
+//!   blocks merge exactly ([`window`], TSQR: Demmel, Grigori, Hoemmen & Langou, SIAM J. Sci.
+//!   Comput. 34 (2012)).
 //!
 //! For the wider identification context (impulse, sine-sweep and multi-sine methods, and why
 //! time-domain least squares with noisy, differentiated regressors needs care) see Tiwari, Lees
@@ -69,7 +70,6 @@ pub mod normal_equations;
 pub mod qr;
 pub mod solve;
 pub mod spectrum;
-pub mod streaming;
 pub mod svd;
 pub mod uncertainty;
 pub mod window;
@@ -84,7 +84,6 @@ use crate::IdentificationError;
 
 pub use feed::WindowFeed;
 pub use frequency::{frequency_domain, Axis, FrequencyEstimate, LinePhasors};
-pub use streaming::{Sample, StreamingEstimator, WindowFactors};
 
 use feed::FedWindow;
 use solve::ScaledFactor;
@@ -451,7 +450,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     let mut start = 0;
     while start <= n - config.window {
         let cols = signals.design(config.model, start..start + config.window);
-        out.push(analyse_window(&cols, start, None, None, None, config));
+        out.push(analyse_window(&cols, start, None, None, config));
         match start.checked_add(config.hop) {
             Some(next) => start = next,
             None => break,
@@ -502,7 +501,7 @@ pub fn estimate_window_fed(
                 ));
             }
             let cols = signals.design(config.model, range.clone());
-            Ok(analyse_window(&cols, range.start, None, None, Some(fed), config))
+            Ok(analyse_window(&cols, range.start, None, Some(fed), config))
         }
         None => estimate_window_searched(signals, range, config, None),
     }
@@ -525,17 +524,15 @@ fn estimate_window_searched(
         ));
     }
     let cols = signals.design(config.model, range.clone());
-    Ok(analyse_window(&cols, range.start, None, search, None, config))
+    Ok(analyse_window(&cols, range.start, search, None, config))
 }
 
-/// The common path of batch and streaming estimation. `cols` are the regressors then fx, fy,
-/// sliced to the window; `summary` is the window's factor if the caller already has it (the
-/// streaming estimator combines block factors), otherwise it is computed here; `fed` is
-/// what a [`WindowFeed`] of all of the window kept (the same bits as computing it here).
+/// The common path of batch and fed estimation. `cols` are the regressors then fx, fy,
+/// sliced to the window; `fed` is what a [`WindowFeed`] of all of the window kept (the same
+/// bits as computing it here).
 pub(crate) fn analyse_window(
     cols: &[(&'static str, &[f64])],
     start: usize,
-    summary: Option<&BlockSummary>,
     search: Option<LineSearch>,
     fed: Option<FedWindow>,
     config: &EstimatorConfig,
@@ -622,18 +619,8 @@ pub(crate) fn analyse_window(
             }
         }
         Solver::Qr | Solver::Svd => {
-            let owned;
-            let summary = match (summary, fed_summary) {
-                (Some(s), _) => s,
-                (None, Some(s)) => {
-                    owned = s;
-                    &owned
-                }
-                (None, None) => {
-                    owned = BlockSummary::from_columns(&data);
-                    &owned
-                }
-            };
+            let owned = fed_summary.unwrap_or_else(|| BlockSummary::from_columns(&data));
+            let summary = &owned;
             if summary.r.cols() == p + 2 {
                 let r = &summary.r;
                 let t = |i: usize, j: usize| r.get(i, j) * r.get(i, j);
