@@ -40,7 +40,7 @@
 
 use std::f64::consts::{PI, SQRT_2};
 
-use nalgebra::{Complex, DMatrix, DVector, Matrix2, Vector2};
+use nalgebra::{Complex, Matrix2, Vector2};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::dimensionless::{self, DimensionlessCoefficients};
 use oilfilm_physics::film::{FilmModelConfig, Running};
@@ -49,6 +49,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::conditioning::RawRecord;
 use crate::error::IdentificationError;
+use crate::estimator::qr;
+use crate::estimator::svd::SmallSvd;
 use crate::excitation::ExcitationPlan;
 use crate::pipeline::{self, PipelineConfig, SpeedSource, WindowReport};
 use crate::simulate::{self, SimulateOptions};
@@ -409,39 +411,35 @@ fn least_squares(what: &str, x: &[f64], y: &[f64], p: usize, basis: impl Fn(f64)
     if let Some(i) = x.iter().zip(y).position(|(a, b)| !(a.is_finite() && b.is_finite())) {
         return Err(IdentificationError::BadInput { what: what.into(), reason: format!("point {i} is not finite ({}, {})", x[i], y[i]) });
     }
-    let mut a = DMatrix::<f64>::zeros(n, p);
+    // The basis columns, each scaled to a largest magnitude of 1.
+    let mut a: Vec<Vec<f64>> = vec![vec![0.0; n]; p];
     for (i, &xi) in x.iter().enumerate() {
         for (j, v) in basis(xi).into_iter().enumerate().take(p) {
-            a[(i, j)] = v;
+            a[j][i] = v;
         }
     }
     let mut scale = vec![1.0; p];
-    for (j, s) in scale.iter_mut().enumerate() {
-        let m = a.column(j).amax();
+    for (j, (col, s)) in a.iter_mut().zip(scale.iter_mut()).enumerate() {
+        let m = col.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if m == 0.0 {
             return Err(IdentificationError::BadInput { what: what.into(), reason: format!("under-determined: basis column {j} is zero at every point") });
         }
         *s = m;
-        a.column_mut(j).scale_mut(1.0 / m);
+        col.iter_mut().for_each(|v| *v /= m);
     }
-    let svd = a.svd(true, true);
-    let smax = svd.singular_values.max();
-    let smin = svd.singular_values.min();
+    let cols: Vec<&[f64]> = a.iter().map(Vec::as_slice).collect();
+    let fit = qr::least_squares(&cols, y).ok_or_else(|| IdentificationError::BadInput { what: what.into(), reason: "least squares failed: the design is rank deficient".into() })?;
+    let sigma = SmallSvd::new(&fit.r, p).map(|s| s.sigma).unwrap_or_default();
+    let (smax, smin) = (sigma.first().copied().unwrap_or(0.0), sigma.last().copied().unwrap_or(0.0));
     if !(smin > 1e-10 * smax) {
         return Err(IdentificationError::BadInput {
             what: what.into(),
             reason: format!("under-determined: the abscissae do not separate the {p} parameters (scaled singular values {smax:.3e} .. {smin:.3e})"),
         });
     }
-    // (A^T A)^-1 of the scaled design, V S^-2 V^T, before `solve` consumes nothing of it.
-    let inverse_normal = svd.v_t.as_ref().map(|vt| {
-        let s2 = svd.singular_values.map(|s| 1.0 / (s * s));
-        vt.transpose() * DMatrix::from_diagonal(&s2) * vt
-    });
-    let b = DVector::from_column_slice(y);
-    let sol = svd
-        .solve(&b, 0.0)
-        .map_err(|e| IdentificationError::BadInput { what: what.into(), reason: format!("least squares failed: {e}") })?;
+    // (AᵀA)⁻¹ of the scaled design, R⁻¹R⁻ᵀ.
+    let inverse_normal = qr::inverse_gram_from_upper(&fit.r, p);
+    let sol = fit.coef;
     let coef: Vec<f64> = sol.iter().zip(&scale).map(|(c, s)| c / s).collect();
     let mean = y.iter().sum::<f64>() / n as f64;
     let (mut ss_res, mut ss_tot) = (0.0, 0.0);
@@ -454,7 +452,7 @@ fn least_squares(what: &str, x: &[f64], y: &[f64], p: usize, basis: impl Fn(f64)
     let covariance = match inverse_normal {
         Some(m) if n > p => {
             let sigma2 = ss_res / (n - p) as f64;
-            Some((0..p).map(|i| (0..p).map(|j| sigma2 * m[(i, j)] / (scale[i] * scale[j])).collect()).collect())
+            Some((0..p).map(|i| (0..p).map(|j| sigma2 * m[i * p + j] / (scale[i] * scale[j])).collect()).collect())
         }
         _ => None,
     };

@@ -44,6 +44,7 @@
 use oilfilm_physics::daq::ChannelId;
 
 use super::{all_finite, first_non_finite};
+use crate::estimator::qr::{inverse_gram_from_upper, Triangle};
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
 
@@ -56,47 +57,6 @@ const BLOCK: usize = 512;
 /// Longest half-length accepted.
 pub const MAX_HALF_LENGTH: usize = 64;
 
-/// Solves the small dense system `g v = rhs` in place (Gaussian elimination, partial
-/// pivoting). `g` is `n x n`, row-major. Returns `false` if it is singular.
-fn solve_small(g: &mut [f64], rhs: &mut [f64]) -> bool {
-    let n = rhs.len();
-    for col in 0..n {
-        let mut piv = col;
-        for r in col + 1..n {
-            if g[r * n + col].abs() > g[piv * n + col].abs() {
-                piv = r;
-            }
-        }
-        if g[piv * n + col] == 0.0 || !g[piv * n + col].is_finite() {
-            return false;
-        }
-        if piv != col {
-            for c in 0..n {
-                g.swap(piv * n + c, col * n + c);
-            }
-            rhs.swap(piv, col);
-        }
-        let d = g[col * n + col];
-        for r in col + 1..n {
-            let f = g[r * n + col] / d;
-            if f != 0.0 {
-                for c in col..n {
-                    g[r * n + c] -= f * g[col * n + c];
-                }
-                rhs[r] -= f * rhs[col];
-            }
-        }
-    }
-    for col in (0..n).rev() {
-        let mut s = rhs[col];
-        for c in col + 1..n {
-            s -= g[col * n + c] * rhs[c];
-        }
-        rhs[col] = s / g[col * n + col];
-    }
-    true
-}
-
 /// Least-squares derivative weights (per sample) for a window of `w.len()` consecutive
 /// samples, the slope taken at window position `eval` (0-based, may be fractional).
 fn ls_derivative_weights(eval: f64, w: &mut [f64]) -> Result<(), IdentificationError> {
@@ -104,36 +64,28 @@ fn ls_derivative_weights(eval: f64, w: &mut [f64]) -> Result<(), IdentificationE
     let p = DEGREE + 1;
     let centre = 0.5 * (len as f64 - 1.0);
     let half = centre.max(1.0);
-    // Normal equations in the scaled abscissa u = (i - centre) / half, in [-1, 1].
-    let mut g = [0.0; (DEGREE + 1) * (DEGREE + 1)];
-    for i in 0..len {
-        let u = (i as f64 - centre) / half;
-        let mut pw = [1.0; DEGREE + 1];
-        for j in 1..p {
-            pw[j] = pw[j - 1] * u;
-        }
-        for r in 0..p {
-            for c in 0..p {
-                g[r * p + c] += pw[r] * pw[c];
-            }
-        }
-    }
+    // The polynomial's basis in the scaled abscissa u = (i - centre) / half, in [-1, 1]; the
+    // weights are `V (VᵀV)⁻¹ d` for the slope functional `d`, (VᵀV)⁻¹ = R⁻¹R⁻ᵀ from the
+    // estimator's Householder factor (the crate's one least-squares core).
+    let basis: Vec<Vec<f64>> = (0..p).map(|j| (0..len).map(|i| ((i as f64 - centre) / half).powi(j as i32)).collect()).collect();
+    let mut block: Vec<f64> = basis.concat();
+    let mut t = Triangle::zeros(p);
+    t.absorb(&mut block, len);
+    t.make_diagonal_nonnegative();
     let u0 = (eval - centre) / half;
-    let mut v = [0.0; DEGREE + 1];
-    for (j, vj) in v.iter_mut().enumerate().skip(1) {
-        *vj = j as f64 * u0.powi(j as i32 - 1);
-    }
-    if !solve_small(&mut g, &mut v) {
+    let d: Vec<f64> = (0..p).map(|j| if j == 0 { 0.0 } else { j as f64 * u0.powi(j as i32 - 1) }).collect();
+    let Some(g) = inverse_gram_from_upper(&t.leading(p), p).filter(|g| g.iter().all(|v| v.is_finite())) else {
         return Err(IdentificationError::invalid(
             "conditioning.differentiator_half_length",
             format!("a {len}-sample window cannot fit a degree-{DEGREE} polynomial"),
         ));
-    }
+    };
+    let v: Vec<f64> = (0..p).map(|r| (0..p).map(|c| g[r * p + c] * d[c]).sum()).collect();
     for (i, wi) in w.iter_mut().enumerate() {
         let u = (i as f64 - centre) / half;
         let mut pw = 1.0;
         let mut s = 0.0;
-        for vj in v {
+        for &vj in &v {
             s += vj * pw;
             pw *= u;
         }

@@ -256,6 +256,40 @@ fn axpy_k(alpha: f64, x: &[f64], y: &mut [f64]) {
     }
 }
 
+/// A small dense least-squares problem `min |A x - b|` solved by the same Householder
+/// factor as the estimator's windows (the crate's one least-squares core: the campaign's
+/// curve fits and the differentiator's design use it too).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DenseSolution {
+    /// `x`.
+    pub coef: Vec<f64>,
+    /// `|A x - b|^2`.
+    pub residual_ss: f64,
+    /// The triangular factor of `A`, `p × p` row-major, diagonal non-negative: `AᵀA = RᵀR`
+    /// ([`inverse_gram_from_upper`] gives the covariance kernel).
+    pub r: Vec<f64>,
+}
+
+/// [`DenseSolution`] of the columns `a` (each at least as long as `b`) against `b`; `None`
+/// when `a` is empty or rank deficient (a zero on the factor's diagonal) or a value is not
+/// finite.
+pub fn least_squares(a: &[&[f64]], b: &[f64]) -> Option<DenseSolution> {
+    let (p, rows) = (a.len(), b.len());
+    if p == 0 || a.iter().any(|c| c.len() < rows) {
+        return None;
+    }
+    let mut block: Vec<f64> = a.iter().flat_map(|c| c[..rows].iter().copied()).chain(b.iter().copied()).collect();
+    let mut t = Triangle::zeros(p + 1);
+    t.absorb(&mut block, rows);
+    t.make_diagonal_nonnegative();
+    if !t.is_finite() {
+        return None;
+    }
+    let r = t.leading(p);
+    let mut coef: Vec<f64> = (0..p).map(|i| t.get(i, p)).collect();
+    solve_upper(&r, p, &mut coef).then(|| DenseSolution { coef, residual_ss: t.get(p, p).powi(2), r })
+}
+
 /// Solve `R z = b` in place for upper-triangular `R` (`p × p`, row-major).
 /// Returns false (leaving `b` partly overwritten) if a diagonal entry is zero.
 pub fn solve_upper(r: &[f64], p: usize, b: &mut [f64]) -> bool {
