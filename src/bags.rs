@@ -77,3 +77,56 @@ pub fn reanalyse_bag(
     }
     Ok((out, frames, status_count))
 }
+
+/// A bag's DAQ frames as one raw record on the frames' schedule, and the speed its rig
+/// status states: what the batch identification (`oilfilm identify BAG`) reads, as it reads
+/// an ASCII record.
+pub struct BagRecord {
+    pub raw: oilfilm_identification::conditioning::RawRecord,
+    /// Conversion offset of each of `raw`'s channels after its scan start (s).
+    pub offsets_s: Vec<f64>,
+    /// The first non-zero shaft speed of the rig status messages (rpm).
+    pub speed_rpm: Option<f64>,
+    /// Channels of the frames that are not the rig's ten (left out).
+    pub ignored: Vec<String>,
+}
+
+/// [`BagRecord`] of the bag at `dir`: its DAQ frames in order, which must be consecutive (a
+/// gap is an error naming the frame) and share one channel layout, units and rate.
+pub fn record_of_bag(dir: &std::path::Path) -> Result<BagRecord> {
+    use oilfilm_identification::conditioning::{RawRecord, RawUnits};
+    use oilfilm_physics::daq::ChannelId;
+    let name = dir.display().to_string();
+    let (frames, status) = read_bag_inputs(dir, reader_threads())?;
+    let first = &frames[0];
+    let kept: Vec<(usize, ChannelId)> = first.channel_names.iter().enumerate().filter_map(|(k, c)| ChannelId::parse(c).ok().map(|id| (k, id))).collect();
+    let ignored = first.channel_names.iter().filter(|c| ChannelId::parse(c).is_err()).cloned().collect();
+    let width = first.channel_names.len();
+    let mut columns = vec![Vec::new(); kept.len()];
+    let (mut next_scan, mut decoded) = (first.first_scan, Vec::new());
+    for (i, f) in frames.iter().enumerate() {
+        if f.channel_names != first.channel_names || f.units != first.units || f.sample_rate_hz != first.sample_rate_hz || f.channel_offsets_s != first.channel_offsets_s {
+            bail!("{name}: DAQ frame {i} (sequence {}) changes the channel layout, schedule, units or rate of frame 0", f.sequence);
+        }
+        if f.first_scan != next_scan {
+            bail!("{name}: DAQ frame {i} (sequence {}) starts at scan {}, expected {next_scan}: the record has a gap", f.sequence, f.first_scan);
+        }
+        let samples = f.samples(&mut decoded).map_err(|reason| anyhow::anyhow!("{name}: DAQ frame {i} (sequence {}): {reason}", f.sequence))?;
+        for scan in samples.chunks_exact(width) {
+            for (c, &(k, _)) in columns.iter_mut().zip(&kept) {
+                c.push(scan[k]);
+            }
+        }
+        next_scan += u64::from(f.scan_count);
+    }
+    let raw = RawRecord {
+        sample_rate_hz: first.sample_rate_hz,
+        start_time_s: first.first_scan as f64 / first.sample_rate_hz,
+        channels: kept.iter().map(|&(_, id)| id).collect(),
+        units: if first.units == oilfilm_msgs::DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
+        columns,
+    };
+    let offsets_s = kept.iter().map(|&(k, _)| first.channel_offsets_s.get(k).copied().unwrap_or(f64::NAN)).collect();
+    let speed_rpm = status.iter().map(|s| s.speed_rad_s * 30.0 / std::f64::consts::PI).find(|&v| v > 0.0);
+    Ok(BagRecord { raw, offsets_s, speed_rpm, ignored })
+}

@@ -175,14 +175,21 @@ pub enum SolverArg {
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
     /// An ASCII record (see the README for the format), or a rosbag2 bag directory (MCAP)
-    /// recorded from the node graph: its DAQ frames and rig status go through the very
-    /// conditioner and estimator the nodes run, so the estimates equal the live ones.
+    /// recorded from the node graph: its DAQ frames, as one record, go through the same
+    /// identification as an ASCII record (with `--replay`: through the very conditioner and
+    /// estimator the nodes run, so the estimates equal the live ones, bit for bit).
     file: PathBuf,
     /// For a bag: a ROS 2 params file for the conditioner and estimator
     /// (`/oilfilm/conditioner`, `/oilfilm/estimator` sections, e.g.
-    /// launch_configs/params/sim_rig.yaml); default: the nodes' defaults.
+    /// launch_configs/params/sim_rig.yaml), whose chain and window settings are used (the
+    /// low-pass as set, not adapted); default: the identification's defaults (with
+    /// `--replay`: the nodes').
     #[arg(long, value_name = "FILE")]
     params: Option<PathBuf>,
+    /// For a bag: re-run the node graph's conditioner and estimator on its frames instead of
+    /// the batch identification, giving the estimates the graph published live.
+    #[arg(long)]
+    replay: bool,
     #[command(flatten)]
     source: RigSource,
     /// Shaft speed, rpm, if the record does not state it.
@@ -217,37 +224,62 @@ pub struct IdentifyArgs {
 }
 
 pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
-    if args.file.is_dir() {
-        return identify_bag(args);
+    if args.file.is_dir() && args.replay {
+        return replay_bag(args);
     }
-    anyhow::ensure!(args.params.is_none(), "--params applies to bags (the node parameters); an ASCII record takes --window, --hop, --model, --solver");
+    anyhow::ensure!(!args.replay, "--replay applies to bags (the node graph re-run); {} is a file", args.file.display());
     let name = args.file.display().to_string();
-    let input = crate::ascii_input::load(&args.file, args.source.path())?;
-    let (record, rig) = (input.record, input.rig);
-    let raw = simulate::raw_from_ascii(&record)?;
-    let offsets: Vec<f64> = (0..record.header.channels.len())
-        .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
-        .collect::<Result<_>>()?;
+    // The record, its schedule, the speed it states and its rig: from a bag's DAQ frames and
+    // rig status (the rig file), or from an ASCII record (the rig its header names, else the
+    // rig file).
+    let (raw, offsets, stated_rpm, mut config, rig) = if args.file.is_dir() {
+        let rig = args.source.load()?;
+        let b = oilfilm::bags::record_of_bag(&args.file)?;
+        if !b.ignored.is_empty() {
+            eprintln!("{name}: channels not used by the conditioning left out: {}", b.ignored.join(", "));
+        }
+        let config = match &args.params {
+            Some(_) => params_config(args, b.raw.sample_rate_hz)?,
+            None => PipelineConfig::default(),
+        };
+        (b.raw, b.offsets_s, b.speed_rpm, config, rig)
+    } else {
+        anyhow::ensure!(args.params.is_none(), "--params applies to bags (the node parameters); an ASCII record takes --window, --hop, --model, --solver");
+        let input = crate::ascii_input::load(&args.file, args.source.path())?;
+        let (record, rig) = (input.record, input.rig);
+        let raw = simulate::raw_from_ascii(&record)?;
+        let offsets: Vec<f64> = (0..record.header.channels.len())
+            .map(|p| record.header.channel_offset_s(p).with_context(|| format!("{name}: no offset for channel {p}")))
+            .collect::<Result<_>>()?;
+        (raw, offsets, record.header.speed_rpm, PipelineConfig::default(), rig)
+    };
     let calibration = pipeline::calibration_for(&rig, &raw, &offsets).with_context(|| format!("{name}: the rig's calibration on the record's schedule"))?;
-    let (speed_rpm, source) = match (args.speed_rpm, record.header.speed_rpm) {
+    let (speed_rpm, source) = match (args.speed_rpm, stated_rpm) {
         (Some(v), _) => (v, SpeedSource::User),
         (None, Some(v)) => (v, SpeedSource::Record),
         (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    let mut config = PipelineConfig::default();
-    config.estimator.window = args.window.unwrap_or(config.estimator.window);
-    config.estimator.hop = args.hop.unwrap_or(config.estimator.window);
-    config.estimator.sample_rate_hz = record.header.sample_rate_hz;
-    config.estimator.model = match args.model.unwrap_or(ModelArg::Kc) {
-        ModelArg::Kc => ModelOrder::Kc,
-        ModelArg::Kcm => ModelOrder::Kcm,
-    };
-    config.estimator.solver = match args.solver.unwrap_or(SolverArg::Qr) {
-        SolverArg::Qr => Solver::Qr,
-        SolverArg::Svd => Solver::Svd,
-        SolverArg::Paper => Solver::NormalEquations,
-    };
-    config.conditioning.deskew = !args.no_deskew;
+    config.estimator.sample_rate_hz = raw.sample_rate_hz;
+    if let Some(w) = args.window {
+        config.estimator.window = w;
+        config.estimator.hop = args.hop.unwrap_or(w);
+    } else if let Some(h) = args.hop {
+        config.estimator.hop = h;
+    }
+    if let Some(m) = args.model {
+        config.estimator.model = match m {
+            ModelArg::Kc => ModelOrder::Kc,
+            ModelArg::Kcm => ModelOrder::Kcm,
+        };
+    }
+    if let Some(s) = args.solver {
+        config.estimator.solver = match s {
+            SolverArg::Qr => Solver::Qr,
+            SolverArg::Svd => Solver::Svd,
+            SolverArg::Paper => Solver::NormalEquations,
+        };
+    }
+    config.conditioning.deskew &= !args.no_deskew;
     let id = pipeline::identify(&raw, &calibration, &rig, speed_rpm, source, &config).with_context(|| format!("identifying {name}"))?;
     let correction = if args.no_correct {
         None
@@ -272,6 +304,25 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The pipeline settings a node params file gives: the conditioner's chain settings (its
+/// low-pass as set, not adapted to the excitation) and the estimator's window settings.
+fn params_config(args: &IdentifyArgs, sample_rate_hz: f64) -> Result<PipelineConfig> {
+    let (conditioner, estimator) = node_params(args)?;
+    Ok(PipelineConfig { conditioning: conditioner.conditioning()?, estimator: estimator.config(sample_rate_hz)?, adaptive_lowpass: false })
+}
+
+/// The conditioner's and estimator's parameters from `--params` (the nodes' defaults without).
+fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams)> {
+    use oilfilm_graph::params::{self, NodeArgs};
+    let node_args = |node: &str| NodeArgs {
+        name: node.into(),
+        namespace: oilfilm_graph::topics::NAMESPACE.into(),
+        params_files: args.params.iter().cloned().collect(),
+        ..Default::default()
+    };
+    Ok((params::load(&node_args("conditioner"))?.0, params::load(&node_args("estimator"))?.0))
 }
 
 fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
@@ -346,23 +397,13 @@ fn recorded_chain(dir: &std::path::Path) -> Result<Option<&'static str>> {
     Ok(first.map(|f| if f.flags.iter().any(|x| x == "chain=causal") { "causal" } else { "zero_phase" }))
 }
 
-/// `oilfilm identify BAG`: the bag's DAQ frames and rig status through a fresh conditioner
-/// and estimator (the nodes, `oilfilm_graph::runner::bag::reanalyse`).
-fn identify_bag(args: &IdentifyArgs) -> Result<()> {
-    use oilfilm_graph::conditioner::ConditionerParams;
-    use oilfilm_graph::estimator::EstimatorParams;
-    use oilfilm_graph::params::{self, NodeArgs};
-
+/// `oilfilm identify BAG --replay`: the bag's DAQ frames and rig status through a fresh
+/// conditioner and estimator (the nodes, `oilfilm_graph::runner::bag::reanalyse`): the
+/// estimates the graph published live, bit for bit.
+fn replay_bag(args: &IdentifyArgs) -> Result<()> {
     let rig = args.source.load()?;
     let name = args.file.display().to_string();
-    let node_args = |node: &str| NodeArgs {
-        name: node.into(),
-        namespace: oilfilm_graph::topics::NAMESPACE.into(),
-        params_files: args.params.iter().cloned().collect(),
-        ..Default::default()
-    };
-    let (mut conditioner, _) = params::load::<ConditionerParams>(&node_args("conditioner"))?;
-    let (mut estimator, _) = params::load::<EstimatorParams>(&node_args("estimator"))?;
+    let (mut conditioner, mut estimator) = node_params(args)?;
     // The chain the graph conditioned with, from its recorded conditioned frames (flag
     // `chain=causal`, ADR 0014): without a params file it is the one to re-run; a params
     // file that names another gets estimates that cannot equal the recorded ones, so say so.

@@ -108,9 +108,12 @@ fn bad_input_names_file_line_and_column_and_exits_non_zero() {
     let _ = std::fs::remove_file(&rig);
 }
 
-/// `oilfilm identify BAG`: a bag recorded from the node graph re-analysed offline through
-/// the node conditioner and estimator gives the live estimates exactly (JSON floats print
-/// shortest-round-trip, so equality of the parsed numbers is equality of the bits).
+/// `oilfilm identify BAG --replay`: a bag recorded from the node graph re-analysed offline
+/// through the node conditioner and estimator gives the live estimates exactly (JSON floats
+/// print shortest-round-trip, so equality of the parsed numbers is equality of the bits).
+/// Without `--replay` the bag's frames go through the batch identification, as an ASCII
+/// record does: windows solved, each stiffness within 5 % of the live one's (the windows
+/// start elsewhere, and the node conditions in blocks, the batch path the whole record).
 #[test]
 fn identify_a_bag_gives_the_live_estimates() {
     use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
@@ -141,7 +144,7 @@ fn identify_a_bag_gives_the_live_estimates() {
     let params = scratch("graph-bag-params.yaml");
     std::fs::write(&params, "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n").unwrap();
 
-    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap(), "--json"]);
+    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--replay", "--params", params.to_str().unwrap(), "--json"]);
     assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     let got = doc["estimates"].as_array().expect("estimates");
@@ -154,8 +157,26 @@ fn identify_a_bag_gives_the_live_estimates() {
         assert_eq!(d, e.damping_n_s_m.to_vec(), "damping of window {}", e.window_start_sample);
     }
     // Human output, and a directory that is no bag is an error naming it.
-    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap()]);
+    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--replay", "--params", params.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&out.stdout).contains("solved"));
+
+    // The batch identification of the same frames: windows of 25 000 scans from the first
+    // valid one (the node's start at multiples of the hop from the stream's first), so the
+    // coefficients agree to the noise the two windows do not share.
+    let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
+    let id: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(id["speed_source"], "record", "the rig status states the speed");
+    assert_eq!(id["lowpass_cutoff_hz"], 55.5, "the params file's low-pass, not adapted");
+    let windows = id["windows"].as_array().expect("windows");
+    assert!(!windows.is_empty());
+    for (w, e) in windows.iter().zip(&live.estimates) {
+        let k = matrix(&w["estimate"]["result"]["Ok"]["stiffness_n_m"]);
+        for (i, live_k) in e.stiffness_n_m.iter().enumerate() {
+            let rel = (k[i / 2][i % 2] - live_k) / live_k.abs();
+            assert!(rel.abs() < 0.05, "K{} batch {:.4e} against live {live_k:.4e}", i, k[i / 2][i % 2]);
+        }
+    }
     let empty = scratch("not-a-bag");
     std::fs::create_dir_all(&empty).unwrap();
     let out = oilfilm(&["identify", empty.to_str().unwrap()]);
@@ -216,9 +237,9 @@ fn diagnose_reads_a_bag_of_the_node_graph() {
     assert!(!notes.iter().any(|n| n.as_str().unwrap_or("").contains("rig file's was assumed")), "the bag's rig status states the speed: {notes:?}");
 }
 
-/// `oilfilm identify BAG` on a bag of the causal chain (what the launch files run): the
-/// chain is read from the recorded conditioned frames, and a params file that names another
-/// chain gets a warning that its estimates cannot equal the recorded ones.
+/// `oilfilm identify BAG --replay` on a bag of the causal chain (what the launch files run):
+/// the chain is read from the recorded conditioned frames, and a params file that names
+/// another chain gets a warning that its estimates cannot equal the recorded ones.
 #[test]
 fn identify_a_causal_bag_follows_the_recorded_chain() {
     use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
@@ -253,7 +274,7 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
     let body = "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n";
     let estimates = |params_text: &str| {
         std::fs::write(&params, params_text).unwrap();
-        let out = oilfilm(&["identify", dir.to_str().unwrap(), "--params", params.to_str().unwrap(), "--json"]);
+        let out = oilfilm(&["identify", dir.to_str().unwrap(), "--replay", "--params", params.to_str().unwrap(), "--json"]);
         assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
         let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
         let k: Vec<Vec<f64>> = doc["estimates"].as_array().unwrap().iter().map(|g| g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()).collect();

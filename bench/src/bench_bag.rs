@@ -1,4 +1,4 @@
-//! `oilfilm-bench bag`: how fast rig data goes into a bag, and how fast `oilfilm identify BAG`
+//! `oilfilm-bench bag`: how fast rig data goes into a bag, and how fast `oilfilm identify BAG --replay`
 //! re-analyses one, on the simulated rig's own messages.
 //!
 //! * Record: the DAQ frames the `daq` node publishes (5 kHz x 10 channels, 500-scan frames of
@@ -12,7 +12,7 @@
 //!   (later log times) to write as many bytes per pass as the volts rows.
 //! * Re-analysis: bags a user can choose (every topic with zstd, lz4 or no compression; only
 //!   the DAQ frames and rig status with zstd) through `records::read_bag_inputs` (read and
-//!   decode the inputs) and `records::reanalyse_bag` (what `oilfilm identify BAG` runs: the
+//!   decode the inputs) and `records::reanalyse_bag` (what `oilfilm identify BAG --replay` runs: the
 //!   node conditioner and estimator, sim_rig parameters, 5 s windows every 2.5 s, fed as
 //!   the chunks are decoded), wall time as a multiple of the bag's real time.
 //!
@@ -203,7 +203,7 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
     }
     println!();
     println!(
-        "Re-analysis (`oilfilm identify BAG`, the sim_rig conditioner and estimator: {} estimates, {} solved, equal to the live ones in every row below: {}); best of {REANALYSIS_PASSES} passes, wall clock; reading alone on {} threads, overlapped with the analysis on {} beside it:",
+        "Re-analysis (`oilfilm identify BAG --replay`, the sim_rig conditioner and estimator: {} estimates, {} solved, equal to the live ones in every row below: {}); best of {REANALYSIS_PASSES} passes, wall clock; reading alone on {} threads, overlapped with the analysis on {} beside it:",
         re.estimates,
         re.solved,
         if re.rows.iter().all(|r| r.equal_to_live) { "yes" } else { "NO" },

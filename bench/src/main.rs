@@ -81,7 +81,7 @@ enum BenchWhat {
         records: Option<std::path::PathBuf>,
     },
     /// rosbag2 bags: record throughput (MB/s, msgs/s; zstd, lz4, none) of the simulated rig's
-    /// DAQ frames and whole graph, and `oilfilm identify BAG` speed as a multiple of real time.
+    /// DAQ frames and whole graph, and `oilfilm identify BAG --replay` speed as a multiple of real time.
     Bag {
         /// Seconds of simulated rig (5 kHz x 10 channels).
         #[arg(long, default_value_t = 60.0)]

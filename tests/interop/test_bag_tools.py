@@ -13,7 +13,8 @@ OILFILM_BIN: the `oilfilm` binary).
 * `rosbags-convert` turns our bag into a sqlite3 bag and back into MCAP with byte-identical
   payloads, topics, types and log times;
 * a bag written by rosbags' Writer (types registered from msgs/) is read by the real
-  `oilfilm identify BAG --json`, whose estimates equal those the node graph published live.
+  `oilfilm identify BAG --replay --json`, whose estimates equal those the node graph
+  published live.
 """
 
 import json
@@ -262,7 +263,7 @@ def test_oilfilm_identify_reads_a_bag_written_by_rosbags(expected, tmp_path):
     # rosbags' bag holds no conditioned frames, so identify takes the chain from the file.
     params = ROOT / "launch_configs" / "params" / "sim_rig.yaml"
     assert "chain: causal" in params.read_text()
-    run = subprocess.run([BIN, "identify", str(out), "--params", str(params), "--window", "5000", "--hop", "2500", "--json"], capture_output=True, text=True)
+    run = subprocess.run([BIN, "identify", str(out), "--replay", "--params", str(params), "--window", "5000", "--hop", "2500", "--json"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
     assert doc["frames"] == sum(1 for m in inputs if m["topic"] == "/oilfilm/daq/frames")
