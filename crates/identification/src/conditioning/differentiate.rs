@@ -251,11 +251,6 @@ impl SavitzkyGolayDerivative {
         }
     }
 
-    #[cfg(test)]
-    pub(crate) fn coefficients_mut(&mut self) -> &mut [f64] {
-        &mut self.interior
-    }
-
     /// The first `M` outputs, on `input[..2M + 1]`; `len >= 2M + 1`.
     fn edge_left(&self, input: &[f64], out: &mut [f64]) {
         let width = 2 * self.half_length + 1;

@@ -328,11 +328,6 @@ impl Butterworth {
         &self.sections
     }
 
-    #[cfg(test)]
-    pub(crate) fn sections_mut(&mut self) -> &mut [Section] {
-        &mut self.sections
-    }
-
     /// Samples for the slowest pole's envelope to fall to 1e-7: the reflection length at
     /// each end, and the samples [`super::condition`] trims at each end for this stage.
     pub fn settling_samples(&self) -> usize {
