@@ -1081,16 +1081,14 @@ fn condition_into_reuses_buffers_and_equals_condition() {
 
 #[test]
 fn kinematics_stage_mean_and_tilt() {
-    let r =
-        kinematics::relative_motion(&[1.0, 3.0], &[-2.0, 0.0], &[3.0, 1.0], &[-4.0, 2.0]).unwrap();
-    println!("{r:?}");
-    assert_eq!(r.x_m, [2.0, 2.0]);
-    assert_eq!(r.y_m, [-3.0, 1.0]);
-    assert_eq!(r.tilt_x_m, [-2.0, 2.0]);
-    assert_eq!(r.tilt_y_m, [2.0, -2.0]);
-    let (hx, hy) = kinematics::housing_displacement(&[1.0], &[2.0]).unwrap();
-    assert_eq!((hx, hy), (vec![1.0], vec![2.0]));
-    assert!(kinematics::relative_motion(&[1.0], &[1.0, 2.0], &[1.0], &[1.0]).is_err());
+    // Ends A and B of x, then of y: the mean is r, the difference the tilt.
+    let (mut ax, mut bx) = (vec![1.0, 3.0], vec![3.0, 1.0]);
+    kinematics::mean_and_difference_in_place(&mut ax, &mut bx).unwrap();
+    assert_eq!((ax, bx), (vec![2.0, 2.0], vec![-2.0, 2.0]));
+    let (mut ay, mut by) = (vec![-2.0, 0.0], vec![-4.0, 2.0]);
+    kinematics::mean_and_difference_in_place(&mut ay, &mut by).unwrap();
+    assert_eq!((ay, by), (vec![-3.0, 1.0], vec![2.0, -2.0]));
+    assert!(kinematics::mean_and_difference_in_place(&mut [1.0], &mut [1.0, 2.0]).is_err());
 }
 
 // ---------------------------------------------------------------------------------------

@@ -42,15 +42,14 @@
 //! are outside [`super::Conditioned::valid`].
 //!
 //! ## Cost
-//! `N` multiply-adds per sample, as `N` passes of a vectorised axpy over the column.
+//! `N` multiply-adds per sample, each output summed in registers ([`super::chain::stencil`]).
 
 use oilfilm_physics::daq::ChannelId;
 
+use std::ops::Range;
+
 use super::first_non_finite;
 use crate::IdentificationError;
-
-/// Output samples per block of the interior loop (4 kB of output, L1-resident).
-const BLOCK: usize = 512;
 
 /// Largest stencil accepted (beyond this Lagrange weights grow and nothing is gained).
 pub const MAX_TAPS: usize = 16;
@@ -174,29 +173,11 @@ impl FractionalDelay {
                 reason: format!("{len} samples, a {taps}-tap interpolator needs at least {taps}"),
             });
         }
-        let start = self.start;
-        // Interior: n with 0 <= n + start and n + start + taps <= len.
-        let lo = (-start).max(0) as usize;
-        let hi_excl = (len as isize - start - taps as isize + 1).clamp(0, len as isize) as usize;
-        // Interior, in blocks that stay in L1 while the `taps` passes of each block run.
-        // For output n the stencil is input[n + start ..][..taps]; `lo + start >= 0` and
-        // `hi_excl - 1 + start + taps <= len` by the bounds above.
-        let mut from = lo;
-        while from < hi_excl {
-            let to = (from + BLOCK).min(hi_excl);
-            let base = (from as isize + start) as usize;
-            let m = to - from;
-            let dst = &mut out[from..to];
-            let w0 = self.weights[0];
-            for (o, &x) in dst.iter_mut().zip(&input[base..base + m]) {
-                *o = w0 * x;
-            }
-            for (j, &wj) in self.weights.iter().enumerate().skip(1) {
-                for (o, &x) in dst.iter_mut().zip(&input[base + j..base + j + m]) {
-                    *o += wj * x;
-                }
-            }
-            from = to;
+        // Interior: the stencil inside the record; the front end's kernel, the same sums.
+        let Range { start: lo, end: hi_excl } = self.interior(len);
+        if lo < hi_excl {
+            let from = (lo as isize + self.start) as usize;
+            super::chain::stencil_any(&self.weights, &input[from..], &mut out[lo..hi_excl]);
         }
         // Edges: shifted stencil inside [0, len).
         for n in (0..lo.min(len)).chain(hi_excl.max(lo.min(len))..len) {

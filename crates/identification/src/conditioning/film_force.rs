@@ -21,40 +21,21 @@ use crate::IdentificationError;
 /// Eq. 2 into caller buffers: all inputs and outputs the same length. Forces in N, housing
 /// acceleration in m/s^2.
 #[allow(clippy::too_many_arguments)] // five named input columns and two outputs, all plain
-pub fn eq2_into(
-    f1: &[f64],
-    f2: &[f64],
-    f3: &[f64],
-    housing_ax: &[f64],
-    housing_ay: &[f64],
-    mechanics: &Mechanics,
-    fx: &mut [f64],
-    fy: &mut [f64],
-) -> Result<(), IdentificationError> {
+pub fn eq2_into(f1: &[f64], f2: &[f64], f3: &[f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics, fx: &mut [f64], fy: &mut [f64]) -> Result<(), IdentificationError> {
     mechanics.validate()?;
     let n = f1.len();
-    for (name, len) in [
-        ("f2", f2.len()),
-        ("f3", f3.len()),
-        ("housing_ax", housing_ax.len()),
-        ("housing_ay", housing_ay.len()),
-        ("fx output", fx.len()),
-        ("fy output", fy.len()),
-    ] {
+    for (name, len) in [("f2", f2.len()), ("f3", f3.len()), ("housing_ax", housing_ax.len()), ("housing_ay", housing_ay.len()), ("fx output", fx.len()), ("fy output", fy.len())] {
         if len != n {
-            return Err(IdentificationError::BadInput {
-                what: format!("eq. 2 `{name}`"),
-                reason: format!("{len} samples, f1 has {n}"),
-            });
+            return Err(IdentificationError::BadInput { what: format!("eq. 2 `{name}`"), reason: format!("{len} samples, f1 has {n}") });
         }
     }
-    fx.copy_from_slice(f1);
-    fy.copy_from_slice(f2);
-    applied_in_place(fx, fy, f3, mechanics)?;
-    subtract_inertia_in_place(fx, fy, housing_ax, housing_ay, mechanics).map(|_| ())
+    let (applied, m) = (Applied::new(mechanics), mechanics.housing_mass_kg);
+    for i in 0..n {
+        let [x, y] = applied.at(f1[i], f2[i], f3[i]);
+        (fx[i], fy[i]) = (x - m * housing_ax[i], y - m * housing_ay[i]);
+    }
+    Ok(())
 }
-
-
 
 /// The applied part of eq. 2, in place: `f1`, `f2` become the exciters' force plus the
 /// bellows' load minus the housing's weight, `(c1 f1 + c2 f2, s1 f1 + s2 f2 + f3 - m g)`.
@@ -98,27 +79,6 @@ impl Applied {
         let Self { c1, s1, c2, s2, mg } = *self;
         [c1 * f1 + c2 * f2, s1 * f1 + s2 * f2 + (f3 - mg)]
     }
-}
-
-/// The inertial part of eq. 2, in place: `fx -= m X''`, `fy -= m Y''`; whether every
-/// result is finite.
-pub(crate) fn subtract_inertia_in_place(fx: &mut [f64], fy: &mut [f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics) -> Result<bool, IdentificationError> {
-    let n = fx.len();
-    if fy.len() != n || housing_ax.len() != n || housing_ay.len() != n {
-        return Err(IdentificationError::BadInput {
-            what: "eq. 2 columns".into(),
-            reason: "the forces and the housing accelerations differ in length".into(),
-        });
-    }
-    let m = mechanics.housing_mass_kg;
-    let (fy, hx, hy) = (&mut fy[..n], &housing_ax[..n], &housing_ay[..n]);
-    let mut finite = true;
-    for i in 0..n {
-        fx[i] -= m * hx[i];
-        fy[i] -= m * hy[i];
-        finite &= fx[i].is_finite() & fy[i].is_finite();
-    }
-    Ok(finite)
 }
 
 /// Eq. 2, allocating `(fx, fy)`.
