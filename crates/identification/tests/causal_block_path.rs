@@ -96,7 +96,12 @@ impl Design {
                     range_si: [a.min(b), a.max(b)],
                     start,
                     weights,
-                    last_good: 0.5 * (a + b),
+                    // Mid-range, in the stream's units: what the filters see until the first
+                    // in-range reading.
+                    last_good: match units {
+                        RawUnits::Volts => 0.5 * (c.linear_range_v[0] + c.linear_range_v[1]),
+                        RawUnits::Si => 0.5 * (a + b),
+                    },
                 }
             })
             .collect();
@@ -180,8 +185,8 @@ impl ScanByScan {
         let n = self.scans;
         self.scans += 1;
         let (m2, reach) = (2 * self.d.sg.len(), (self.d.lookback + self.d.settling + 2 * self.d.sg.len()) as u64);
-        // Calibration and range check; an out-of-range reading holds the last good value.
-        let mut si = [0.0; CHANNEL_COUNT];
+        // Range check; an out-of-range reading holds the last good reading.
+        let mut held = [0.0; CHANNEL_COUNT];
         for (k, f) in self.d.fronts.iter_mut().enumerate() {
             let r = row[f.column];
             let (volts, value) = match self.d.units {
@@ -189,7 +194,7 @@ impl ScanByScan {
                 RawUnits::Si => (f.offset_v + f.sensitivity * r, r),
             };
             if volts > f.lo_v && volts < f.hi_v && value.is_finite() {
-                f.last_good = value;
+                f.last_good = r;
             } else {
                 self.invalid_through = Some(self.invalid_through.map_or(n + reach, |t| t.max(n + reach)));
                 match out.violations.iter_mut().rev().find(|v| v.channel == f.channel) {
@@ -197,20 +202,24 @@ impl ScanByScan {
                     _ => out.violations.push(RangeViolation { channel: f.channel, index: n as usize, value_si: value, range_si: f.range_si, count: 1 }),
                 }
             }
-            si[k] = f.last_good;
+            held[k] = f.last_good;
         }
-        self.raw.set(n, si);
+        self.raw.set(n, held);
         if n < (self.d.lookahead + self.d.lookback) as u64 {
             return;
         }
-        // De-skew: time index m = n - L.
+        // Calibration and de-skew: time index m = n - L.
         let m = n - self.d.lookahead as u64;
         let mut s = [0.0; CHANNEL_COUNT];
         for (k, f) in self.d.fronts.iter().enumerate() {
+            let si = |i: i64| match self.d.units {
+                RawUnits::Volts => (self.raw.at(i as u64)[k] - f.offset_v) * (1.0 / f.sensitivity),
+                RawUnits::Si => self.raw.at(i as u64)[k],
+            };
             let base = m as i64 + f.start as i64;
-            let mut acc = f.weights[0] * self.raw.at(base as u64)[k];
+            let mut acc = f.weights[0] * si(base);
             for (j, &w) in f.weights.iter().enumerate().skip(1) {
-                acc += w * self.raw.at((base + j as i64) as u64)[k];
+                acc += w * si(base + j as i64);
             }
             s[k] = acc;
         }

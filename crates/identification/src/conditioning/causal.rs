@@ -62,9 +62,9 @@ use std::ops::Range;
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::chain::stencil_any;
+use super::chain::{Constants, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{kinematics, range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
+use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
 
@@ -100,17 +100,9 @@ impl CausalDelays {
     }
 
     fn of(chain: &Chain) -> Self {
-        let stencils = stencils(chain);
-        let ahead = stencils.iter().map(|(s, w)| s + w.len() as isize - 1).max().unwrap_or(0).max(0) as usize;
-        let back = stencils.iter().map(|(s, _)| -s).max().unwrap_or(0).max(0) as usize;
-        Self { lookahead: ahead, lookback: back, derivative: 2 * chain.derivative.half_length(), settling: chain.lowpass.settling_samples() }
+        let (lookback, lookahead) = chain.reach();
+        Self { lookahead, lookback, derivative: 2 * chain.derivative.half_length(), settling: chain.lowpass.settling_samples() }
     }
-}
-
-/// The de-skew stencil of each channel (start relative to the output, weights); the identity
-/// without de-skew.
-fn stencils(chain: &Chain) -> Vec<(isize, Vec<f64>)> {
-    chain.delays.iter().map(|d| d.as_ref().map_or((0, vec![1.0]), |d| (d.stencil_start(), d.weights().to_vec()))).collect()
 }
 
 /// The delays [`CausalChain::new`] will have for this calibration, configuration and rate.
@@ -133,9 +125,8 @@ struct Front {
     lo_v: f64,
     hi_v: f64,
     range_si: [f64; 2],
-    start: isize,
-    weights: Vec<f64>,
-    /// The last in-range value (SI), fed to the filters in place of an out-of-range one.
+    /// The last in-range reading (in the stream's units), fed to the filters in place of an
+    /// out-of-range one.
     last_good: f64,
 }
 
@@ -189,13 +180,14 @@ impl CausalOutput {
 /// scratch columns reused from call to call.
 #[derive(Clone, Debug, Default)]
 struct Buffers {
-    /// SI readings (in-range, or held) by channel index, scans `raw_first ..`.
+    /// Readings (in range, or held) by channel index, scans `raw_first ..`.
     raw: [Vec<f64>; CHANNEL_COUNT],
     raw_first: u64,
-    /// This call's de-skewed samples by channel index.
-    deskewed: [Vec<f64>; CHANNEL_COUNT],
-    /// This call's `[x, y, tilt_x, tilt_y, X, Y, F_x, F_y]` (applied force), low-passed in place.
+    /// This call's `[x, y, tilt_x, tilt_y, X, Y, F_x, F_y]` (applied force), low-passed in
+    /// place, and its de-skewed bellows' load and temperature.
     frames: Vec<[f64; 8]>,
+    load: Vec<f64>,
+    temperature: Vec<f64>,
     /// Low-passed `x, y, tilt_x, tilt_y, X, Y, F_x, F_y`, then the unfiltered `f3` and
     /// temperature, low-pass indices `filtered_first ..`.
     filtered: [Vec<f64>; 10],
@@ -235,6 +227,8 @@ const DIFFERENTIATED: [usize; 4] = [0, 1, 4, 5];
 #[derive(Clone)]
 pub struct CausalChain {
     chain: Chain,
+    /// The front end's constants for the stream's units, by channel index.
+    constants: [Constants; CHANNEL_COUNT],
     units: RawUnits,
     width: usize,
     fronts: Vec<Front>,
@@ -248,6 +242,7 @@ pub struct CausalChain {
     invalid_through: Option<u64>,
     /// History carried between calls, and scratch.
     buf: Buffers,
+    front: FrontScratch,
 }
 
 impl CausalChain {
@@ -264,7 +259,7 @@ impl CausalChain {
     ) -> Result<Self, IdentificationError> {
         let chain = Chain::causal(calibration, mechanics, config, sample_rate_hz)?;
         let mut fronts = Vec::with_capacity(CHANNEL_COUNT);
-        for (&ch, (start, weights)) in ChannelId::ALL.iter().zip(stencils(&chain)) {
+        for &ch in &ChannelId::ALL {
             let column = columns[ch.index()];
             if column >= width {
                 return Err(IdentificationError::BadInput { what: format!("channel `{ch}`"), reason: format!("column {column} of a {width}-column scan") });
@@ -283,12 +278,20 @@ impl CausalChain {
             let (lo_v, hi_v) = range_check::volts_bounds(ch, calibration)?;
             let [a, b] = c.linear_range_v.map(|v| (v - offset_v) / sensitivity);
             // Mid-range: what the filters see until the first in-range reading.
-            let mid = 0.5 * (a + b);
+            let mid = match units {
+                RawUnits::Volts => 0.5 * (c.linear_range_v[0] + c.linear_range_v[1]),
+                RawUnits::Si => 0.5 * (a + b),
+            };
             let last_good = if mid.is_finite() { mid } else { 0.0 };
-            fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], start, weights, last_good });
+            fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], last_good });
         }
+        let constants = std::array::from_fn(|k| match units {
+            RawUnits::Volts => chain.volts[k].unwrap_or(Constants::SI),
+            RawUnits::Si => Constants::SI,
+        });
         Ok(Self {
             delays: CausalDelays::of(&chain),
+            constants,
             chain,
             units,
             width,
@@ -298,6 +301,7 @@ impl CausalChain {
             lowpassed: 0,
             invalid_through: None,
             buf: Buffers::default(),
+            front: FrontScratch::default(),
         })
     }
 
@@ -358,14 +362,14 @@ impl Kernel for Push<'_> {
         let half = two_m / 2;
         let buf = &mut c.buf;
 
-        // Calibration and range check, channel by channel into the raw columns. The raw
-        // columns hold the scans since `raw_first`, so scan `n0` goes at their current end.
+        // The readings into the raw columns, range-checked. The raw columns hold the scans
+        // since `raw_first`, so scan `n0` goes at their current end.
         let e0 = (n0 - buf.raw_first) as usize;
         for col in buf.raw.iter_mut() {
             col.resize(e0 + scans, 0.0);
         }
         {
-            // The readings into the channel columns, row after row, then converted in place.
+            // The readings into the channel columns, row after row.
             let dst = buf.raw.each_mut().map(|c| &mut c[e0..e0 + scans]);
             let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| c.fronts[k].column);
             for (i, row) in values.chunks_exact(width).enumerate() {
@@ -375,8 +379,8 @@ impl Kernel for Push<'_> {
             }
         }
         let mut in_range = true;
-        for (f, col) in c.fronts.iter().zip(buf.raw.iter_mut()) {
-            in_range &= f.calibrate(c.units, &mut col[e0..]);
+        for (f, col) in c.fronts.iter().zip(&buf.raw) {
+            in_range &= f.in_range(c.units, &col[e0..]);
         }
         buf.hits.clear();
         if in_range {
@@ -391,7 +395,7 @@ impl Kernel for Push<'_> {
                 for (f, col) in c.fronts.iter_mut().zip(buf.raw.iter_mut()) {
                     let (value, ok) = f.read(c.units, row[f.column]);
                     if ok {
-                        f.last_good = value;
+                        f.last_good = row[f.column];
                     } else {
                         if buf.hits.last() != Some(&n) {
                             buf.hits.push(n);
@@ -406,40 +410,33 @@ impl Kernel for Push<'_> {
             }
         }
 
-        // De-skew: scan `n` gives time index `m = n - L`, once the stencils' reach back is in.
+        // The front end (calibration, de-skew, kinematics, applied force): scan `n` gives
+        // time index `m = n - L`, once the stencils' reach back is in.
         let (first_n, end_n) = (n0.max(ahead + back), n0 + scans as u64);
         if first_n < end_n {
             let count = (end_n - first_n) as usize;
-            let m0 = first_n - ahead;
-            for ((f, raw), y) in c.fronts.iter().zip(&buf.raw).zip(buf.deskewed.iter_mut()) {
-                // `m0 + start >= m0 - lookback >= raw_first` (the raw columns keep the last
-                // `L + lookback` scans) and the stencil's last reading is `<= end_n - 1`.
-                let from = (m0 as i64 + f.start as i64 - buf.raw_first as i64) as usize;
-                y.resize(count, 0.0);
-                stencil_any(&f.weights, &raw[from..], y);
+            let m0 = (first_n - ahead) as usize;
+            let (frames, f3, temperature) = (&mut buf.frames, &mut buf.load, &mut buf.temperature);
+            for v in [&mut *f3, &mut *temperature] {
+                v.clear();
             }
-            // Kinematics (`r` = the mean of ends A and B, tilt = their difference) and the
-            // applied force, as frames of the low-pass's eight lanes.
-            let [a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature] = &buf.deskewed;
-            buf.frames.clear();
-            buf.frames.extend((0..count).map(|i| {
-                let [x, tx] = kinematics::mean_and_difference(a_x[i], b_x[i]);
-                let [y, ty] = kinematics::mean_and_difference(a_y[i], b_y[i]);
-                let [fx, fy] = c.chain.applied.at(f1[i], f2[i], f3[i]);
-                [x, y, tx, ty, frame_x[i], frame_y[i], fx, fy]
-            }));
+            frames.clear();
+            let cols = buf.raw.each_ref().map(Vec::as_slice);
+            // The raw columns keep the last `L + lookback` scans, every reading the stencils
+            // of `m0..` reach: this cannot fail.
+            let _ = c.chain.front_frames(&c.constants, cols, buf.raw_first as usize, m0..m0 + count, &mut c.front, frames, f3, temperature);
 
             // Low-pass: index `p = m - lookback`, started in the steady state of its first input.
             let p0 = c.lowpassed;
             c.lowpassed += count as u64;
-            let st = c.forward.get_or_insert_with(|| c.chain.lowpass.forward_steady(buf.frames[0]));
-            c.chain.lowpass.forward_run(st, &mut buf.frames);
+            let st = c.forward.get_or_insert_with(|| c.chain.lowpass.forward_steady(frames[0]));
+            c.chain.lowpass.forward_run(st, frames);
             let fe = (p0 - buf.filtered_first) as usize;
             for col in buf.filtered.iter_mut() {
                 col.resize(fe + count, 0.0);
             }
             let [l0, l1, l2, l3, l4, l5, l6, l7, o_f3, o_t] = &mut buf.filtered;
-            simd.transpose8(&mut [l0, l1, l2, l3, l4, l5, l6, l7].map(|c| &mut c[..]), fe, &mut buf.frames, false);
+            simd.transpose8(&mut [l0, l1, l2, l3, l4, l5, l6, l7].map(|c| &mut c[..]), fe, frames, false);
             o_f3[fe..].copy_from_slice(&f3[..count]);
             o_t[fe..].copy_from_slice(&temperature[..count]);
 
@@ -556,17 +553,11 @@ impl Front {
         (value, (volts > self.lo_v) & (volts < self.hi_v) & value.is_finite())
     }
 
-    /// The channel's readings in `col` converted to SI in place; `false` if any is out of
-    /// range (the caller then redoes the block holding values).
+    /// Whether every reading of `col` is in range (the caller then redoes the block holding
+    /// values if one is not).
     #[inline(always)]
-    fn calibrate(&self, units: RawUnits, col: &mut [f64]) -> bool {
+    fn in_range(&self, units: RawUnits, col: &[f64]) -> bool {
         // A count rather than a short-circuit `all`, so that the loop vectorises.
-        let mut bad = 0u64;
-        for c in col.iter_mut() {
-            let (v, ok) = self.read(units, *c);
-            *c = v;
-            bad += u64::from(!ok);
-        }
-        bad == 0
+        col.iter().map(|&r| u64::from(!self.read(units, r).1)).sum::<u64>() == 0
     }
 }

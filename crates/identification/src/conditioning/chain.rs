@@ -47,8 +47,8 @@ pub struct Chain {
     mechanics: Mechanics,
     pub(super) lowpass: Butterworth,
     pub(super) derivative: SavitzkyGolayDerivative,
-    /// By channel index: the de-skew stencil (`None` without de-skew).
-    pub(super) delays: [Option<FractionalDelay>; CHANNEL_COUNT],
+    /// By channel index: the de-skew stencil (the identity without de-skew).
+    pub(super) delays: [FractionalDelay; CHANNEL_COUNT],
     /// By channel index: the front end's constants for readings in volts (`None` when the
     /// calibration is unusable: the stages one by one say why).
     pub(super) volts: [Option<Constants>; CHANNEL_COUNT],
@@ -58,21 +58,19 @@ pub struct Chain {
 
 /// The filters a configuration asks for: the low-pass of `order`, the differentiator, the
 /// de-skew stencils, and the scans their edge effects spoil at each end of a record.
-type Designs = (Butterworth, SavitzkyGolayDerivative, [Option<FractionalDelay>; CHANNEL_COUNT], usize);
+type Designs = (Butterworth, SavitzkyGolayDerivative, [FractionalDelay; CHANNEL_COUNT], usize);
 
 fn designs(calibration: &Calibration, config: &ConditioningConfig, fs: f64, order: usize) -> Result<Designs, IdentificationError> {
     let lowpass = Butterworth::design(order, config.lowpass_cutoff_hz, fs)?;
     let derivative = SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
     config.check_taps()?;
-    let mut delays: [Option<FractionalDelay>; CHANNEL_COUNT] = Default::default();
-    let mut trim = 0;
+    let mut delays: [FractionalDelay; CHANNEL_COUNT] = std::array::from_fn(|_| FractionalDelay::identity());
     if config.deskew {
         for ch in ChannelId::ALL {
-            let d = FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
-            trim = trim.max(d.edge_samples());
-            delays[ch.index()] = Some(d);
+            delays[ch.index()] = FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
         }
     }
+    let trim = delays.iter().map(FractionalDelay::edge_samples).max().unwrap_or(0);
     let edge = trim + lowpass.settling_samples() + 2 * derivative.half_length();
     Ok((lowpass, derivative, delays, edge))
 }
@@ -152,6 +150,13 @@ impl Chain {
     /// half-length. A record of `n` scans is valid over `edge..n - edge`.
     pub fn edge(&self) -> usize {
         self.edge
+    }
+
+    /// How far the de-skew stencils reach before and after their output scan.
+    pub(super) fn reach(&self) -> (usize, usize) {
+        let back = self.delays.iter().map(|d| (-d.stencil_start()).max(0) as usize).max().unwrap_or(0);
+        let ahead = self.delays.iter().map(|d| (d.stencil_start() + d.taps() as isize - 1).max(0) as usize).max().unwrap_or(0);
+        (back, ahead)
     }
 
     /// Steps 1-7 on a whole record.
@@ -326,10 +331,8 @@ impl Chain {
             if let Some(v) = range_check::check(ch, column, raw.units, &self.calibration)? {
                 violations.push(v);
             }
-            if let Some(d) = &self.delays[ch.index()] {
-                d.apply_into(buf, &mut tmp)?;
-                std::mem::swap(buf, &mut tmp);
-            }
+            self.delays[ch.index()].apply_into(buf, &mut tmp)?;
+            std::mem::swap(buf, &mut tmp);
         }
         let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature] = si;
         kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x)?;
@@ -551,6 +554,68 @@ pub(super) struct FrontChannel<'a> {
     pub(super) interior: Range<usize>,
 }
 
+/// The front end's working memory when it runs over a stream of scans ([`Chain::front_frames`]).
+#[derive(Clone)]
+pub(super) struct FrontScratch {
+    tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
+    input: [f64; TILE + MAX_TAPS],
+    lanes: [Vec<f64>; 8],
+    load: Vec<f64>,
+    temp: Vec<f64>,
+}
+
+impl Default for FrontScratch {
+    fn default() -> Self {
+        Self { tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]), input: [0.0; TILE + MAX_TAPS], lanes: std::array::from_fn(|_| vec![0.0; TILE]), load: Vec::new(), temp: Vec::new() }
+    }
+}
+
+impl Chain {
+    /// The front end over the output scans `out` of a stream whose raw readings of channel
+    /// `k` are `cols[k]` from scan `first` on (they must hold every reading the stencils of
+    /// `out` reach): the eight dynamic lanes of each scan appended to `frames`, its bellows'
+    /// load and temperature to `load` and `temp`. How many readings it found unusable.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the stream's readings and the three kinds of output
+    pub(super) fn front_frames(
+        &self,
+        constants: &[Constants; CHANNEL_COUNT],
+        cols: [&[f64]; CHANNEL_COUNT],
+        first: usize,
+        out: Range<usize>,
+        s: &mut FrontScratch,
+        frames: &mut Vec<[f64; 8]>,
+        load: &mut Vec<f64>,
+        temp: &mut Vec<f64>,
+    ) -> Result<usize, IdentificationError> {
+        let (back, ahead) = self.reach();
+        let (mut p, mut bad) = (out.start, 0);
+        while p < out.end {
+            let q = (p + TILE).min(out.end);
+            let (w0, w1) = (p - back - first, q + ahead - first);
+            let mut chans = Vec::with_capacity(CHANNEL_COUNT);
+            for ch in ChannelId::ALL {
+                let volts = cols[ch.index()].get(w0..w1).ok_or_else(|| IdentificationError::BadInput {
+                    what: format!("column `{ch}`"),
+                    reason: format!("scans {}..{} of the stream missing", w0 + first, w1 + first),
+                })?;
+                let delay = &self.delays[ch.index()];
+                chans.push(FrontChannel { volts, k: constants[ch.index()], delay, interior: delay.interior(w1 - w0) });
+            }
+            let o = back..back + (q - p);
+            s.load.resize(o.end, 0.0);
+            s.temp.resize(o.end, 0.0);
+            let mut lanes = s.lanes.each_mut().map(|l| &mut l[..]);
+            bad += front_tile(&chans, &self.applied, w1 - w0, o.start, o.clone(), &mut s.tile, &mut s.input, &mut lanes, &mut s.load, &mut s.temp);
+            frames.extend((0..q - p).map(|i| std::array::from_fn(|l| s.lanes[l][i])));
+            load.extend_from_slice(&s.load[o.clone()]);
+            temp.extend_from_slice(&s.temp[o]);
+            p = q;
+        }
+        Ok(bad)
+    }
+}
+
 /// The fused record's producer: the front end tile by tile as the low-pass asks for samples.
 struct FrontTiles<'a> {
     chans: Vec<FrontChannel<'a>>,
@@ -565,8 +630,8 @@ struct FrontTiles<'a> {
 }
 
 impl<'a> FrontTiles<'a> {
-    /// `None` unless the window is in volts, de-skewed, with usable calibrations and at
-    /// least a stencil long: the stages one by one handle the rest.
+    /// `None` unless the window is in volts, with usable calibrations and at least a stencil
+    /// long: the stages one by one handle the rest.
     fn new(chain: &'a Chain, raw: &'a RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT]) -> Option<Self> {
         let len = window.len();
         if raw.units != RawUnits::Volts || len < 2 {
@@ -574,7 +639,7 @@ impl<'a> FrontTiles<'a> {
         }
         let mut chans = Vec::with_capacity(CHANNEL_COUNT);
         for ch in ChannelId::ALL {
-            let (delay, k) = (chain.delays[ch.index()].as_ref()?, chain.volts[ch.index()]?);
+            let (delay, k) = (&chain.delays[ch.index()], chain.volts[ch.index()]?);
             let volts = raw.columns.get(col_of[ch.index()])?.get(window.clone())?;
             if len < delay.taps() {
                 return None;

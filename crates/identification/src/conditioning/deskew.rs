@@ -107,6 +107,12 @@ impl FractionalDelay {
         })
     }
 
+    /// No delay: one tap of weight 1 (what a chain without de-skew runs, so that its front end
+    /// is the same code; `1 x = x` exactly).
+    pub(crate) fn identity() -> Self {
+        Self { delay_samples: 0.0, start: 0, weights: vec![1.0] }
+    }
+
     /// The filter for a channel converted `offset_s` after the scan start, at `sample_rate_hz`.
     pub fn for_offset(
         offset_s: f64,

@@ -21,8 +21,7 @@
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::chain::{front_tile, Constants, Derivatives, FrontChannel, TILE};
-use super::deskew::MAX_TAPS;
+use super::chain::{Constants, Derivatives, FrontScratch};
 use super::lowpass::ForwardStream;
 use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawRecord, RawUnits};
 use crate::simd::{self, Kernel, Simd};
@@ -52,9 +51,6 @@ pub struct ZeroPhaseStream {
     col_of: [usize; CHANNEL_COUNT],
     /// By channel index.
     constants: [Constants; CHANNEL_COUNT],
-    /// How far the de-skew stencils reach before and after their output scan.
-    lookback: usize,
-    lookahead: usize,
     /// The front end and the forward pass are done for stream scans `..produced`.
     produced: usize,
     /// Their outputs for scans `kept_from..produced`: the forward pass's eight lanes
@@ -68,10 +64,8 @@ pub struct ZeroPhaseStream {
     /// window can reach them).
     bad: Vec<usize>,
     // Working memory, reused.
-    tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
-    lanes: [Vec<f64>; 8],
+    front: FrontScratch,
     load: Vec<f64>,
-    temp: Vec<f64>,
     back: Vec<[f64; 8]>,
     /// The block's final low-passed columns and `[first, second]` derivatives of x, y, X, Y.
     columns: [Vec<f64>; 8],
@@ -80,8 +74,8 @@ pub struct ZeroPhaseStream {
 
 impl ZeroPhaseStream {
     /// A stream of records whose columns are `channels` (each of the ten once, any order) in
-    /// `units` at `sample_rate_hz`. The chain needs de-skew (`config.deskew`) and usable
-    /// calibrations; without them, `Ok(None)`: condition windows instead.
+    /// `units` at `sample_rate_hz`. The chain needs usable calibrations; without them,
+    /// `Ok(None)`: condition windows instead (they name what is wrong).
     pub fn new(
         channels: &[ChannelId],
         units: RawUnits,
@@ -101,36 +95,28 @@ impl ZeroPhaseStream {
                 reason: "missing from the stream; conditioning needs all ten channels".into(),
             });
         }
-        let (mut lookback, mut lookahead) = (0usize, 0usize);
         let mut constants = [Constants::SI; CHANNEL_COUNT];
-        for ch in ChannelId::ALL {
-            let Some(delay) = &chain.delays[ch.index()] else { return Ok(None) };
-            let start = delay.stencil_start();
-            lookback = lookback.max((-start).max(0) as usize);
-            lookahead = lookahead.max((start + delay.taps() as isize - 1).max(0) as usize);
-            if units == RawUnits::Volts {
+        if units == RawUnits::Volts {
+            for ch in ChannelId::ALL {
                 // Every reading would be unusable: the windowed conditioning says why.
                 let Some(k) = chain.volts[ch.index()] else { return Ok(None) };
                 constants[ch.index()] = k;
             }
         }
+        let back = chain.reach().0;
         Ok(Some(Self {
             chain,
             units,
             col_of,
             constants,
-            lookback,
-            lookahead,
-            produced: lookback,
-            kept_from: lookback,
+            produced: back,
+            kept_from: back,
             frames: Vec::new(),
             temperature: Vec::new(),
             forward: None,
             bad: Vec::new(),
-            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
-            lanes: std::array::from_fn(|_| vec![0.0; TILE]),
+            front: FrontScratch::default(),
             load: Vec::new(),
-            temp: Vec::new(),
             back: Vec::new(),
             columns: Default::default(),
             derived: Default::default(),
@@ -152,7 +138,7 @@ impl ZeroPhaseStream {
     /// The first stream scan [`ZeroPhaseStream::advance`] still reads (the caller may drop
     /// the scans before it, and those before its next block's window).
     pub fn first_needed(&self) -> usize {
-        self.produced - self.lookback
+        self.produced - self.chain.reach().0
     }
 
     /// Runs the front end and the forward pass over every scan whose de-skew stencils `raw`
@@ -178,7 +164,8 @@ impl ZeroPhaseStream {
             return Ok(None);
         }
         // Any unusable reading the window's front end reads: the windowed conditioning says which.
-        let reach = window.start.saturating_sub(self.lookback)..window.end + self.lookahead;
+        let (lookback, lookahead) = self.chain.reach();
+        let reach = window.start.saturating_sub(lookback)..window.end + lookahead;
         if self.bad.iter().any(|b| reach.contains(b)) {
             return Ok(None);
         }
@@ -224,7 +211,7 @@ impl ZeroPhaseStream {
             self.temperature.drain(..dead);
             self.kept_from = keep;
         }
-        let reach_from = next.saturating_sub(self.edge() + self.lookback);
+        let reach_from = next.saturating_sub(self.edge() + self.chain.reach().0);
         self.bad.retain(|&b| b >= reach_from);
     }
 }
@@ -242,54 +229,37 @@ impl Kernel for Advance<'_> {
     #[inline(always)]
     fn run<S: Simd>(self, _: S) -> Self::Output {
         let Advance { s, raw, offset } = self;
-        let end = (offset + raw.len()).saturating_sub(s.lookahead);
-        if s.produced < end && s.first_needed() < offset {
+        let end = (offset + raw.len()).saturating_sub(s.chain.reach().1);
+        if s.produced >= end {
+            return Ok(());
+        }
+        if s.first_needed() < offset {
             return Err(IdentificationError::BadInput { what: "stream".into(), reason: format!("scans from {} needed, the record starts at {offset}", s.first_needed()) });
         }
-        let mut input = [0.0; TILE + MAX_TAPS];
-        while s.produced < end {
-            let (p, q) = (s.produced, (s.produced + TILE).min(end));
-            let (w0, w1) = (p - s.lookback - offset, q + s.lookahead - offset);
-            let len = w1 - w0;
-            let mut chans = Vec::with_capacity(CHANNEL_COUNT);
-            for ch in ChannelId::ALL {
-                let volts = raw.columns.get(s.col_of[ch.index()]).and_then(|v| v.get(w0..w1)).ok_or_else(|| IdentificationError::BadInput {
-                    what: format!("column `{ch}`"),
-                    reason: format!("scans {w0}..{w1} of the record missing"),
-                })?;
-                // `new` made a stream only with every stencil.
-                let Some(delay) = &s.chain.delays[ch.index()] else { return Ok(()) };
-                chans.push(FrontChannel { volts, k: s.constants[ch.index()], delay, interior: delay.interior(len) });
+        let cols: [&[f64]; CHANNEL_COUNT] = std::array::from_fn(|k| raw.columns.get(s.col_of[k]).map_or(&[][..], Vec::as_slice));
+        let new_from = s.frames.len();
+        s.load.clear();
+        s.chain.front_frames(&s.constants, cols, offset, s.produced..end, &mut s.front, &mut s.frames, &mut s.load, &mut s.temperature)?;
+        // The forward pass over the new frames, restarting in steady state after any frame
+        // (or temperature) that is not finite.
+        let mut i = new_from;
+        while i < s.frames.len() {
+            let mut j = i;
+            while j < s.frames.len() && s.frames[j].iter().fold(s.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
+                j += 1;
             }
-            let (o0, o1) = (s.lookback, s.lookback + (q - p));
-            s.load.resize(o1, 0.0);
-            s.temp.resize(o1, 0.0);
-            let mut lanes = s.lanes.each_mut().map(|l| &mut l[..]);
-            front_tile(&chans, &s.chain.applied, len, o0, o0..o1, &mut s.tile, &mut input, &mut lanes, &mut s.load, &mut s.temp);
-            let new_from = s.frames.len();
-            s.frames.extend((0..q - p).map(|i| std::array::from_fn(|l| s.lanes[l][i])));
-            s.temperature.extend_from_slice(&s.temp[o0..o1]);
-            // The forward pass over the new frames, restarting in steady state after any
-            // frame (or temperature) that is not finite.
-            let mut i = new_from;
-            while i < s.frames.len() {
-                let mut j = i;
-                while j < s.frames.len() && s.frames[j].iter().fold(s.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
-                    j += 1;
-                }
-                if j > i {
-                    let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(s.frames[i]));
-                    s.chain.lowpass.forward_run(st, &mut s.frames[i..j]);
-                }
-                if j < s.frames.len() {
-                    s.bad.push(p + (j - new_from));
-                    s.forward = None;
-                    j += 1;
-                }
-                i = j;
+            if j > i {
+                let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(s.frames[i]));
+                s.chain.lowpass.forward_run(st, &mut s.frames[i..j]);
             }
-            s.produced = q;
+            if j < s.frames.len() {
+                s.bad.push(s.produced + (j - new_from));
+                s.forward = None;
+                j += 1;
+            }
+            i = j;
         }
+        s.produced = end;
         Ok(())
     }
 }
