@@ -317,7 +317,7 @@ fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, at: &str) ->
 /// `oilfilm identify` with the baseline instruction set (`OILFILM_SIMD=scalar`: no AVX, no
 /// fused multiply-add, `rustfft`'s scalar transforms: what a CPU without AVX2 and FMA runs)
 /// gives what it gives on this CPU: the same lines, flags and refusals, every number within
-/// a relative 1e-12 (the transforms' rounding, ADR 0022).
+/// a relative 1e-12 (the transforms' rounding, ADR 0023).
 #[test]
 fn identify_without_avx_or_fma_gives_the_same_estimates() {
     let record = scratch("simd.txt");

@@ -84,7 +84,7 @@ fn reference_bag_identifies_the_films_coefficients_in_every_window() {
         assert_eq!((&*g.topic, g.log_time), (w.topic.as_str(), w.log_time), "message {i}");
         if g.data != w.data && w.type_name == <oilfilm_msgs::CoefficientEstimate as oilfilm_msgs::RosMessage>::TYPE_NAME {
             // The estimator's transforms are rustfft's AVX ones on a CPU with AVX2 and FMA,
-            // its scalar ones elsewhere (ADR 0022): recorded on one kind, re-recorded on the
+            // its scalar ones elsewhere (ADR 0023): recorded on one kind, re-recorded on the
             // other, an estimate differs by their rounding only.
             let a: oilfilm_msgs::CoefficientEstimate = g.decode().unwrap();
             let b: oilfilm_msgs::CoefficientEstimate = oilfilm_msgs::decode(&w.data).unwrap();
@@ -96,7 +96,7 @@ fn reference_bag_identifies_the_films_coefficients_in_every_window() {
     }
 }
 
-/// Two estimates of one window computed with transforms that round differently (ADR 0022):
+/// Two estimates of one window computed with transforms that round differently (ADR 0023):
 /// the same window, verdict, flags and lines, every number within a relative 1e-12 (1e-15
 /// seen, `crates/identification/tests/same_bits_on_every_isa.rs`).
 fn assert_estimates_agree(a: &oilfilm_msgs::CoefficientEstimate, b: &oilfilm_msgs::CoefficientEstimate, i: usize) {

@@ -8,7 +8,7 @@
 //! kernels otherwise. So an estimate is the same bits on every CPU of one class (x86-64 with
 //! AVX2 and FMA; all others), and `OILFILM_SIMD=scalar` on an AVX2 CPU reproduces, bit for
 //! bit, what a CPU without it computes. Between the two classes only the transforms' rounding
-//! differs; what it moves is bounded in `tests/same_bits_on_every_isa.rs` (ADR 0022).
+//! differs; what it moves is bounded in `tests/same_bits_on_every_isa.rs` (ADR 0023).
 
 use std::cell::RefCell;
 

@@ -1,4 +1,4 @@
-//! The causal chain's block path (`conditioning::causal`, ADR 0014, 0021) against the chain
+//! The causal chain's block path (`conditioning::causal`, ADR 0014, 0022) against the chain
 //! run scan by scan through ring buffers, written plainly here from the public designs (the
 //! de-skew stencils, the order-2N Butterworth, the Savitzky-Golay taps, eq. 2): the same bits
 //! for every cutting of the input, with out-of-range readings in it, on every instruction

@@ -1,5 +1,5 @@
 //! An identification does not depend on the CPU's vector instructions beyond the FFT's
-//! rounding (ADR 0022). The whole pipeline (conditioning, line search, least squares,
+//! rounding (ADR 0023). The whole pipeline (conditioning, line search, least squares,
 //! standard errors, the frequency-domain cross-check) run on every instruction set this CPU
 //! has: the AVX2 and AVX-512 sets give the same bits (neither the conditioning nor the least
 //! squares use a fused multiply-add; both use `rustfft`'s AVX transforms), and the baseline

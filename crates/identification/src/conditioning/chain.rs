@@ -1,6 +1,6 @@
 //! The prepared conditioning chain: its filters designed once from the calibration, the
 //! rig's mechanics and the configuration (as a planner prepares an FFT), and the front end
-//! and the record driver every way of running the chain shares (ADR 0021).
+//! and the record driver every way of running the chain shares (ADR 0022).
 //!
 //! [`Chain`] owns the de-skew stencils, the low-pass, the differentiator, eq. 2's constants
 //! and the instruction set its kernels run on. A record (or a window of one) goes through it

@@ -177,7 +177,7 @@ impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
 /// A group of sections (a pair, or the lone last section of an odd order) over frames of
 /// eight lanes, compiled for the caller's instruction set. (An AVX2 kernel that kept the
 /// pair's state in registers by volatile accesses, ADR 0016 amendment 4, measured within
-/// noise of this loop and went: ADR 0021.)
+/// noise of this loop and went: ADR 0022.)
 #[inline(always)]
 fn run_group(sections: &[Section], lanes: &mut [Lanes<8>], frames: &mut [[f64; 8]], reverse: bool) {
     if let (Ok(pair), Ok(l)) = (<&[Section; 2]>::try_from(sections), <&mut [Lanes<8>; 2]>::try_from(&mut *lanes)) {

@@ -55,7 +55,7 @@
 //! CPU has ([`crate::simd`]; the bits do not depend on which). A record ([`condition`]), a
 //! window of one ([`condition_window_into`], buffers reused), a stream of scans
 //! ([`stream::ZeroPhaseStream`]) and the causal chain for live use ([`causal::CausalChain`])
-//! are drivers over it (ADR 0021). The stage modules above are the reference the fused
+//! are drivers over it (ADR 0022). The stage modules above are the reference the fused
 //! chain is tested against, bit for bit.
 
 pub mod calibrate;
