@@ -4,6 +4,8 @@
 
 #[path = "support/scratch.rs"]
 mod support;
+#[path = "support/json_difference.rs"]
+mod json_difference;
 
 use std::process::{Command, Output};
 
@@ -293,27 +295,6 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
 }
 
 
-/// The largest relative difference of the numbers of two JSON documents of one shape whose
-/// other values are equal; `Err` names the first place they are not.
-fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, at: &str) -> Result<f64, String> {
-    use serde_json::Value;
-    match (a, b) {
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
-            Ok(if x == y { 0.0 } else { (x - y).abs() / x.abs().max(y.abs()) })
-        }
-        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
-            x.iter().zip(y).enumerate().try_fold(0.0f64, |m, (i, (p, q))| largest_difference(p, q, &format!("{at}[{i}]")).map(|d| m.max(d)))
-        }
-        (Value::Object(x), Value::Object(y)) if x.len() == y.len() => x.iter().try_fold(0.0f64, |m, (k, p)| {
-            let q = y.get(k).ok_or_else(|| format!("{at}.{k} missing"))?;
-            largest_difference(p, q, &format!("{at}.{k}")).map(|d| m.max(d))
-        }),
-        _ if a == b => Ok(0.0),
-        _ => Err(format!("{at}: {a} against {b}")),
-    }
-}
-
 /// `oilfilm identify` with the baseline instruction set (`OILFILM_SIMD=scalar`: no AVX, no
 /// fused multiply-add, `rustfft`'s scalar transforms: what a CPU without AVX2 and FMA runs)
 /// gives what it gives on this CPU: the same lines, flags and refusals, every number within
@@ -336,7 +317,7 @@ fn identify_without_avx_or_fma_gives_the_same_estimates() {
     let (baseline, widest) = (identify(Some("scalar")), identify(None));
     let solved = widest["windows"].as_array().map_or(0, |w| w.iter().filter(|w| w["estimate"]["result"]["Ok"].is_object()).count());
     assert!(solved >= 2, "windows to compare: {widest}");
-    let d = largest_difference(&baseline, &widest, "identification").unwrap_or_else(|e| panic!("OILFILM_SIMD=scalar: {e}"));
+    let d = json_difference::largest_difference(&baseline, &widest, "identification").unwrap_or_else(|e| panic!("OILFILM_SIMD=scalar: {e}"));
     println!("{solved} windows; OILFILM_SIMD=scalar against this CPU's widest set: largest relative difference {d:.1e}");
     assert!(d <= 1e-12, "{d:e}");
 }

@@ -135,11 +135,10 @@ pub(crate) trait Simd: Copy {
         }
     }
 
-    /// The mean of a column, summed relative to its first value with eight partial sums
-    /// combined pairwise ([`crate::estimator::window::mean`]).
+    /// [`mean`] of a column.
     #[inline(always)]
     fn mean(self, c: &[f64]) -> f64 {
-        crate::estimator::window::mean_inline(c)
+        mean(c)
     }
 
     /// The Savitzky-Golay interior `dst[i] = sum_k c[k - 1] (x[i + M + k] - x[i + M - k])`,
@@ -168,6 +167,24 @@ fn derivative_lanes<const M: usize, const W: usize>(c: &[f64; M], x: &[f64], dst
     for (j, o) in dst.iter_mut().enumerate().skip(body) {
         *o = derivative_point(c, x, j + M);
     }
+}
+
+/// Mean of a column, summed relative to its first value (so the sum carries the variation,
+/// not the offset) with eight independent partial sums combined pairwise: the portable
+/// [`Simd::mean`] (the estimator's window means).
+#[inline(always)]
+pub(crate) fn mean(c: &[f64]) -> f64 {
+    let Some(&shift) = c.first() else { return f64::NAN };
+    let mut acc = [0.0f64; 8];
+    let mut chunks = c.chunks_exact(8);
+    for ch in &mut chunks {
+        for l in 0..8 {
+            acc[l] += ch[l] - shift;
+        }
+    }
+    let tail: f64 = chunks.remainder().iter().map(|v| v - shift).sum();
+    let s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail;
+    shift + s / c.len() as f64
 }
 
 /// One output of [`Simd::derivative`], centred on `x[i]`.

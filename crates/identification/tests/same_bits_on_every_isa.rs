@@ -15,30 +15,14 @@ use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use serde_json::Value;
 
+#[path = "../../../tests/support/json_difference.rs"]
+mod json_difference;
+use json_difference::largest_difference;
+
 /// Largest relative difference allowed between the baseline's numbers and the AVX sets':
 /// the transforms' rounding (a few ulps of each bin) reaches the line frequencies, the
 /// standard errors and the frequency-domain estimate through sums over many bins.
 const TOLERANCE: f64 = 1e-12;
-
-/// The largest relative difference of the numbers of `a` and `b`, which must have the same
-/// shape and the same non-numbers; `Err` names the first place they do not.
-fn largest_difference(a: &Value, b: &Value, at: &str) -> Result<f64, String> {
-    match (a, b) {
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap_or(f64::NAN), y.as_f64().unwrap_or(f64::NAN));
-            Ok(if x == y { 0.0 } else { (x - y).abs() / x.abs().max(y.abs()) })
-        }
-        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
-            x.iter().zip(y).enumerate().try_fold(0.0f64, |m, (i, (p, q))| largest_difference(p, q, &format!("{at}[{i}]")).map(|d| m.max(d)))
-        }
-        (Value::Object(x), Value::Object(y)) if x.len() == y.len() => x.iter().try_fold(0.0f64, |m, (k, p)| {
-            let q = y.get(k).ok_or_else(|| format!("{at}.{k} missing"))?;
-            largest_difference(p, q, &format!("{at}.{k}")).map(|d| m.max(d))
-        }),
-        _ if a == b => Ok(0.0),
-        _ => Err(format!("{at}: {a} against {b}")),
-    }
-}
 
 #[test]
 fn the_identification_is_the_same_on_every_instruction_set() {

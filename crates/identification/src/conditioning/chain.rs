@@ -24,7 +24,7 @@ use std::ops::Range;
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::deskew::{FractionalDelay, MAX_TAPS};
+use super::deskew::{stencil_any, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::{self, Applied};
 use super::lowpass::{Butterworth, Consume8, FromColumns, Produce8, MAX_ORDER};
@@ -662,51 +662,6 @@ impl Produce8 for FrontTiles<'_> {
             o0 = o1;
         }
         Ok(())
-    }
-}
-
-/// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
-/// that order (as [`FractionalDelay::apply_into`]), with `T` taps known at compile time so
-/// each output is summed in registers and stored once.
-#[inline(always)]
-pub(super) fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {
-    let Ok(w) = <&[f64; T]>::try_from(w) else {
-        return stencil_passes(w, x, dst);
-    };
-    for (o, xs) in dst.iter_mut().zip(x.windows(T)) {
-        let mut acc = w[0] * xs[0];
-        for j in 1..T {
-            acc += w[j] * xs[j];
-        }
-        *o = acc;
-    }
-}
-
-/// [`stencil`] for any number of taps: a pass over the tile per tap, the same sums.
-#[inline(always)]
-fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
-    let m = dst.len();
-    for (o, &x) in dst.iter_mut().zip(&x[..m]) {
-        *o = w[0] * x;
-    }
-    for (j, &wj) in w.iter().enumerate().skip(1) {
-        for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
-            *o += wj * x;
-        }
-    }
-}
-
-/// [`stencil`] for the usual numbers of taps, the passes for the others.
-#[inline(always)]
-pub(super) fn stencil_any(w: &[f64], x: &[f64], dst: &mut [f64]) {
-    match w.len() {
-        2 => stencil::<2>(w, x, dst),
-        3 => stencil::<3>(w, x, dst),
-        4 => stencil::<4>(w, x, dst),
-        5 => stencil::<5>(w, x, dst),
-        6 => stencil::<6>(w, x, dst),
-        8 => stencil::<8>(w, x, dst),
-        _ => stencil_passes(w, x, dst),
     }
 }
 

@@ -42,7 +42,8 @@
 //! are outside [`super::Conditioned::valid`].
 //!
 //! ## Cost
-//! `N` multiply-adds per sample, each output summed in registers ([`super::chain::stencil`]).
+//! `N` multiply-adds per sample, each output summed in registers ([`stencil`]); the fused
+//! front end runs the same kernel tile by tile.
 
 use oilfilm_physics::daq::ChannelId;
 
@@ -183,7 +184,7 @@ impl FractionalDelay {
         let Range { start: lo, end: hi_excl } = self.interior(len);
         if lo < hi_excl {
             let from = (lo as isize + self.start) as usize;
-            super::chain::stencil_any(&self.weights, &input[from..], &mut out[lo..hi_excl]);
+            stencil_any(&self.weights, &input[from..], &mut out[lo..hi_excl]);
         }
         // Edges: shifted stencil inside [0, len).
         for n in (0..lo.min(len)).chain(hi_excl.max(lo.min(len))..len) {
@@ -243,4 +244,49 @@ pub fn align(
         return Err(super::non_finite_error(channel, i, column[i], "sample"));
     }
     FractionalDelay::for_offset(offset_s, sample_rate_hz, taps)?.apply(column)
+}
+
+/// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
+/// that order (as [`FractionalDelay::apply_into`]), with `T` taps known at compile time so
+/// each output is summed in registers and stored once.
+#[inline(always)]
+pub(crate) fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let Ok(w) = <&[f64; T]>::try_from(w) else {
+        return stencil_passes(w, x, dst);
+    };
+    for (o, xs) in dst.iter_mut().zip(x.windows(T)) {
+        let mut acc = w[0] * xs[0];
+        for j in 1..T {
+            acc += w[j] * xs[j];
+        }
+        *o = acc;
+    }
+}
+
+/// [`stencil`] for any number of taps: a pass over the tile per tap, the same sums.
+#[inline(always)]
+fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    let m = dst.len();
+    for (o, &x) in dst.iter_mut().zip(&x[..m]) {
+        *o = w[0] * x;
+    }
+    for (j, &wj) in w.iter().enumerate().skip(1) {
+        for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
+            *o += wj * x;
+        }
+    }
+}
+
+/// [`stencil`] for the usual numbers of taps, the passes for the others.
+#[inline(always)]
+pub(crate) fn stencil_any(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    match w.len() {
+        2 => stencil::<2>(w, x, dst),
+        3 => stencil::<3>(w, x, dst),
+        4 => stencil::<4>(w, x, dst),
+        5 => stencil::<5>(w, x, dst),
+        6 => stencil::<6>(w, x, dst),
+        8 => stencil::<8>(w, x, dst),
+        _ => stencil_passes(w, x, dst),
+    }
 }

@@ -27,26 +27,10 @@ pub const CHUNK_ROWS: usize = 512;
 
 /// Mean of a column, summed relative to its first value (so the sum carries the variation,
 /// not the offset) with eight independent partial sums (a single running sum is a chain of
-/// dependent additions the compiler may not reorder, and was the slowest part of a window).
+/// dependent additions the compiler may not reorder, and was the slowest part of a window):
+/// [`crate::simd::mean`], the same bits on every instruction set.
 pub fn mean(c: &[f64]) -> f64 {
-    mean_inline(c)
-}
-
-/// [`mean`], inlined into its callers (so that it is compiled with their target features):
-/// the portable [`Simd::mean`].
-#[inline(always)]
-pub(crate) fn mean_inline(c: &[f64]) -> f64 {
-    let Some(&shift) = c.first() else { return f64::NAN };
-    let mut acc = [0.0f64; 8];
-    let mut chunks = c.chunks_exact(8);
-    for ch in &mut chunks {
-        for l in 0..8 {
-            acc[l] += ch[l] - shift;
-        }
-    }
-    let tail: f64 = chunks.remainder().iter().map(|v| v - shift).sum();
-    let s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail;
-    shift + s / c.len() as f64
+    crate::simd::mean(c)
 }
 
 /// Row count, column means and the triangular factor of the centred columns of one block.
