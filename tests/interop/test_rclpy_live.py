@@ -243,8 +243,15 @@ def main():
     # Volatile requests match both our volatile and transient-local writers.
     qos = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.VOLATILE)
+    # The exciter's commands are kept whole (keep-all): the no-step check below rebuilds the
+    # setpoint stream from them, and while this probe waits for a service (up to 20 s, or
+    # spins a fresh participant instead) nothing takes samples from its readers, so a
+    # keep-last history dropped the oldest commands under load and the rebuilt stream showed
+    # a step the exciter never made.
+    whole = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
     for t, cls in TOPICS.items():
-        node.create_subscription(cls, f"{NS}/{t}", lambda m, t=t: got[t].append(m), qos)
+        node.create_subscription(cls, f"{NS}/{t}", lambda m, t=t: got[t].append(m), whole if t == "exciter/command" else qos)
     requests = node.create_publisher(ExciterCommand, f"{NS}/exciter/request",
                                      QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
     # rclpy's graph first. ros2-client announces a node on ros_discovery_info only when it
@@ -375,6 +382,11 @@ def main():
         check(launch.wait(timeout=20) == 0, "oilfilm launch exits 0 after SIGINT")
         # Start, plan change, amplitude change, stop, start again, shutdown: the plans (amplitude,
         # top line, ramp) of the params file and the requests above.
+        seqs = {c.sequence for c in got["exciter/command"]}
+        missing = sorted(set(range(min(seqs), max(seqs) + 1)) - seqs) if seqs else []
+        check(bool(seqs) and not missing,
+              f"the probe received every exciter command (sequences {min(seqs, default=0)}..{max(seqs, default=0)}; "
+              f"missing {missing[:10]}{' ...' if len(missing) > 10 else ''}), so the rebuilt setpoint stream is whole")
         check_no_step(got["exciter/command"], [(400.0, 37.0, 0.2), (200.0, 47.0, 0.2), (100.0, 47.0, 0.2), (300.0, 43.0, 0.2), (350.0, 37.0, 0.2)],
                       "every transition of the live graph's exciter")
     finally:
