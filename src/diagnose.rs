@@ -17,7 +17,7 @@ use crate::RigSource;
 
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
-    /// An ASCII record (README format) or a rosbag2 bag directory holding DAQ frames.
+    /// An ASCII record (format: docs/manual/ascii-format.md) or a rosbag2 bag directory holding DAQ frames.
     input: PathBuf,
     #[command(flatten)]
     source: RigSource,
@@ -27,7 +27,7 @@ pub struct DiagnoseArgs {
     /// Directory for report.md and the SVG figures (created if missing).
     #[arg(long, value_name = "DIR", default_value = "out/diagnose")]
     out: PathBuf,
-    /// Print the diagnosis as one JSON object (the contract in the README) instead of text.
+    /// Print the diagnosis as one JSON object (the contract in docs/manual/diagnosis.md) instead of text.
     #[arg(long)]
     json: bool,
     /// Skip the show (simulation against measurement) and the report: verdict only.

@@ -174,7 +174,7 @@ pub enum SolverArg {
 
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
-    /// An ASCII record (see the README for the format), or a rosbag2 bag directory (MCAP)
+    /// An ASCII record (format: docs/manual/ascii-format.md), or a rosbag2 bag directory (MCAP)
     /// recorded from the node graph: its DAQ frames, as one record, go through the same
     /// identification as an ASCII record (with `--replay`: through the very conditioner and
     /// estimator the nodes run, so the estimates equal the live ones, bit for bit).

@@ -1,6 +1,6 @@
 //! What the diagnosis will see: an injected film effect must be observable in the DAQ record
 //! itself (noise, 16-bit codes, multiplexed sampling), not only in the simulator's truth, at
-//! the scale the README recommends, and with the evidence that tells it from its nearest
+//! the scale docs/manual/physics.md recommends, and with the evidence that tells it from its nearest
 //! catalog neighbour.
 //!
 //! `film_relaxation` (outside the catalog) and `fluid_inertia` (in it) both make the complex
