@@ -12,11 +12,52 @@ echo "== toolchain"
 cargo --version
 rustc --version
 
+# A phase's wall time, printed as it ends, so a slow suite says where the time went.
+phase_start=$SECONDS
+phase() {
+  echo "== time: $1 took $((SECONDS - phase_start)) s (total $SECONDS s)"
+  phase_start=$SECONDS
+}
+
+mkdir -p target
+# The Python venvs (pip downloads, rosidl's build of oilfilm_msgs) are set up while cargo
+# builds: on a clean clone they are minutes of mostly waiting on the network. Each script is
+# idempotent; the interop scripts below call them again and find them ready.
+( bash tests/interop/setup-ros-venv.sh >target/setup-ros-venv.log 2>&1; echo "$?" >target/setup-ros-venv.status ) &
+ros_venv_pid=$!
+( bash tests/interop/setup-bag-venv.sh >target/setup-bag-venv.log 2>&1; echo "$?" >target/setup-bag-venv.status ) &
+bag_venv_pid=$!
+
+echo "== format and lints (cargo fmt --check, cargo clippy -D warnings)"
+set +e
+cargo fmt --all --check >target/fmt-output.txt 2>&1
+fmt_status=$?
+set -e
+if [ "$fmt_status" -eq 0 ]; then
+  passed=$((passed + 1))
+  echo "ok: cargo fmt --all --check"
+else
+  failed=$((failed + 1))
+  head -40 target/fmt-output.txt
+  echo "FAILED: cargo fmt --all --check (run cargo fmt --all)"
+fi
+set +e
+cargo clippy --workspace --all-targets --profile test -- -D warnings 2>&1 | tail -60
+clippy_status=${PIPESTATUS[0]}
+set -e
+if [ "$clippy_status" -eq 0 ]; then
+  passed=$((passed + 1))
+  echo "ok: cargo clippy --workspace --all-targets -- -D warnings"
+else
+  failed=$((failed + 1))
+  echo "FAILED: cargo clippy --workspace --all-targets -- -D warnings"
+fi
+phase "format and lints"
+
 echo "== Rust tests (built optimised: see [profile.test] in Cargo.toml)"
 # A clean clone gains nothing from incremental caches, and they cost several GB of
 # disk (a CI run once died of a full disk while linking). Set it to 1 to keep them.
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
-mkdir -p target
 set +e
 # --no-fail-fast: a failing test binary must not keep the later ones from running (without it
 # a run once reported 235 passed and 1 failed, and never ran some 110 other tests).
@@ -33,7 +74,17 @@ if [ "$rust_status" -ne 0 ] && [ "$rf" -eq 0 ]; then
   failed=$((failed + 1))
 fi
 
+phase "Rust build and tests"
+
 echo "== ROS 2 interop (rclpy and rosidl from PyPI, in .venv-ros)"
+wait "$ros_venv_pid" "$bag_venv_pid" || true
+for v in ros bag; do
+  if [ "$(cat target/setup-$v-venv.status 2>/dev/null)" != 0 ]; then
+    echo "setting up .venv-$v failed; its log:"
+    tail -40 "target/setup-$v-venv.log"
+  fi
+done
+phase "waiting for the Python venvs"
 interop() {
   local name=$1
   shift
@@ -51,10 +102,12 @@ interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopb
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 interop "oilfilm play seen from rclpy: /clock is rosgraph_msgs/Clock on the bag's log time and a use_sim_time node follows it; every message arrives with its recorded stamp" bash tests/interop/run-rclpy-player.sh target/debug
+phase "ROS 2 interop"
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
 interop "rosbags (type hashes checked) and mcap-ros2-support decode our bags (also a killed one after our recovery); pymcap-cli doctor finds no error; rosbags-convert round-trips via sqlite3; our reader and oilfilm identify read rosbags' bags" bash tests/interop/run-bag-readers.sh
 interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
 
+phase "bag interop"
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
 [ "$failed" -eq 0 ]

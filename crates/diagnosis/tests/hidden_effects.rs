@@ -5,7 +5,7 @@
 //! `none`; a frequency-dependent film (outside the catalog) must give `unexplained`. The test
 //! prints the confusion matrix and the gains.
 
-mod common;
+use crate::common;
 
 use common::*;
 use oilfilm_diagnosis::{Cause, Diagnosis};

@@ -4,7 +4,7 @@
 //! reach marked invalid, and on the simulated Zhou rig the coefficients within issue 3's
 //! tolerances beside the zero-phase chain on the same record.
 
-mod simulated_rig;
+use crate::simulated_rig;
 
 use simulated_rig::*;
 

@@ -3,7 +3,7 @@
 //! gives the bits of the stages run one by one (a plainly written zero-phase filter
 //! included) on every instruction set this CPU has.
 
-mod volts_record;
+use crate::volts_record;
 
 use oilfilm_identification::conditioning::{
     calibrate, condition, condition_window_into, deskew, differentiate, kinematics, lowpass, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord,

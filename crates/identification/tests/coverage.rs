@@ -46,7 +46,7 @@
 //! Expected values (300 seeds of this design, same physics): |bias| ≤ 0.34 SE (dxx), SD/SE
 //! 0.98–1.07, coverage 0.92–0.95. Run time about 22 s in the test profile.
 
-mod simulated_rig;
+use crate::simulated_rig;
 
 use simulated_rig::*;
 

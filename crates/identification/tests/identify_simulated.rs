@@ -5,7 +5,7 @@
 //! signal (measured on a noise-free pass of the same record); force, load and temperature
 //! sensors keep the rig file's realistic noise.
 
-mod simulated_rig;
+use crate::simulated_rig;
 
 use simulated_rig::*;
 

@@ -15,8 +15,7 @@ use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use serde_json::Value;
 
-#[path = "../../../tests/support/json_difference.rs"]
-mod json_difference;
+use crate::json_difference;
 use json_difference::largest_difference;
 
 /// Largest relative difference allowed between the baseline's numbers and the AVX sets':

@@ -10,7 +10,7 @@
 //! samples left, near the 2 000-sample floor (`SE_MIN_SAMPLES`), which the sim_rig's 5 kHz
 //! windows (11-fold, 2 273 samples) and the node benchmark's 100 kHz ones (100-fold) reach.
 
-mod simulated_rig;
+use crate::simulated_rig;
 
 use simulated_rig::*;
 

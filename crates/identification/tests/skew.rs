@@ -5,7 +5,7 @@
 //!    displacement regressor is so noisy that the 12-coefficient fit is biased by errors in
 //!    variables far more than by skew (tens of kg); the estimator flags that.
 
-mod simulated_rig;
+use crate::simulated_rig;
 
 use simulated_rig::*;
 

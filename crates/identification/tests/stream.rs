@@ -2,7 +2,7 @@
 //! the windowed and whole-record conditioning, independent of how the scans come in and of
 //! the instruction set, and what it leaves to the windows.
 
-mod volts_record;
+use crate::volts_record;
 
 use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
 use oilfilm_identification::conditioning::{condition, condition_window_into, Conditioned, ConditioningConfig, Mechanics, RawRecord};
