@@ -434,8 +434,14 @@ pub struct Context<'a> {
     channels: Vec<ChannelSignal>,
     views: RefCell<BTreeMap<Corrections, Rc<View>>>,
     /// The delay fitted for a model, by the model's other parts.
-    delays: RefCell<Vec<(Spec, Option<(usize, f64, f64)>)>>,
+    delays: RefCell<Vec<(Spec, Option<FittedDelay>)>>,
 }
+
+/// Where a delayed channel enters the model: (field, weight, which of its derivatives).
+type Entry = (usize, f64, usize);
+
+/// A channel delay fitted for a model: the channel's index, the delay (s) and its standard error.
+type FittedDelay = (usize, f64, f64);
 
 /// The temperature record the thermal drift is judged against.
 #[derive(Debug, Clone)]
@@ -649,7 +655,7 @@ impl<'a> Context<'a> {
                 continue;
             }
             use field::*;
-            let (derivatives, enters): ([Vec<f64>; 4], Vec<(usize, f64, usize)>) = match ch {
+            let (derivatives, enters): ([Vec<f64>; 4], Vec<Entry>) = match ch {
                 ChannelId::ProbeAX | ChannelId::ProbeBX | ChannelId::ProbeAY | ChannelId::ProbeBY => {
                     let (mean, vel, acc, tilt, fx, fv, fa, ft) = if matches!(ch, ChannelId::ProbeAX | ChannelId::ProbeBX) {
                         (&c.x_m, &c.vx_m_s, &c.ax_m_s2, &c.tilt_x_m, X, VX, AX, TX)
@@ -754,8 +760,8 @@ impl<'a> Context<'a> {
             let r = &self.runout;
             for (axis, base) in [(0usize, 0usize), (1, 1)] {
                 let (pm, pd) = (r.mean[axis], r.difference[axis]);
-                for i in 0..len {
-                    let [v, dv, av] = r.at(pm, c.t_s[i]);
+                for (i, &t) in c.t_s.iter().enumerate().take(len) {
+                    let [v, dv, av] = r.at(pm, t);
                     full[base][i] -= v;
                     full[2 + base][i] -= dv;
                     full[4 + base][i] -= av;
@@ -1135,14 +1141,14 @@ impl<'a> Context<'a> {
         let mut block_sse = Vec::with_capacity(p.blocks.len());
         let mut fold_kc = Vec::with_capacity(p.blocks.len());
         let mut fold_theta = Vec::with_capacity(p.blocks.len());
-        for b in 0..p.blocks.len() {
+        for (b, rows) in sensor_blocks.iter().enumerate() {
             let f = force.fit(Some(b), &what)?;
             fold_kc.push(std::array::from_fn(|k| f.theta[k]));
             fold_theta.push(f.theta.clone());
             let mut sse = force.block_sse(b, &f.theta);
             sse += match &sensor {
                 Some(s) => s.block_sse(b, &s.fit(Some(b), &what)?.theta),
-                None => sensor_blocks[b].iter().map(|&i| sensor_target[i] * sensor_target[i]).sum::<f64>(),
+                None => rows.iter().map(|&i| sensor_target[i] * sensor_target[i]).sum::<f64>(),
             };
             block_sse.push(sse);
         }
@@ -1226,7 +1232,7 @@ impl<'a> Context<'a> {
                         params.insert("oil_law_slope_per_c".into(), json!(d.oil_slope_per_c));
                         params.insert("temperature_rise_c".into(), json!(d.rise_c));
                         ses.insert("viscosity_temperature_slope_per_c".into(), se);
-                        if !(beta < 0.0) {
+                        if beta.is_nan() || beta >= 0.0 {
                             physical = Err(format!("the coefficients change with temperature as if the viscosity rose with it (slope {beta:.4}/C): no oil does that"));
                         }
                     }
@@ -1350,7 +1356,7 @@ fn fit_runout(p: &Prepared) -> Runout {
 /// that holds enough readings and is [`PLATEAU_DENSITY_RATIO`] times denser per code than the
 /// band twice as wide below it.
 fn plateau(col: &[f64], high: bool, lsb: f64) -> Option<(Vec<bool>, f64)> {
-    if col.is_empty() || !(lsb > 0.0) {
+    if col.is_empty() || lsb.is_nan() || lsb <= 0.0 {
         return None;
     }
     // Work in codes measured down from the extreme, so both sides are one case. The extreme

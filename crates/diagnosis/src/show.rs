@@ -812,11 +812,7 @@ fn residual_spectra(
         fx_n: &narrow.fx_n[v.clone()],
         fy_n: &narrow.fy_n[v.clone()],
     };
-    let mut est = estimator::EstimatorConfig::default();
-    est.model = estimator::ModelOrder::Kc;
-    est.sample_rate_hz = fs;
-    est.window = v.len();
-    est.hop = v.len();
+    let est = estimator::EstimatorConfig { model: estimator::ModelOrder::Kc, sample_rate_hz: fs, window: v.len(), hop: v.len(), ..Default::default() };
     let fit = estimator::estimate_window(&signals, 0..v.len(), &est)?;
     let (baseline, baseline_se, refusal, k, c) = match &fit.result {
         Ok(co) => (

@@ -185,7 +185,7 @@ fn phasor(v: &[f64], t: &[f64], f: f64) -> (f64, f64) {
 /// The samples spanning a whole number of periods of `grid_hz` (all lines and probes are
 /// multiples of it), when the lines lie on such a grid: `Some(n)` samples from the start.
 fn whole_periods(lines: &[f64], grid_hz: f64, t: &[f64]) -> Option<usize> {
-    if !(grid_hz > 0.0) || lines.iter().any(|f| ((f / grid_hz) - (f / grid_hz).round()).abs() > 0.01) {
+    if grid_hz.is_nan() || grid_hz <= 0.0 || lines.iter().any(|f| ((f / grid_hz) - (f / grid_hz).round()).abs() > 0.01) {
         return None;
     }
     let step = if t.len() > 1 { (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64 } else { return None };
@@ -272,7 +272,8 @@ pub fn line_structure_normed(
     // The excluded lines (the shaft's 1X, 2X) are off the grid: they would leak into every bin
     // of a plain sum, so they are fitted and taken out of each signal first.
     let clean = |v: &[f64]| -> Vec<f64> { remove_tones(&v[..n_used], t, exclude_hz) };
-    let (motion, force, norm): (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<Vec<f64>>) = (motion.iter().map(|v| clean(v)).collect(), force.iter().map(|v| clean(v)).collect(), norm.iter().map(|v| clean(v)).collect());
+    let cleaned = |vs: &[&[f64]]| -> Vec<Vec<f64>> { vs.iter().map(|v| clean(v)).collect() };
+    let (motion, force, norm) = (cleaned(&motion), cleaned(&force), cleaned(&norm));
     let phasors = |freqs: &[f64]| -> Vec<[(f64, f64); 6]> {
         freqs
             .iter()
@@ -331,7 +332,7 @@ pub fn line_structure_normed(
     // The motion's own signal-to-noise ratio over the whole record (Hann window): the
     // whole-period span above trades length for orthogonality, which a noise level does not
     // need.
-    let whole_t = &t_all[..];
+    let whole_t = t_all;
     let displacement_power = |freqs: &[f64]| -> f64 {
         freqs
             .iter()
