@@ -49,7 +49,7 @@ pub fn run(args: &LaunchArgs) -> Result<()> {
     let namespace = nodes.first().map_or_else(|| topics::NAMESPACE.to_string(), |n| n.namespace.clone());
     let stop = shutdown_flag()?;
     let me = NodeArgs { name: "oilfilm_launch".into(), namespace: namespace.clone(), ..Default::default() };
-    let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|m| if m.is_empty() { Ok(()) } else { Err("the launcher has no parameters".into()) }))?;
+    let mut ros = RosNode::new(&me)?;
     let mut estimates = ros.subscription::<CoefficientEstimate>(&topics::ESTIMATES)?;
     let mut graph = Supervisor::start(&nodes, &bin_dir)?;
     println!("launched {} from {} in namespace {namespace}; estimates print as they arrive", graph.names().join(", "), args.file.display());

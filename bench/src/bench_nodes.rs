@@ -158,7 +158,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     let mut estimator = spawn("oilfilm-estimator", "estimator", &[rig_arg, format!("window:={}", case.window), format!("hop:={}", case.window), "speed_rpm:=1500.0".into(), format!("signal_band_hz:={:?}", case.signal_band_hz)])?;
 
     let me = NodeArgs { name: "bench_nodes".into(), namespace: topics::NAMESPACE.into(), ..Default::default() };
-    let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|m| if m.is_empty() { Ok(()) } else { Err("no parameters".into()) }))?;
+    let mut ros = RosNode::new(&me)?;
     let mut out = ros.publisher::<DaqFrame>(&topics::DAQ_FRAMES)?;
     let mut cond_in = ros.subscription::<ConditionedFrame>(&topics::CONDITIONED)?;
     let mut est_in = ros.subscription::<CoefficientEstimate>(&topics::ESTIMATES)?;

@@ -2,12 +2,18 @@
 //!
 //! What ros2-client does not do for us, done here: `ROS_DOMAIN_ID` is read from the
 //! environment and passed into the context; every topic's QoS is set explicitly from
-//! [`oilfilm_graph::topics`] (ros2-client's subscription default is best-effort, keep-last 1); the
-//! typed parameters are declared through the standard parameter services, and a change
-//! from `ros2 param set` (or rclpy) is checked against the typed struct before it is
-//! accepted, then handed to the node's loop; and the node re-announces itself on
-//! `ros_discovery_info` so a graph that missed its first announcement still lists it
+//! [`oilfilm_graph::topics`] (ros2-client's subscription default is best-effort, keep-last 1);
+//! the parameter services are ours ([`crate::parameters`]: descriptors from the node's specs,
+//! a set applied by the node or refused with the reason); the log goes to `/rosout`
+//! ([`crate::logging`]); and the node re-announces itself on `ros_discovery_info`, with the
+//! raw readers and writers ros2-client does not know of (the recorder's, the player's), so a
+//! graph that missed its first announcement still lists it and every topic shows its node
 //! (ADR 0017).
+//!
+//! ros2-client's spinner is not run: it would serve its own parameter services and subscribe
+//! `/clock` as `builtin_interfaces/msg/Time`, a second type on a topic whose type is
+//! `rosgraph_msgs/msg/Clock` (ADR 0023). Nothing here needs its discovery bookkeeping: reader
+//! counts come from the participant's discovered readers.
 
 use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -23,10 +29,13 @@ use serde_json::{Map, Value};
 use oilfilm_graph::node::{Connect, Input, Message, Output, RawTopic};
 use oilfilm_graph::params::NodeArgs;
 use oilfilm_graph::ports::{Publish, RawCdr, Receive};
+use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::topics::Topic;
 use oilfilm_graph::NodeError;
 
-fn mw(what: impl Into<String>, e: impl std::fmt::Display) -> NodeError {
+use crate::parameters::{Change, ParameterServer, SimTime};
+
+pub(crate) fn mw(what: impl Into<String>, e: impl std::fmt::Display) -> NodeError {
     NodeError::Middleware { what: what.into(), reason: e.to_string() }
 }
 
@@ -109,21 +118,34 @@ pub fn from_parameter(p: &ParameterValue) -> Value {
     }
 }
 
-/// Checks a whole parameter set (the typed struct's validation): `Err(reason)` refuses it.
-pub type Validator = Box<dyn Fn(&Map<String, Value>) -> Result<(), String> + Send + Sync>;
-
 /// One ROS 2 node on DDS. Dropping it (or [`RosNode::shutdown`]) takes the node off DDS in
 /// the order that leaves no entity behind: see the `Drop` impl.
 pub struct RosNode {
-    /// Dropped by hand, after `node` and the spinner (`Drop for RosNode`).
+    /// Dropped by hand, after `node` (`Drop for RosNode`).
     context: ManuallyDrop<Context>,
     /// Dropped by hand, first after the announcer (`Drop for RosNode`).
     node: ManuallyDrop<Node>,
     namespace: String,
-    params: Arc<Mutex<Map<String, Value>>>,
-    changed: Arc<Mutex<bool>>,
-    spinner: Option<std::thread::JoinHandle<()>>,
+    /// `/namespace/name`.
+    fully_qualified: String,
+    /// The parameter services, once declared ([`RosNode::declare_parameters`]).
+    parameters: Option<ParameterServer>,
+    /// `/clock` while the node follows it, and the last time it said.
+    clock: Option<(DdsSubscription<oilfilm_msgs::Clock>, Option<Stamp>)>,
+    /// The node's own `/rosout` writer (rclcpp's QoS), shared with the log; dropped with the
+    /// node's other entities, before the participant (`Drop for RosNode`).
+    rosout: Option<Arc<ros2_client::Publisher<ros2_client::Log>>>,
+    /// Readers and writers made outside ros2-client's node (raw ones): announced with it.
+    extra: Arc<Mutex<ExtraEntities>>,
     announcer: Option<Announcer>,
+}
+
+/// The GIDs of a node's raw readers and writers, which ros2-client's own announcements
+/// leave out.
+#[derive(Default)]
+struct ExtraEntities {
+    readers: Vec<ros2_client::Gid>,
+    writers: Vec<ros2_client::Gid>,
 }
 
 /// Re-announces the node on `ros_discovery_info` while it lives.
@@ -143,9 +165,21 @@ pub struct RosNode {
 /// clean-clone CI run saw the conditioner unlisted for 30 s, through five repeats). The
 /// graph cache keys by participant GID, so a repeat only restates what the first
 /// announcement said.
+///
+/// The info sent also lists the node's raw readers and writers ([`ExtraEntities`]: the
+/// recorder's subscriptions, the player's publishers), which ros2-client's own
+/// announcements leave out, so `ros2 topic info -v` shows them with their node instead of
+/// `_NODE_NAME_UNKNOWN_`. It is sent at once whenever one is made ([`Announcer::now`]), and
+/// ros2-client's next announcement (it has none after the node's last entity) would be
+/// corrected by the next repeat.
 struct Announcer {
-    stop: std::sync::mpsc::Sender<()>,
+    wake: std::sync::mpsc::Sender<Wake>,
     thread: std::thread::JoinHandle<()>,
+}
+
+enum Wake {
+    Now,
+    Stop,
 }
 
 /// The announcer's factor on its waits, in [0.75, 1.25): from the standard library's
@@ -175,10 +209,10 @@ pub fn ros_discovery_topic(
 }
 
 impl Announcer {
-    fn start(context: &Context) -> Result<Self, NodeError> {
+    fn start(context: &Context, node: ros2_client::NodeName, extra: Arc<Mutex<ExtraEntities>>) -> Result<Self, NodeError> {
         use ros2_client::builtin_topics::ros_discovery;
         use ros2_client::dds::rustdds::serialization::CDRSerializerAdapter;
-        use ros2_client::entities_info::ParticipantEntitiesInfo;
+        use ros2_client::entities_info::{NodeEntitiesInfo, ParticipantEntitiesInfo};
         let participant = context.domain_participant();
         let topic = ros_discovery_topic(&participant)?;
         let writer = participant
@@ -186,84 +220,149 @@ impl Announcer {
             .map_err(|e| mw("ros_discovery_info publisher", e))?
             .create_datawriter_no_key::<ParticipantEntitiesInfo, CDRSerializerAdapter<_>>(&topic, None)
             .map_err(|e| mw("ros_discovery_info writer", e))?;
-        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        let (wake, woken) = std::sync::mpsc::channel::<Wake>();
         let context = context.clone();
+        let fqn = node.fully_qualified_name();
+        let info = move || {
+            let base = context.participant_entities_info();
+            let extra = extra.lock().unwrap_or_else(PoisonError::into_inner);
+            let nodes = base
+                .nodes()
+                .iter()
+                .map(|n| {
+                    let mut n = n.clone();
+                    if n.fully_qualified_name() == fqn {
+                        extra.readers.iter().for_each(|g| n.add_reader(*g));
+                        extra.writers.iter().for_each(|g| n.add_writer(*g));
+                    }
+                    n
+                })
+                .collect::<Vec<NodeEntitiesInfo>>();
+            ParticipantEntitiesInfo::new(base.gid(), nodes)
+        };
         let thread = std::thread::Builder::new()
             .name("ros-discovery-announcer".into())
             .spawn(move || {
                 let scale = schedule_scale();
                 let mut wait = std::time::Duration::from_millis(500);
-                // Ends on a stop message or when the sender is dropped.
-                while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(wait.mul_f64(scale)) {
-                    if let Err(e) = writer.write(context.participant_entities_info(), None) {
+                loop {
+                    match woken.recv_timeout(wait.mul_f64(scale)) {
+                        Ok(Wake::Now) => {}
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                            wait = if wait >= std::time::Duration::from_secs(8) { std::time::Duration::from_secs(15) } else { wait * 2 };
+                        }
+                        // Stopped, or the sender dropped.
+                        Ok(Wake::Stop) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+                    }
+                    if let Err(e) = writer.write(info(), None) {
                         tracing::warn!("re-announcing the node on ros_discovery_info failed: {e:?}");
                     }
-                    wait = if wait >= std::time::Duration::from_secs(8) {
-                        std::time::Duration::from_secs(15)
-                    } else {
-                        wait * 2
-                    };
                 }
             })
             .map_err(|e| NodeError::Io { what: "ros_discovery_info announcer thread".into(), source: e })?;
-        Ok(Self { stop, thread })
+        Ok(Self { wake, thread })
+    }
+
+    /// Announces now (a raw entity was made).
+    fn now(&self) {
+        let _ = self.wake.send(Wake::Now);
     }
 
     /// Stops before the context goes, so its farewell (an empty node list) is the last word.
     fn stop(self) {
-        let _ = self.stop.send(());
+        let _ = self.wake.send(Wake::Stop);
         let _ = self.thread.join();
     }
 }
 
 impl RosNode {
-    /// A node named by `args` in domain `ROS_DOMAIN_ID`, with `params` declared. A set
-    /// request is checked by `validate` on the whole set with the new value (so a value the
-    /// node would reject is refused through the service, with the reason).
-    pub fn new(args: &NodeArgs, params: &Map<String, Value>, validate: Validator) -> Result<Self, NodeError> {
+    /// A node named by `args` in domain `ROS_DOMAIN_ID`, its log going to `/rosout` from now
+    /// on. It has parameter services once [`RosNode::declare_parameters`] is called.
+    pub fn new(args: &NodeArgs) -> Result<Self, NodeError> {
         let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?)).map_err(|e| mw("context", e))?;
-        let shared = Arc::new(Mutex::new(params.clone()));
-        let changed = Arc::new(Mutex::new(false));
-        let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(true);
-        for (k, v) in params {
-            options = options.declare_parameter(k, to_parameter(v));
-        }
-        let (check_params, validate) = (Arc::clone(&shared), Arc::new(validate));
-        options = options.parameter_validator(Box::new(move |name, value| {
-            let mut next = check_params.lock().unwrap_or_else(PoisonError::into_inner).clone();
-            if !next.contains_key(name) {
-                return Err(format!("`{name}` is not a parameter of this node"));
-            }
-            next.insert(name.to_string(), from_parameter(value));
-            validate(&next)
-        }));
-        let (set_params, set_changed) = (Arc::clone(&shared), Arc::clone(&changed));
-        options = options.parameter_set_action(Box::new(move |name, value| {
-            set_params.lock().unwrap_or_else(PoisonError::into_inner).insert(name.to_string(), from_parameter(value));
-            *set_changed.lock().unwrap_or_else(PoisonError::into_inner) = true;
-            Ok(())
-        }));
+        let options = NodeOptions::new().enable_rosout(false).start_parameter_services(false);
         let node_name = NodeName::new(&args.namespace, &args.name).map_err(|e| mw("node name", format!("{e:?}")))?;
-        let mut node = context.clone().new_node(node_name, options).map_err(|e| mw("node", e))?;
-        let spinner = node.spinner().map_err(|e| mw("spinner", e))?;
-        let handle = std::thread::Builder::new()
-            .name("ros2-spinner".into())
-            .spawn(move || {
-                if let Err(e) = smol::block_on(spinner.spin()) {
-                    tracing::error!("ROS 2 spinner stopped: {e}");
-                }
-            })
-            .map_err(|e| NodeError::Io { what: "spinner thread".into(), source: e })?;
-        let announcer = Announcer::start(&context)?;
+        let mut node = context.clone().new_node(node_name.clone(), options).map_err(|e| mw("node", e))?;
+        // rcl's rosout QoS: reliable, transient-local, keep-last 1000, 10 s lifespan.
+        let rosout_qos = QosProfile { lifespan: Some(std::time::Duration::from_secs(10)), ..qos_from(oilfilm_graph::topics::TopicQos { reliable: true, depth: 1000, transient_local: true }) };
+        let rosout = Arc::new(node.create_publisher::<ros2_client::Log>(&context.get_rosout_topic(), Some(rosout_qos)).map_err(|e| mw("/rosout publisher", e))?);
+        let fully_qualified = node_name.fully_qualified_name();
+        crate::logging::attach(Arc::clone(&rosout), crate::logging::logger_name(&fully_qualified));
+        let extra = Arc::new(Mutex::new(ExtraEntities::default()));
+        let announcer = Announcer::start(&context, node_name, Arc::clone(&extra))?;
         Ok(Self {
             context: ManuallyDrop::new(context),
             node: ManuallyDrop::new(node),
             namespace: args.namespace.clone(),
-            params: shared,
-            changed,
-            spinner: Some(handle),
+            fully_qualified,
+            parameters: None,
+            clock: None,
+            rosout: Some(rosout),
+            extra,
             announcer: Some(announcer),
         })
+    }
+
+    /// Starts the parameter services for `specs` with their `values`, and `use_sim_time`.
+    pub fn declare_parameters(&mut self, specs: Vec<oilfilm_graph::params::Spec>, values: Map<String, Value>, use_sim_time: bool, sim_time: SimTime) -> Result<(), NodeError> {
+        let now = Stamp::now();
+        let server = ParameterServer::new(&mut self.node, &self.context, &self.fully_qualified, specs, values, use_sim_time, sim_time, now)?;
+        self.parameters = Some(server);
+        self.follow_clock(use_sim_time)?;
+        Ok(())
+    }
+
+    /// Answers the parameter requests waiting (a set goes through `apply`, which applies it
+    /// to the node or refuses it); returns how many were answered.
+    pub fn serve_parameters(&mut self, apply: &mut dyn FnMut(&Change) -> Result<(), String>) -> Result<usize, NodeError> {
+        let now = self.now()?;
+        let Some(server) = &mut self.parameters else { return Ok(0) };
+        let mut sim_time = None;
+        let answered = server.serve(now, &mut |change: &Change| {
+            apply(change)?;
+            sim_time = Some(change.use_sim_time);
+            Ok(())
+        });
+        if let Some(on) = sim_time {
+            self.follow_clock(on)?;
+        }
+        Ok(answered)
+    }
+
+    /// Follows `/clock` (subscribes) or the wall clock.
+    fn follow_clock(&mut self, on: bool) -> Result<(), NodeError> {
+        match (on, self.clock.is_some()) {
+            (true, false) => {
+                let qos = qos_of(&oilfilm_graph::topics::CLOCK);
+                let s = self.subscription_named::<oilfilm_msgs::Clock>(oilfilm_graph::topics::CLOCK.name, oilfilm_graph::topics::CLOCK.type_name, qos)?;
+                self.clock = Some((s, None));
+                tracing::info!("following /clock (use_sim_time)");
+            }
+            (false, true) => {
+                self.clock = None;
+                crate::logging::set_sim_time(None);
+                tracing::info!("following the wall clock (use_sim_time false)");
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The node's ROS time: the wall clock, or the last `/clock` when it follows it (zero
+    /// until the first arrives, as in rclcpp).
+    pub fn now(&mut self) -> Result<Stamp, NodeError> {
+        let Some((clock, last)) = &mut self.clock else { return Ok(Stamp::now()) };
+        while let Some(c) = clock.receive()? {
+            *last = Some(Stamp::from_time(&c.clock));
+        }
+        let t = last.unwrap_or(Stamp(0));
+        crate::logging::set_sim_time(Some(t));
+        Ok(t)
+    }
+
+    /// The node's fully qualified name (`/oilfilm/exciter`).
+    pub fn fully_qualified_name(&self) -> &str {
+        &self.fully_qualified
     }
 
     /// The namespace the node's topics live under.
@@ -315,6 +414,8 @@ impl RosNode {
         let reader = subscriber
             .create_simple_datareader_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
             .map_err(|e| mw(format!("raw subscription {full}"), e))?;
+        self.extra.lock().unwrap_or_else(PoisonError::into_inner).readers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&reader)));
+        self.announce_now();
         Ok(RawSubscription { reader, topic: full.to_string() })
     }
 
@@ -329,7 +430,16 @@ impl RosNode {
         let writer = publisher
             .create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
             .map_err(|e| mw(format!("raw publisher {full}"), e))?;
+        self.extra.lock().unwrap_or_else(PoisonError::into_inner).writers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&writer)));
+        self.announce_now();
         Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, first_ack: false })
+    }
+
+    /// Sends the node's entities on `ros_discovery_info` now.
+    fn announce_now(&self) {
+        if let Some(a) = &self.announcer {
+            a.now();
+        }
     }
 
     /// Matched subscriptions on a topic (fully qualified name), as DDS discovery sees them.
@@ -348,15 +458,6 @@ impl RosNode {
         let t = self.topic(topic)?;
         let s = self.node.create_subscription::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("subscription {}", topic.name), e))?;
         Ok(DdsSubscription { subscription: s, topic: topic.name })
-    }
-
-    /// The whole parameter set, if a parameter changed since the last call.
-    pub fn parameter_change(&self) -> Option<Map<String, Value>> {
-        let mut changed = self.changed.lock().unwrap_or_else(PoisonError::into_inner);
-        if !std::mem::replace(&mut *changed, false) {
-            return None;
-        }
-        Some(self.params.lock().unwrap_or_else(PoisonError::into_inner).clone())
     }
 
     /// Waits (at most `timeout`) until `topic` has a matched subscription, so that what is
@@ -380,25 +481,22 @@ impl RosNode {
 }
 
 impl Drop for RosNode {
-    /// Stops the announcer (so ros2-client's farewell, an empty node list, stays the last
-    /// word), drops the node (which signals its spinner), waits for the spinner while this
-    /// still holds the DDS participant, then drops the context, which lets the participant
-    /// say goodbye to DDS. On every path out of a node, errors included.
-    ///
-    /// The order matters because ros2-client's spinner declares its context before the
-    /// parameter servers: ending as the context's last holder, it dropped the participant
-    /// first, and removing each of the twelve service endpoints then failed ("Cannot remove
-    /// Reader/Writer ... Disconnected", a RustDDS ERROR line apiece on every node's exit;
-    /// `nodes/tests/clean_exit.rs`).
+    /// Takes the parameter services down and the log off `/rosout`, stops the announcer (so
+    /// ros2-client's farewell, an empty node list, stays the last word), drops the node's
+    /// entities and the node, then the context, which lets the participant say goodbye to
+    /// DDS. On every path out of a node, errors included: entities go before their
+    /// participant, or DDS cannot remove them cleanly ("Cannot remove Reader/Writer ...
+    /// Disconnected", `nodes/tests/clean_exit.rs`).
     fn drop(&mut self) {
+        crate::logging::detach();
+        self.rosout = None;
+        self.parameters = None;
+        self.clock = None;
         if let Some(a) = self.announcer.take() {
             a.stop();
         }
         // SAFETY: `node` is dropped here once, and nothing uses it after: this is `drop`.
         unsafe { ManuallyDrop::drop(&mut self.node) };
-        if let Some(h) = self.spinner.take() {
-            let _ = h.join();
-        }
         // SAFETY: as for `node`: dropped here once, never used after.
         unsafe { ManuallyDrop::drop(&mut self.context) };
     }
@@ -630,10 +728,9 @@ pub fn shutdown_flag() -> Result<Arc<std::sync::atomic::AtomicBool>, NodeError> 
     Ok(flag)
 }
 
-/// Logs to stderr, `RUST_LOG` filtering (default info).
+/// Logs to stderr, and to `/rosout` once the process has a node ([`crate::logging`]).
 pub fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rustdds=warn,ros2_client=warn"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    crate::logging::init();
 }
 
 #[cfg(test)]

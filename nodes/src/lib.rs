@@ -6,5 +6,7 @@
 //! no middleware.
 
 pub mod dds;
+pub mod logging;
+pub mod parameters;
 pub mod runner;
 pub mod supervisor;

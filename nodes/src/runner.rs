@@ -7,14 +7,16 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use oilfilm_graph::node::{load_rig, Node, Start};
-use oilfilm_graph::params::{self, NodeArgs};
+use oilfilm_graph::params::{self, NodeArgs, NodeParams, Sources, USE_SIM_TIME};
 use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::NodeError;
 use serde_json::{Map, Value};
 
-use crate::dds::{init_logging, shutdown_flag, RosNode, Validator};
+use crate::dds::{init_logging, shutdown_flag, RosNode};
+use crate::parameters::{Change, SimTime};
 
-/// The longest a turn that found nothing to do waits before the next.
+/// The longest a turn that found nothing to do waits before the next (also the latency of a
+/// parameter request).
 const IDLE: Duration = Duration::from_micros(500);
 /// The longest a node waits for the time it asked to be woken at (a DAQ's next block).
 const MAX_NAP: Duration = Duration::from_millis(20);
@@ -22,14 +24,15 @@ const MAX_NAP: Duration = Duration::from_millis(20);
 /// published (the exciter's ramp to zero, a DAQ's last frames, the last estimate).
 const LINGER: Duration = Duration::from_millis(500);
 
-/// A node binary's `main`: parses `--ros-args`, loads the typed parameters, runs the node
-/// until SIGINT/SIGTERM (or until it finishes), and exits non-zero with the error if any.
+/// A node binary's `main`: parses `--ros-args`, loads the typed parameters (a bad value is
+/// named with the file and key, or the `-p`, that gave it), runs the node until
+/// SIGINT/SIGTERM (or until it finishes), and exits non-zero with the error if any.
 pub fn main<N: Node + 'static>() -> ExitCode {
     init_logging();
     let run = || -> Result<(), NodeError> {
         let args = params::parse_args(N::NAME, std::env::args().skip(1))?;
-        let (p, map) = params::load::<N::Params>(&args)?;
-        run::<N>(&args, &p, &map).map(|_| ())
+        let (p, map, sources) = params::load_located::<N::Params>(&args)?;
+        run_located::<N>(&args, &p, &map, &sources).map(|_| ())
     };
     match run() {
         Ok(()) => ExitCode::SUCCESS,
@@ -40,16 +43,12 @@ pub fn main<N: Node + 'static>() -> ExitCode {
     }
 }
 
-/// Accepts the values the node started with (ros2-client validates declarations too) and
-/// refuses any change.
-fn read_only(node: &'static str, initial: Map<String, Value>) -> Validator {
-    Box::new(move |m| {
-        if *m == initial {
-            Ok(())
-        } else {
-            Err(format!("the {node} node's parameters are read-only while it runs: restart it with new ones"))
-        }
-    })
+/// Whether node `N` can follow `/clock`.
+fn sim_time_of<N: Node>() -> SimTime {
+    match N::CLOCK_SOURCE {
+        Some(why) => SimTime::Refused(why),
+        None => SimTime::Follows,
+    }
 }
 
 /// Runs node `N` named by `args` with parameters `params` (`map`: the same, as the ROS
@@ -57,26 +56,39 @@ fn read_only(node: &'static str, initial: Map<String, Value>) -> Validator {
 /// its last turn ([`Node::finish`], also after an error) and takes it off DDS. Returns the
 /// node (the recorder says where its bag is).
 pub fn run<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: &Map<String, Value>) -> Result<N, NodeError> {
+    run_located::<N>(args, params, map, &Sources::default())
+}
+
+/// [`run`], errors about a parameter value found when the node is built (against its rig
+/// file) named with the file and key that gave it (`sources`).
+pub fn run_located<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: &Map<String, Value>, sources: &Sources) -> Result<N, NodeError> {
+    let use_sim_time = params::use_sim_time(args)?;
+    if let (true, Some(why)) = (use_sim_time, N::CLOCK_SOURCE) {
+        return Err(NodeError::parameter(USE_SIM_TIME, format!("cannot be true: {why}")));
+    }
     tracing::info!(node = %args.fully_qualified_name(), domain = crate::dds::domain_id()?, "starting");
-    let mut node = N::new(params, &Start { now: Stamp::now(), rig: &load_rig, namespace: &args.namespace })?;
-    let validator: Validator = match node.param_check() {
-        Some(check) => Box::new(move |m: &Map<String, Value>| {
-            let p: N::Params = params::typed(m).map_err(|e| e.to_string())?;
-            check(&p).map_err(|e| e.to_string())
-        }),
-        None => read_only(N::NAME, map.clone()),
+    let start_now = if use_sim_time { Stamp(0) } else { Stamp::now() };
+    let mut node = N::new(params, &Start { now: start_now, rig: &load_rig, namespace: &args.namespace }).map_err(|e| sources.locate(e))?;
+    // The declared values as the typed parameters hold them (a whole number given for a
+    // double parameter is declared a double).
+    let declared = match serde_json::to_value(params) {
+        Ok(Value::Object(m)) => m,
+        _ => map.clone(),
     };
-    let mut ros = RosNode::new(args, map, validator)?;
+    let mut ros = RosNode::new(args)?;
+    ros.declare_parameters(N::Params::specs(), declared, use_sim_time, sim_time_of::<N>())?;
     let mut ports = node.connect(&mut ros)?;
     let stop = shutdown_flag()?;
     let turned = (|| -> Result<(), NodeError> {
         while !stop.load(Ordering::SeqCst) {
-            if let Some(m) = ros.parameter_change() {
-                if let Err(e) = params::typed::<N::Params>(&m).and_then(|p| node.reconfigure(&p)) {
-                    tracing::warn!("parameter change not applied: {e}");
+            ros.serve_parameters(&mut |change: &Change| {
+                let p = params::checked::<N::Params>(change.params).map_err(|e| e.to_string())?;
+                if change.changed.iter().any(|c| c != USE_SIM_TIME) {
+                    node.reconfigure(&p).map_err(|e| e.to_string())?;
                 }
-            }
-            let now = Stamp::now();
+                Ok(())
+            })?;
+            let now = ros.now()?;
             let turn = node.turn(now, &mut ports)?;
             if turn.finished {
                 break;
@@ -88,7 +100,8 @@ pub fn run<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: &Map<Str
         }
         Ok(())
     })();
-    let finished = node.finish(Stamp::now(), &mut ports);
+    let now = ros.now().unwrap_or_else(|_| Stamp::now());
+    let finished = node.finish(now, &mut ports);
     std::thread::sleep(LINGER);
     // Entities go before their participant, or DDS cannot remove them cleanly.
     drop(ports);

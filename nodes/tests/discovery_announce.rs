@@ -26,7 +26,7 @@ fn a_late_volatile_reader_hears_the_node_announced_again() {
     // this binary has this one test.
     std::env::set_var("ROS_DOMAIN_ID", domain.to_string());
     let me = NodeArgs { name: "announced".into(), namespace: "/oilfilm_announce".into(), ..Default::default() };
-    let node = RosNode::new(&me, &serde_json::Map::new(), Box::new(|_| Ok(()))).expect("a node on DDS");
+    let node = RosNode::new(&me).expect("a node on DDS");
     std::thread::sleep(Duration::from_secs(1));
 
     let participant = DomainParticipant::new(domain).expect("a second participant");

@@ -154,7 +154,7 @@ fn a_bag_played_on_dds_is_recorded_again_byte_for_byte_with_clock() {
     let sent = source_bag(&source);
 
     let me = NodeArgs { name: "clock_probe".into(), namespace: topics::NAMESPACE.into(), ..Default::default() };
-    let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|_| Ok(()))).unwrap();
+    let mut ros = RosNode::new(&me).unwrap();
     let qos = qos_from(TopicQos { reliable: true, depth: 1000, transient_local: false });
     let mut clock = ros.subscription_named::<Clock>("/clock", Clock::TYPE_NAME, qos).unwrap();
 

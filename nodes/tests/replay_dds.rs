@@ -48,7 +48,7 @@ fn a_damaged_record_replays_on_dds_and_still_identifies() {
 
     std::env::set_var("ROS_DOMAIN_ID", (40 + std::process::id() % 50).to_string());
     let me = NodeArgs { name: "replay_probe".into(), namespace: topics::NAMESPACE.into(), ..Default::default() };
-    let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|_| Ok(()))).unwrap();
+    let mut ros = RosNode::new(&me).unwrap();
     let mut estimates = ros.subscription::<CoefficientEstimate>(&topics::ESTIMATES).unwrap();
     let mut conditioned = ros.subscription::<ConditionedFrame>(&topics::CONDITIONED).unwrap();
     let node = |name: &str, params: &[String]| {

@@ -71,7 +71,7 @@ fn run_on_dds(tag: &str, rig: &RigConfig, p: &GraphParams, expected: usize) -> V
     // of this file run one after the other (see the mutex below).
     std::env::set_var("ROS_DOMAIN_ID", domain.to_string());
     let me = NodeArgs { name: format!("e2e_{tag}"), namespace: topics::NAMESPACE.into(), ..Default::default() };
-    let mut ros = RosNode::new(&me, &serde_json::Map::new(), Box::new(|_| Ok(()))).unwrap();
+    let mut ros = RosNode::new(&me).unwrap();
     let mut sub = ros.subscription::<CoefficientEstimate>(&topics::ESTIMATES).unwrap();
     let nodes: Vec<NodeLaunch> = ["exciter", "daq", "conditioner", "estimator"]
         .iter()

@@ -50,6 +50,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
 use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::stamp::Stamp;
 use crate::topics;
 
@@ -107,6 +108,27 @@ impl Default for ConditionerParams {
             block_scans: 1000,
             chain: Chain::ZeroPhase.name().into(),
         }
+    }
+}
+
+impl NodeParams for ConditionerParams {
+    fn specs() -> Vec<Spec> {
+        vec![
+            Spec::fixed("rig", "rig file (TOML): its calibration converts volts, its housing mass and exciter angles enter eq. 2; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
+            Spec::fixed("lowpass_cutoff_hz", "low-pass cutoff, Hz: about 1.5 x the highest excitation line (every hertz above lets differentiated probe noise bias the coefficients)", Rule::above(0.0, 1e6))
+                .with_constraints("below the Nyquist frequency of the rig file's DAQ rate (2 500 Hz at 5 kHz)"),
+            Spec::fixed("lowpass_order", "Butterworth order of the low-pass (zero_phase: run forward and back; causal: order 2 x this, forward only)", Rule::Integer { min: 1, max: conditioning::lowpass::MAX_ORDER as i64 })
+                .with_constraints("causal chain: at most half the largest order"),
+            Spec::fixed("differentiator_half_length", "half-length of the Savitzky-Golay derivative filters, samples", Rule::Integer { min: 2, max: 10_000 }),
+            Spec::fixed("deskew", "remove the multiplexer's channel skew (false only to show what skew does: it looks like added mass)", Rule::Any),
+            Spec::fixed("deskew_taps", "taps of the fractional-delay de-skew filter", Rule::Integer { min: 2, max: conditioning::deskew::MAX_TAPS as i64 }),
+            Spec::fixed("block_scans", "samples per conditioned frame", Rule::Integer { min: 1, max: 1_000_000 }),
+            Spec::fixed("chain", "zero_phase (forward-backward low-pass: a block waits for the filter's edge past its end) or causal (forward only, a sample out a few scans after its scan; ADR 0014); a replay must use the live graph's", Rule::OneOf(&["zero_phase", "causal"])),
+        ]
+    }
+
+    fn validate(&self) -> Result<(), NodeError> {
+        ConditionerParams::validate(self)
     }
 }
 
@@ -220,6 +242,14 @@ pub struct ConditionerCore {
 impl ConditionerCore {
     pub fn new(rig: RigConfig, params: &ConditionerParams) -> Result<Self, NodeError> {
         params.validate()?;
+        // The rig's DAQ rate: a cutoff at or above its Nyquist frequency (or a filter that
+        // cannot be designed there) would refuse every frame, so it is refused here.
+        params.conditioning()?.validate(rig.daq.sample_rate_hz).map_err(|e| match e {
+            oilfilm_identification::IdentificationError::InvalidParameter { field, reason } => {
+                NodeError::parameter(field.trim_start_matches("conditioning."), format!("{reason} (the rig file's DAQ rate)"))
+            }
+            other => NodeError::Identification(other),
+        })?;
         Ok(Self {
             mechanics: mechanics_of(&rig),
             rig,

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::NodeError;
 use crate::lines::LineDaq;
 use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::topics;
 use crate::stamp::Stamp;
 
@@ -67,6 +68,27 @@ impl Default for DaqParams {
             command_timeout_s: 2.0,
             speed_rpm: 0.0,
         }
+    }
+}
+
+impl NodeParams for DaqParams {
+    fn specs() -> Vec<Spec> {
+        vec![
+            Spec::fixed("rig", "rig file (TOML): the simulated rig, or the calibration of the real one; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
+            Spec::fixed("source", "sim (the simulated rig, driven by exciter/command), ascii (replay the record `file`) or tcp (the acquisition process's stream at `address`)", Rule::OneOf(&["sim", "ascii", "tcp"])),
+            Spec::fixed("file", "ASCII record (format v1) to replay (source ascii)", Rule::Any).with_constraints("not empty for source ascii"),
+            Spec::fixed("address", "host:port of the acquisition process (source tcp)", Rule::Any).with_constraints("host:port for source tcp"),
+            Spec::fixed("block_scans", "scans per published frame", Rule::Integer { min: 1, max: 1_000_000 }),
+            Spec::fixed("rate_factor", "pace: 1 real time (stamps are wall time), 4 four times faster and 0 as fast as the consumers allow (stamps are sim time, published on /clock); not used by tcp", Rule::number(0.0, 1e6)),
+            Spec::fixed("duration_s", "stop after this many seconds of rig time; 0: run until stopped or the file ends (not used by tcp)", Rule::number(0.0, 1e9)),
+            Spec::fixed("start_stamp_ns", "rig time of scan 0, ns since the epoch; 0: the clock when the rig starts (sim), the record's start_time_s (ascii, tcp)", Rule::Integer { min: 0, max: i64::MAX }),
+            Spec::fixed("command_timeout_s", "sim: how long to wait for exciter setpoints before running a block with the force held, s of wall time", Rule::above(0.0, 86_400.0)),
+            Spec::fixed("speed_rpm", "shaft speed stated in rig/status, rpm; 0: the rig file's (sim) or the record's speed_rpm header (ascii, tcp)", Rule::number(0.0, 1e6)),
+        ]
+    }
+
+    fn validate(&self) -> Result<(), NodeError> {
+        DaqParams::validate(self)
     }
 }
 
@@ -414,6 +436,7 @@ impl Node for Daq {
     const NAME: &'static str = "daq";
     type Params = DaqParams;
     type Ports<'a> = DaqPorts<'a>;
+    const CLOCK_SOURCE: Option<&'static str> = Some("the DAQ is the rig's clock: its stamps are wall time at rate_factor 1 and it publishes /clock when it runs faster or replays");
 
     /// Scan 0 of the simulated rig is at `start_stamp_ns`, or at `start.now` when 0.
     fn new(params: &DaqParams, start: &Start) -> Result<Self, NodeError> {

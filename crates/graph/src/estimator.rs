@@ -19,7 +19,8 @@ use oilfilm_physics::config::RigConfig;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
-use crate::node::{skipped, Connect, Input, Node, Output, ParamCheck, Start, Turn};
+use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::stamp::Stamp;
 use crate::topics;
 
@@ -67,6 +68,40 @@ impl Default for EstimatorParams {
             speed_rpm: 0.0,
             signal_band_hz: 0.0,
         }
+    }
+}
+
+impl NodeParams for EstimatorParams {
+    fn specs() -> Vec<Spec> {
+        let kc = ModelOrder::Kc.min_samples();
+        let kcm = ModelOrder::Kcm.min_samples();
+        vec![
+            Spec::fixed("rig", "rig file (TOML): geometry and oil law for the dimensionless coefficients and the operating point; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
+            Spec::live("window", "samples per window (the paper: 50 000 = 10 s at 5 kHz)", Rule::Integer { min: kc as i64, max: 100_000_000 })
+                .with_constraints(if kcm == 112 { "at least the model's minimum: 80 samples for kc, 112 for kcm (16 per unknown of a row, with its intercept)" } else { "at least the model's minimum number of samples" }),
+            Spec::live("hop", "samples between window starts (hop = window: windows end to end; less: they overlap)", Rule::Integer { min: 1, max: 100_000_000 }),
+            Spec::live("model", "kc: 8 coefficients (stiffness, damping); kcm: 12 (plus added mass)", Rule::OneOf(&["kc", "kcm"])),
+            Spec::live("solver", "least squares by qr (default), svd, or normal_equations (the paper's, for comparison only)", Rule::OneOf(&["qr", "svd", "normal_equations"])),
+            Spec::live("max_condition", "largest condition number of a window's regressors before it is refused", Rule::number(1.0, 1e300)),
+            Spec::live("max_relative_se", "largest standard error of a direct coefficient, as a fraction of it, before the window is refused (.inf: never)", Rule::above(0.0, f64::INFINITY)),
+            Spec::live("speed_rpm", "shaft speed for the operating point, rpm; 0: from rig/status (else the rig file's)", Rule::number(0.0, 1e6)),
+            Spec::live("signal_band_hz", "band of the conditioned signals, Hz (set it to the conditioner's lowpass_cutoff_hz: standard errors from a decimated copy, the same coefficients); 0: every sample", Rule::number(0.0, 1e6))
+                .with_constraints("0, or below the Nyquist frequency of the rig file's DAQ rate"),
+        ]
+    }
+
+    /// The window must hold the model's minimum of samples (the estimator would refuse every
+    /// window), besides each value's own rule.
+    fn validate(&self) -> Result<(), NodeError> {
+        let model = if self.model == "kcm" { ModelOrder::Kcm } else { ModelOrder::Kc };
+        let need = model.min_samples() as i64;
+        if self.window < need {
+            return Err(NodeError::parameter(
+                "window",
+                format!("{} samples is shorter than the {} model needs (at least {need}: 16 per unknown of a row, with its intercept): every window would be refused", self.window, self.model),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -184,7 +219,8 @@ pub struct EstimatorCore {
 
 impl EstimatorCore {
     pub fn new(rig: RigConfig, params: EstimatorParams) -> Result<Self, NodeError> {
-        params.config(5000.0)?;
+        NodeParams::validate(&params)?;
+        params.config(rig.daq.sample_rate_hz)?;
         Ok(Self {
             rig,
             params,
@@ -206,7 +242,11 @@ impl EstimatorCore {
 
     /// New parameters (the parameter service); the windows restart at the next hop.
     pub fn set_params(&mut self, params: EstimatorParams) -> Result<(), NodeError> {
-        params.config(if self.rate_hz > 0.0 { self.rate_hz } else { 5000.0 })?;
+        if params.rig != self.params.rig {
+            return Err(NodeError::parameter("rig", "is read-only while the node runs: restart it with the new rig file"));
+        }
+        NodeParams::validate(&params)?;
+        params.config(if self.rate_hz > 0.0 { self.rate_hz } else { self.rig.daq.sample_rate_hz })?;
         let hop = params.hop as u64;
         self.params = params;
         self.next_start = self.buffer.end().div_ceil(hop) * hop;
@@ -503,7 +543,9 @@ impl Node for Estimator {
     type Ports<'a> = EstimatorPorts<'a>;
 
     fn new(params: &EstimatorParams, start: &Start) -> Result<Self, NodeError> {
-        Ok(Self { core: EstimatorCore::new((start.rig)(&params.rig)?, params.clone())? })
+        let rig = (start.rig)(&params.rig)?;
+        params.config(rig.daq.sample_rate_hz)?;
+        Ok(Self { core: EstimatorCore::new(rig, params.clone())? })
     }
 
     fn connect<C: Connect>(&self, c: &mut C) -> Result<EstimatorPorts<'static>, NodeError> {
@@ -535,10 +577,6 @@ impl Node for Estimator {
             }
         }
         Ok(turn)
-    }
-
-    fn param_check(&self) -> Option<ParamCheck<EstimatorParams>> {
-        Some(Box::new(|p: &EstimatorParams| p.config(5000.0).map(|_| ())))
     }
 
     fn reconfigure(&mut self, params: &EstimatorParams) -> Result<(), NodeError> {

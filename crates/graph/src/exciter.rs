@@ -40,7 +40,8 @@ use oilfilm_physics::config::RigConfig;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
-use crate::node::{skipped, Connect, Input, Node, Output, ParamCheck, Start, Turn};
+use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::stamp::Stamp;
 use crate::topics;
 
@@ -164,6 +165,30 @@ impl Default for ExciterParams {
             band_limit_low_hz: 0.0,
             band_limit_high_hz: 0.0,
         }
+    }
+}
+
+impl NodeParams for ExciterParams {
+    fn specs() -> Vec<Spec> {
+        let hz = Rule::above(0.0, 100_000.0);
+        let newtons = Rule::number(0.0, 1e7);
+        vec![
+            Spec::fixed("rig", "rig file (TOML) whose hard exciter limits bound everything else; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
+            Spec::live("plan", "excitation: two_tone (f1 on exciter 1, f2 on exciter 2: one record identifies all eight coefficients), multisine (Schroeder, odd/even lines per exciter), sine (the paper's one frequency on both: the estimator refuses it) or off", Rule::OneOf(&["two_tone", "multisine", "sine", "off"])),
+            Spec::live("frequency_1_hz", "exciter 1's frequency (two_tone; sine: both exciters), Hz", hz.clone()).with_constraints("inside the exciter band (band_limit_*_hz, else the rig file's exciter_band_hz)"),
+            Spec::live("frequency_2_hz", "exciter 2's frequency (two_tone), Hz", hz).with_constraints("inside the exciter band (band_limit_*_hz, else the rig file's exciter_band_hz)"),
+            Spec::live("amplitude_n", "force amplitude per exciter (two_tone, sine), N", newtons.clone()).with_constraints("at most max_force_n (else the rig file's exciter_max_force_n); its slope 2 pi f A within the rig file's exciter_max_slew_n_per_s"),
+            Spec::live("band_low_hz", "multisine: lowest line, Hz", Rule::above(0.0, 100_000.0)).with_constraints("below band_high_hz, inside the exciter band"),
+            Spec::live("band_high_hz", "multisine: highest line, Hz", Rule::above(0.0, 100_000.0)).with_constraints("inside the exciter band"),
+            Spec::live("period_s", "multisine: period, s (line spacing 1 / period_s)", Rule::above(0.0, 3600.0)),
+            Spec::live("rms_n", "multisine: rms force per exciter, N", newtons.clone()).with_constraints("its peak at most max_force_n, its steepest rise within the slew limit"),
+            Spec::live("ramp_s", "raised-cosine ramp of every transition (start, plan or amplitude change, stop), s; transitions take at least 0.05 s and ramps down at most 1.5 s", Rule::number(0.0, 3600.0)),
+            Spec::fixed("setpoint_rate_hz", "force setpoints per second (the DAQ's scan rate, so the simulated rig gets one per scan)", Rule::number(SETPOINT_RATE_RANGE_HZ[0], SETPOINT_RATE_RANGE_HZ[1])),
+            Spec::live("lookahead_s", "how far ahead of the rig clock the setpoints reach, s", Rule::above(0.0, MAX_BLOCK_S)),
+            Spec::live("max_force_n", "force limit per exciter, N; lowers the rig file's exciter_max_force_n, never raises it; 0: the rig file's", newtons).with_constraints("at most the rig file's exciter_max_force_n"),
+            Spec::live("band_limit_low_hz", "lower edge of the band every line must lie in, Hz; narrows the rig file's exciter_band_hz, never widens it; both edges 0: the rig file's", Rule::number(0.0, 100_000.0)).with_constraints("with band_limit_high_hz a band inside the rig file's exciter_band_hz"),
+            Spec::live("band_limit_high_hz", "upper edge of that band, Hz (0 with band_limit_low_hz 0: the rig file's)", Rule::number(0.0, 100_000.0)).with_constraints("above band_limit_low_hz, inside the rig file's exciter_band_hz"),
+        ]
     }
 }
 
@@ -767,11 +792,6 @@ impl Node for Exciter {
             }
         }
         Ok(turn)
-    }
-
-    fn param_check(&self) -> Option<ParamCheck<ExciterParams>> {
-        let hard = self.core.hard;
-        Some(Box::new(move |p: &ExciterParams| p.validate(&hard)))
     }
 
     fn reconfigure(&mut self, params: &ExciterParams) -> Result<(), NodeError> {

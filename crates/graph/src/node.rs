@@ -20,6 +20,7 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 use crate::error::NodeError;
+use crate::params::NodeParams;
 use crate::ports::{Publish, RawCdr, Receive};
 use crate::stamp::Stamp;
 use crate::topics::Topic;
@@ -91,17 +92,19 @@ impl Turn {
     }
 }
 
-/// Checks a whole parameter set before the parameter service accepts it.
-pub type ParamCheck<P> = Box<dyn Fn(&P) -> Result<(), NodeError> + Send + Sync>;
-
 /// A node: built from its typed parameters, its ports connected once, then turned.
 pub trait Node: Sized {
     /// The node's default name; its binary is `oilfilm-<NAME>`.
     const NAME: &'static str;
-    /// Its typed ROS 2 parameters (a params file's `ros__parameters`, unknown names refused).
-    type Params: Serialize + DeserializeOwned + Default + Clone;
+    /// Its typed ROS 2 parameters (a params file's `ros__parameters`, unknown names refused),
+    /// each with its descriptor ([`NodeParams::specs`]).
+    type Params: NodeParams;
     /// Its ports, one a topic.
     type Ports<'a>;
+
+    /// Why the node cannot follow `/clock` (`use_sim_time` true is refused with this), when
+    /// it is the clock itself; `None`: it follows `/clock` when asked.
+    const CLOCK_SOURCE: Option<&'static str> = None;
 
     fn new(params: &Self::Params, start: &Start) -> Result<Self, NodeError>;
 
@@ -112,13 +115,11 @@ pub trait Node: Sized {
     /// keeps running); an error here is a port that failed.
     fn turn(&mut self, now: Stamp, ports: &mut Self::Ports<'_>) -> Result<Turn, NodeError>;
 
-    /// The check a changed parameter set must pass while the node runs; `None`: the node's
-    /// parameters are read-only while it runs.
-    fn param_check(&self) -> Option<ParamCheck<Self::Params>> {
-        None
-    }
-
-    /// Applies a changed parameter set that passed [`Node::param_check`].
+    /// Applies a changed parameter set while the node runs: all of it, or nothing and the
+    /// reason (naming the parameter and the rule). The runner calls it only with a set whose
+    /// values passed their rules and [`NodeParams::validate`], and in which only parameters
+    /// whose spec is not read-only changed; what it accepts is what the parameter services
+    /// then report, so no set is reported applied that the node did not apply.
     fn reconfigure(&mut self, _params: &Self::Params) -> Result<(), NodeError> {
         Err(NodeError::parameter("(parameters)", format!("the {} node's parameters are read-only while it runs: restart it with new ones", Self::NAME)))
     }

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
 use crate::node::{Connect, Node, Output, RawTopic, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::ports::{Publish, RawCdr};
 use crate::stamp::Stamp;
 
@@ -56,6 +57,25 @@ pub struct PlayerParams {
 impl Default for PlayerParams {
     fn default() -> Self {
         Self { bag: String::new(), rate: 1.0, fast: false, looped: false, clock: true, clock_hz: 100.0, topics: Vec::new(), wait_s: 10.0 }
+    }
+}
+
+impl NodeParams for PlayerParams {
+    fn specs() -> Vec<Spec> {
+        vec![
+            Spec::fixed("bag", "the bag directory to play", Rule::Any).with_constraints("not empty"),
+            Spec::fixed("rate", "playback rate: 1 real time, 2 twice as fast, 0.5 half speed", Rule::above(0.0, 1e9)),
+            Spec::fixed("fast", "as fast as the readers take it (reliable, nothing dropped); overrides rate", Rule::Any),
+            Spec::fixed("loop", "start again at the end, for ever", Rule::Any),
+            Spec::fixed("clock", "publish /clock (rosgraph_msgs/msg/Clock) with the bag's log time", Rule::Any),
+            Spec::fixed("clock_hz", "/clock messages per second of wall time between messages", Rule::above(0.0, 1e6)),
+            Spec::fixed("topics", "topics to play (full names as in the bag); empty: all", Rule::Any),
+            Spec::fixed("wait_s", "seconds to wait for a subscriber on every played topic before starting", Rule::number(0.0, 86_400.0)),
+        ]
+    }
+
+    fn validate(&self) -> Result<(), NodeError> {
+        self.options().map(|_| ())
     }
 }
 
@@ -318,6 +338,7 @@ impl Player {
 impl Node for Player {
     const NAME: &'static str = "player";
     type Params = PlayerParams;
+    const CLOCK_SOURCE: Option<&'static str> = Some("the player publishes /clock itself (the bag's log time)");
     type Ports<'a> = PlayerPorts<'a>;
 
     fn new(params: &PlayerParams, _start: &Start) -> Result<Self, NodeError> {

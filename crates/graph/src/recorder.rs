@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
 use crate::node::{Connect, Input, Node, RawTopic, Start, Turn};
+use crate::params::{NodeParams, Rule, Spec};
 use crate::ports::RawCdr;
 use crate::stamp::Stamp;
 use crate::topics::{self, TopicQos};
@@ -59,6 +60,24 @@ impl Default for RecorderParams {
             split_duration_s: 0.0,
             status_period_s: 1.0,
         }
+    }
+}
+
+impl NodeParams for RecorderParams {
+    fn specs() -> Vec<Spec> {
+        vec![
+            Spec::fixed("output", "the bag directory (must not exist, or be empty); empty: rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory", Rule::Any),
+            Spec::fixed("topics", "topics to record, relative to the namespace (daq/frames) or absolute; empty: all six of ours and /parameter_events", Rule::Any)
+                .with_constraints("each one of our topics, or /parameter_events"),
+            Spec::fixed("compression", "chunk compression", Rule::OneOf(&["zstd", "lz4", "none"])),
+            Spec::fixed("split_size_mb", "start a new file of the bag after this many MB (10^6 bytes); 0: never", Rule::number(0.0, 1e12)),
+            Spec::fixed("split_duration_s", "start a new file of the bag after this many seconds of log time; 0: never", Rule::number(0.0, 1e12)),
+            Spec::fixed("status_period_s", "seconds between status lines on stderr; 0: none", Rule::number(0.0, 1e9)),
+        ]
+    }
+
+    fn validate(&self) -> Result<(), NodeError> {
+        self.writer_options().map(|_| ())
     }
 }
 
