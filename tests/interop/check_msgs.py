@@ -12,7 +12,8 @@ deserialize_message gives the same values back, and writes
 same value through serde. Values are finite (JSON has no NaN).
 
 It also copies the dependency definitions the bag schemas need (std_msgs/Header,
-builtin_interfaces/Time, and rosgraph_msgs/Clock for the player) from the installed share directories into crates/msgs/upstream/.
+builtin_interfaces/Time, rosgraph_msgs/Clock for the player, and rcl_interfaces/ParameterEvent with
+Parameter and ParameterValue for the recorder) from the installed share directories into crates/msgs/upstream/.
 
 Note: Fast-CDR does not zero alignment padding, so padding bytes in cdr_hex may be any
 value; the Rust test compares every other byte.
@@ -324,7 +325,8 @@ def main():
                 f.write("\n")
     if not args.check:
         deps = os.path.join(ROOT, "crates", "msgs", "upstream")
-        for pkg, typ in [("std_msgs", "Header"), ("builtin_interfaces", "Time"), ("rosgraph_msgs", "Clock")]:
+        for pkg, typ in [("std_msgs", "Header"), ("builtin_interfaces", "Time"), ("rosgraph_msgs", "Clock"),
+                         ("rcl_interfaces", "ParameterEvent"), ("rcl_interfaces", "Parameter"), ("rcl_interfaces", "ParameterValue")]:
             src = os.path.join(get_package_share_directory(pkg), "msg", f"{typ}.msg")
             dst = os.path.join(deps, pkg, "msg", f"{typ}.msg")
             os.makedirs(os.path.dirname(dst), exist_ok=True)

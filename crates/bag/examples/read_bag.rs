@@ -18,6 +18,7 @@ fn main() -> anyhow::Result<()> {
             OilfilmMessage::ConditionedFrame(v) => serde_yaml_ng::to_value(v)?,
             OilfilmMessage::CoefficientEstimate(v) => serde_yaml_ng::to_value(v)?,
             OilfilmMessage::RigStatus(v) => serde_yaml_ng::to_value(v)?,
+            OilfilmMessage::ParameterEvent(v) => serde_yaml_ng::to_value(v)?,
         };
         let mut map = serde_yaml_ng::Mapping::new();
         map.insert("topic".into(), m.topic.to_string().into());

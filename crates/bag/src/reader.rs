@@ -7,7 +7,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, RigStatus, RosMessage};
+use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, ParameterEvent, RigStatus, RosMessage};
 
 use crate::error::{io, BagError, Result};
 use crate::metadata::{BagInfo, MetadataFile};
@@ -40,6 +40,9 @@ pub enum OilfilmMessage {
     ConditionedFrame(ConditionedFrame),
     CoefficientEstimate(CoefficientEstimate),
     RigStatus(RigStatus),
+    /// `/parameter_events`, which our recorder keeps with the graph's topics: the nodes'
+    /// parameters.
+    ParameterEvent(ParameterEvent),
 }
 
 impl BagMessage {
@@ -69,6 +72,7 @@ impl BagMessage {
             ConditionedFrame::TYPE_NAME => OilfilmMessage::ConditionedFrame(self.decode()?),
             CoefficientEstimate::TYPE_NAME => OilfilmMessage::CoefficientEstimate(self.decode()?),
             RigStatus::TYPE_NAME => OilfilmMessage::RigStatus(self.decode()?),
+            ParameterEvent::TYPE_NAME => OilfilmMessage::ParameterEvent(self.decode()?),
             other => {
                 return Err(BagError::Format {
                     path: self.file.to_path_buf(),

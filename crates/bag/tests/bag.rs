@@ -97,6 +97,7 @@ fn every_topic_round_trips_byte_for_byte_and_decodes() {
             OilfilmMessage::ConditionedFrame(m) => oilfilm_msgs::encode(&m),
             OilfilmMessage::CoefficientEstimate(m) => oilfilm_msgs::encode(&m),
             OilfilmMessage::RigStatus(m) => oilfilm_msgs::encode(&m),
+            OilfilmMessage::ParameterEvent(m) => oilfilm_msgs::encode(&m),
         };
         assert!(again == g.data, "{} at {}", g.topic, g.log_time);
     }

@@ -172,6 +172,55 @@ ros_message! {
     constants {}
 }
 
+ros_message! {
+    /// `rcl_interfaces/msg/ParameterValue`: one parameter's value, the field `type` says
+    /// (1 bool, 2 integer, 3 double, 4 string, 5-9 arrays) is set.
+    pub struct ParameterValue = "rcl_interfaces/msg/ParameterValue",
+        definition = include_str!("../upstream/rcl_interfaces/msg/ParameterValue.msg"); {
+        pub r#type: u8,
+        pub bool_value: bool,
+        pub integer_value: i64,
+        pub double_value: f64,
+        pub string_value: String,
+        pub byte_array_value: Vec<u8>,
+        pub bool_array_value: Vec<bool>,
+        pub integer_array_value: Vec<i64>,
+        pub double_array_value: Vec<f64>,
+        pub string_array_value: Vec<String>,
+    }
+    constants {}
+}
+
+ros_message! {
+    /// `rcl_interfaces/msg/Parameter`: a parameter's name and value.
+    pub struct Parameter = "rcl_interfaces/msg/Parameter",
+        definition = include_str!("../upstream/rcl_interfaces/msg/Parameter.msg"); {
+        pub name: String,
+        pub value: ParameterValue,
+    }
+    constants {}
+}
+
+// A `Parameter[]` starts with its first string's length: aligned to 4.
+impl cdr::CdrElement for Parameter {
+    const ALIGN: usize = 4;
+}
+
+ros_message! {
+    /// `rcl_interfaces/msg/ParameterEvent`: a node's parameters declared, changed or deleted,
+    /// as nodes publish them on `/parameter_events`. Our recorder keeps this topic in a bag,
+    /// so the bag says which parameters the nodes ran with (ADR 0026).
+    pub struct ParameterEvent = "rcl_interfaces/msg/ParameterEvent",
+        definition = include_str!("../upstream/rcl_interfaces/msg/ParameterEvent.msg"); {
+        pub stamp: Time,
+        pub node: String,
+        pub new_parameters: Vec<Parameter>,
+        pub changed_parameters: Vec<Parameter>,
+        pub deleted_parameters: Vec<Parameter>,
+    }
+    constants {}
+}
+
 /// The frame id our nodes put in `header.frame_id`: the rig's bearing frame (x horizontal,
 /// y up, origin at the bearing centre).
 pub const BEARING_FRAME_ID: &str = "oilfilm_bearing";
@@ -488,6 +537,9 @@ pub fn definition(package: &str, type_name: &str) -> Option<&'static str> {
         ("builtin_interfaces", "Time") => Time::DEFINITION,
         ("std_msgs", "Header") => Header::DEFINITION,
         ("rosgraph_msgs", "Clock") => Clock::DEFINITION,
+        ("rcl_interfaces", "ParameterEvent") => ParameterEvent::DEFINITION,
+        ("rcl_interfaces", "Parameter") => Parameter::DEFINITION,
+        ("rcl_interfaces", "ParameterValue") => ParameterValue::DEFINITION,
         ("oilfilm_msgs", "ExciterCommand") => ExciterCommand::DEFINITION,
         ("oilfilm_msgs", "DaqFrame") => DaqFrame::DEFINITION,
         ("oilfilm_msgs", "ConditionedFrame") => ConditionedFrame::DEFINITION,

@@ -18,6 +18,10 @@ const ROSIDL: &[(&str, &str)] = &[
     ("oilfilm_msgs/msg/ConditionedFrame", "RIHS01_633b5d90c5b55cb9db92692e77cc0d9acf4fbf0abb6f9ace2856033bf3f0f6bf"),
     ("oilfilm_msgs/msg/CoefficientEstimate", "RIHS01_87439f95ec86f7e098f608d8472d186def30124d2281d58163d57711d7450643"),
     ("oilfilm_msgs/msg/RigStatus", "RIHS01_28c780a23e00861cbda92acad04db9fe1a69aff3a04446204d23b7b288fc9c8b"),
+    // The recorder's /parameter_events (rcl_interfaces' share/rcl_interfaces/msg/ParameterEvent.json).
+    ("rcl_interfaces/msg/ParameterEvent", "RIHS01_043e627780fcad87a22d225bc2a037361dba713fca6a6b9f4b869a5aa0393204"),
+    ("rcl_interfaces/msg/Parameter", "RIHS01_ddfe6442cffc462317adb5c92536a7b6dd55858c5c3e1e328165a6b73c2831af"),
+    ("rcl_interfaces/msg/ParameterValue", "RIHS01_115fc089a387e23c7ecd3525c9189c379109119d6ab82e8dfbde0fdf6a7f9b68"),
 ];
 
 #[test]
@@ -80,4 +84,23 @@ fn a_missing_dependency_or_bad_type_is_an_error_naming_it() {
     let lookup = |_: &str, _: &str| Some("float64[x] a\n");
     let e = type_hash("x/msg/T", &lookup).unwrap_err();
     assert!(e.contains("field a") && e.contains("`x` is not a size"), "{e}");
+}
+
+/// A `/parameter_events` message as our recorder keeps it: its CDR reads back the same,
+/// nested sequences of parameters included.
+#[test]
+fn a_parameter_event_round_trips() {
+    use oilfilm_msgs::{decode, encode, Parameter, ParameterEvent, ParameterValue, Time};
+    let e = ParameterEvent {
+        stamp: Time { sec: 17, nanosec: 5 },
+        node: "/oilfilm/estimator".into(),
+        new_parameters: vec![
+            Parameter { name: "window".into(), value: ParameterValue { r#type: 2, integer_value: 25_000, ..Default::default() } },
+            Parameter { name: "model".into(), value: ParameterValue { r#type: 4, string_value: "kc".into(), ..Default::default() } },
+            Parameter { name: "topics".into(), value: ParameterValue { r#type: 9, string_array_value: vec!["a".into(), "b".into()], ..Default::default() } },
+        ],
+        changed_parameters: vec![Parameter { name: "use_sim_time".into(), value: ParameterValue { r#type: 1, bool_value: true, ..Default::default() } }],
+        deleted_parameters: vec![],
+    };
+    assert_eq!(decode::<ParameterEvent>(&encode(&e)).unwrap(), e);
 }
