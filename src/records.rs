@@ -182,8 +182,9 @@ pub struct IdentifyArgs {
     /// For a bag: a ROS 2 params file for the conditioner and estimator
     /// (`/oilfilm/conditioner`, `/oilfilm/estimator` sections, e.g.
     /// launch_configs/params/sim_rig.yaml), whose chain and window settings are used (the
-    /// low-pass as set, not adapted); default: the identification's defaults (with
-    /// `--replay`: the nodes').
+    /// low-pass as set, not adapted); default: the parameters the bag's conditioner and
+    /// estimator ran with (recorded on /parameter_events), else the identification's
+    /// defaults (with `--replay`: the nodes').
     #[arg(long, value_name = "FILE")]
     params: Option<PathBuf>,
     /// For a bag: re-run the node graph's conditioner and estimator on its frames instead of
@@ -238,9 +239,9 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
         if !b.ignored.is_empty() {
             eprintln!("{name}: channels not used by the conditioning left out: {}", b.ignored.join(", "));
         }
-        let config = match &args.params {
-            Some(_) => params_config(args, b.raw.sample_rate_hz)?,
-            None => PipelineConfig::default(),
+        let config = match node_params(args)? {
+            (c, e, ParamsFrom::File | ParamsFrom::Bag) => params_config(&c, &e, b.raw.sample_rate_hz)?,
+            (_, _, ParamsFrom::Defaults) => PipelineConfig::default(),
         };
         (b.raw, b.offsets_s, b.speed_rpm, config, rig)
     } else {
@@ -306,15 +307,30 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
     Ok(())
 }
 
-/// The pipeline settings a node params file gives: the conditioner's chain settings (its
-/// low-pass as set, not adapted to the excitation) and the estimator's window settings.
-fn params_config(args: &IdentifyArgs, sample_rate_hz: f64) -> Result<PipelineConfig> {
-    let (conditioner, estimator) = node_params(args)?;
+/// The pipeline settings node parameters give (a params file's or those a bag recorded): the
+/// conditioner's chain settings (its low-pass as set, not adapted to the excitation) and the
+/// estimator's window settings.
+fn params_config(conditioner: &oilfilm_graph::conditioner::ConditionerParams, estimator: &oilfilm_graph::estimator::EstimatorParams, sample_rate_hz: f64) -> Result<PipelineConfig> {
     Ok(PipelineConfig { conditioning: conditioner.conditioning()?, estimator: estimator.config(sample_rate_hz)?, adaptive_lowpass: false })
 }
 
-/// The conditioner's and estimator's parameters from `--params` (the nodes' defaults without).
-fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams)> {
+/// Where the conditioner's and estimator's parameters came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ParamsFrom {
+    /// `--params FILE`.
+    File,
+    /// The bag's `/parameter_events`: what its nodes ran with (ADR 0026).
+    Bag,
+    /// Neither: the nodes' defaults.
+    Defaults,
+}
+
+/// The conditioner's and estimator's parameters: from `--params`; without it, for a bag that
+/// recorded them, the ones its nodes ran with (said on stderr, with a warning when they
+/// changed during the recording); else the nodes' defaults.
+fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams, ParamsFrom)> {
+    use oilfilm_graph::conditioner::ConditionerParams;
+    use oilfilm_graph::estimator::EstimatorParams;
     use oilfilm_graph::params::{self, NodeArgs};
     let node_args = |node: &str| NodeArgs {
         name: node.into(),
@@ -322,7 +338,37 @@ fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::Condi
         params_files: args.params.iter().cloned().collect(),
         ..Default::default()
     };
-    Ok((params::load(&node_args("conditioner"))?.0, params::load(&node_args("estimator"))?.0))
+    let (mut conditioner, _) = params::load::<ConditionerParams>(&node_args("conditioner"))?;
+    let (mut estimator, _) = params::load::<EstimatorParams>(&node_args("estimator"))?;
+    if args.params.is_some() {
+        return Ok((conditioner, estimator, ParamsFrom::File));
+    }
+    if !args.file.is_dir() {
+        return Ok((conditioner, estimator, ParamsFrom::Defaults));
+    }
+    let name = args.file.display();
+    let recorded = oilfilm_graph::runner::bag::recorded_parameters_of(&oilfilm_bag::Bag::open(&args.file)?)?;
+    let c = recorded.of::<ConditionerParams>("conditioner")?;
+    let e = recorded.of::<EstimatorParams>("estimator")?;
+    for (node, what) in [c.as_ref().map(|c| &c.0), e.as_ref().map(|e| &e.0)].into_iter().zip(["conditioner", "estimator"]) {
+        if let Some(node) = node {
+            eprintln!("{name}: the {what}'s parameters are the ones {node} ran with (the bag's /parameter_events)");
+        }
+    }
+    if !recorded.changed_later.is_empty() {
+        eprintln!(
+            "warning: {name}: parameters changed during the recording ({}): re-analysing with those in force at the first DAQ frame, so later windows may differ from the recorded estimates",
+            recorded.changed_later.join(", ")
+        );
+    }
+    let from = if c.is_some() && e.is_some() { ParamsFrom::Bag } else { ParamsFrom::Defaults };
+    if let Some((_, c)) = c {
+        conditioner = c;
+    }
+    if let Some((_, e)) = e {
+        estimator = e;
+    }
+    Ok((conditioner, estimator, from))
 }
 
 fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
@@ -403,19 +449,20 @@ fn recorded_chain(dir: &std::path::Path) -> Result<Option<&'static str>> {
 fn replay_bag(args: &IdentifyArgs) -> Result<()> {
     let rig = args.source.load()?;
     let name = args.file.display().to_string();
-    let (mut conditioner, mut estimator) = node_params(args)?;
+    let (mut conditioner, mut estimator, from) = node_params(args)?;
     // The chain the graph conditioned with, from its recorded conditioned frames (flag
-    // `chain=causal`, ADR 0014): without a params file it is the one to re-run; a params
-    // file that names another gets estimates that cannot equal the recorded ones, so say so.
+    // `chain=causal`, ADR 0014): without a params file or recorded parameters it is the one
+    // to re-run; parameters that name another get estimates that cannot equal the recorded
+    // ones, so say so.
     if let Some(recorded) = recorded_chain(&args.file)? {
-        if args.params.is_none() {
+        if from == ParamsFrom::Defaults {
             if conditioner.chain != recorded {
                 eprintln!("{name}: the recorded conditioned frames were made by the `{recorded}` chain: re-analysing with it");
             }
             conditioner.chain = recorded.into();
         } else if conditioner.chain != recorded {
             eprintln!(
-                "warning: {name}: the recorded conditioned frames were made by the `{recorded}` chain, the params give `{}`: these estimates will not equal the recorded ones (set `chain: {recorded}` for the conditioner)",
+                "warning: {name}: the recorded conditioned frames were made by the `{recorded}` chain, the parameters give `{}`: these estimates will not equal the recorded ones (set `chain: {recorded}` for the conditioner)",
                 conditioner.chain
             );
         }

@@ -12,7 +12,7 @@
 //!
 //! ros2-client's spinner is not run: it would serve its own parameter services and subscribe
 //! `/clock` as `builtin_interfaces/msg/Time`, a second type on a topic whose type is
-//! `rosgraph_msgs/msg/Clock` (ADR 0023). Nothing here needs its discovery bookkeeping: reader
+//! `rosgraph_msgs/msg/Clock` (ADR 0025). Nothing here needs its discovery bookkeeping: reader
 //! counts come from the participant's discovered readers.
 
 use std::mem::ManuallyDrop;

@@ -1,5 +1,5 @@
 //! The ROS 2 parameter services of a node, served by us rather than by ros2-client, so that
-//! they say what the node really does (ADR 0023):
+//! they say what the node really does (ADR 0025):
 //!
 //! * `describe_parameters` gives each parameter's description, its range or allowed values
 //!   (and the rules across parameters, in `additional_constraints`) and whether it is

@@ -441,6 +441,15 @@ impl Node for Daq {
     /// Scan 0 of the simulated rig is at `start_stamp_ns`, or at `start.now` when 0.
     fn new(params: &DaqParams, start: &Start) -> Result<Self, NodeError> {
         params.validate()?;
+        if params.source == "ascii" && std::path::Path::new(&params.file).is_dir() {
+            return Err(NodeError::parameter(
+                "file",
+                format!(
+                    "{} is a directory, not an ASCII record; a rosbag2 bag is re-estimated with `oilfilm launch launch_configs/replay_bag.launch.yaml bag:={}` (or offline: `oilfilm identify {}`)",
+                    params.file, params.file, params.file
+                ),
+            ));
+        }
         let rig = (start.rig)(&params.rig)?;
         if params.source == "sim" {
             let epoch = if params.start_stamp_ns != 0 { Stamp(params.start_stamp_ns) } else { start.now };

@@ -391,6 +391,48 @@ fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, Stri
     Ok(out)
 }
 
+/// A parameter value as `rcl_interfaces/msg/ParameterValue` (a NaN double arrives here as
+/// `null`: it is sent as NaN).
+pub fn to_ros_value(v: &Value) -> oilfilm_msgs::ParameterValue {
+    use oilfilm_msgs::ParameterValue as P;
+    match v {
+        Value::Bool(b) => P { r#type: 1, bool_value: *b, ..P::default() },
+        Value::Number(n) if n.is_i64() => P { r#type: 2, integer_value: n.as_i64().unwrap_or_default(), ..P::default() },
+        Value::Number(n) => P { r#type: 3, double_value: n.as_f64().unwrap_or(f64::NAN), ..P::default() },
+        Value::Null => P { r#type: 3, double_value: f64::NAN, ..P::default() },
+        Value::String(s) => P { r#type: 4, string_value: s.clone(), ..P::default() },
+        Value::Array(a) if a.iter().all(Value::is_i64) && !a.is_empty() => P { r#type: 7, integer_array_value: a.iter().filter_map(Value::as_i64).collect(), ..P::default() },
+        Value::Array(a) if a.iter().all(Value::is_number) && !a.is_empty() => P { r#type: 8, double_array_value: a.iter().filter_map(Value::as_f64).collect(), ..P::default() },
+        Value::Array(a) => P { r#type: 9, string_array_value: a.iter().filter_map(|s| s.as_str().map(str::to_string)).collect(), ..P::default() },
+        Value::Object(_) => P::default(),
+    }
+}
+
+/// `rcl_interfaces/msg/ParameterValue` as a parameter value (`None`: not set).
+pub fn from_ros_value(p: &oilfilm_msgs::ParameterValue) -> Option<Value> {
+    let number = |x: f64| serde_json::Number::from_f64(x).map_or(Value::Null, Value::Number);
+    Some(match p.r#type {
+        1 => Value::Bool(p.bool_value),
+        2 => Value::from(p.integer_value),
+        3 => number(p.double_value),
+        4 => Value::String(p.string_value.clone()),
+        5 => Value::from(p.byte_array_value.clone()),
+        6 => Value::from(p.bool_array_value.clone()),
+        7 => Value::from(p.integer_array_value.clone()),
+        8 => Value::Array(p.double_array_value.iter().map(|x| number(*x)).collect()),
+        9 => Value::from(p.string_array_value.clone()),
+        _ => return None,
+    })
+}
+
+/// The event a node publishes on `/parameter_events` when it starts: every parameter it
+/// declared (`use_sim_time` included), at `now`.
+pub fn declaration_event(fully_qualified: &str, params: &Map<String, Value>, use_sim_time: bool, now: crate::stamp::Stamp) -> oilfilm_msgs::ParameterEvent {
+    let mut new_parameters: Vec<oilfilm_msgs::Parameter> = params.iter().map(|(k, v)| oilfilm_msgs::Parameter { name: k.clone(), value: to_ros_value(v) }).collect();
+    new_parameters.push(oilfilm_msgs::Parameter { name: USE_SIM_TIME.into(), value: to_ros_value(&Value::Bool(use_sim_time)) });
+    oilfilm_msgs::ParameterEvent { stamp: now.to_time(), node: fully_qualified.to_string(), new_parameters, ..Default::default() }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -38,7 +38,7 @@ pub struct RecorderParams {
     /// (UTC) in the working directory, as `ros2 bag record` names it.
     pub output: String,
     /// Topics to record, relative to the namespace (`daq/frames`) or absolute
-    /// (`/oilfilm/daq/frames`). Empty: all six of ours.
+    /// (`/oilfilm/daq/frames`). Empty: all six of ours and `/parameter_events`.
     pub topics: Vec<String>,
     /// Chunk compression: `zstd`, `lz4` or `none`.
     pub compression: String,
@@ -140,24 +140,24 @@ pub struct RecordTopic {
     pub qos: TopicQos,
 }
 
-/// The topics `wanted` names (all six of ours when empty) under `namespace`; an unknown
-/// name is an error listing the known ones.
+/// The topics `wanted` names (when empty: all six of ours and `/parameter_events`) under
+/// `namespace`; an unknown name is an error listing the known ones.
 pub fn select_topics(namespace: &str, wanted: &[String]) -> Result<Vec<RecordTopic>, NodeError> {
     let of = |t: &topics::Topic| RecordTopic { name: topics::qualified(namespace, t), type_name: t.type_name.into(), qos: t.qos };
     if wanted.is_empty() {
-        return Ok(topics::ALL.iter().map(of).collect());
+        return Ok(topics::RECORDED.iter().map(of).collect());
     }
     let mut out: Vec<RecordTopic> = Vec::new();
     for w in wanted {
-        let found = topics::ALL
+        let found = topics::RECORDED
             .iter()
-            .find(|t| if w.starts_with('/') { topics::qualified(namespace, t) == *w } else { t.name == w.as_str() })
+            .find(|t| if w.starts_with('/') { topics::qualified(namespace, t) == *w } else { t.name == w.as_str() || t.name.strip_prefix('/') == Some(w.as_str()) })
             .map(of);
         match found {
             Some(t) if !out.contains(&t) => out.push(t),
             Some(_) => {}
             None => {
-                let known: Vec<String> = topics::ALL.iter().map(|t| topics::qualified(namespace, t)).collect();
+                let known: Vec<String> = topics::RECORDED.iter().map(|t| topics::qualified(namespace, t)).collect();
                 return Err(NodeError::parameter("topics", format!("`{w}` is not one of our topics ({})", known.join(", "))));
             }
         }
@@ -418,7 +418,8 @@ mod tests {
         let info = bag.info();
         let daq = &info.topics_with_message_count[0].topic_metadata;
         assert_eq!(daq.offered_qos_profiles, vec![bag_qos(&topics::DAQ_FRAMES.qos)]);
-        assert_eq!(info.topics_with_message_count[1].topic_metadata.offered_qos_profiles[0].durability, oilfilm_bag::metadata::Durability::TransientLocal);
+        // rig/status is volatile (only exciter/command keeps history: topics.rs).
+        assert_eq!(info.topics_with_message_count[1].topic_metadata.offered_qos_profiles[0].durability, oilfilm_bag::metadata::Durability::Volatile);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -432,7 +433,10 @@ mod tests {
         assert!(e.contains("compression") && e.contains("gzip"), "{e}");
         let e = RecorderParams { split_size_mb: -1.0, ..Default::default() }.writer_options().unwrap_err().to_string();
         assert!(e.contains("split_size_mb"), "{e}");
-        assert_eq!(select_topics("/oilfilm", &[]).unwrap().len(), 6);
+        let all = select_topics("/oilfilm", &[]).unwrap();
+        assert_eq!(all.len(), 7, "our six and the parameter events");
+        assert_eq!(all[6].name, "/parameter_events");
+        assert_eq!(select_topics("/oilfilm", &["parameter_events".into()]).unwrap()[0].type_name, "rcl_interfaces/msg/ParameterEvent");
         let e = select_topics("/oilfilm", &["daq/frame".into()]).unwrap_err().to_string();
         assert!(e.contains("daq/frame") && e.contains("/oilfilm/daq/frames"), "{e}");
         assert_eq!(select_topics("/rig2", &["estimates".into()]).unwrap()[0].name, "/rig2/estimates");

@@ -103,10 +103,68 @@ fn every_shipped_launch_file_builds_in_memory() {
         let args: Vec<(String, String)> = match name {
             "record_sim_rig.launch.yaml" => vec![("bag".into(), bag.display().to_string())],
             "replay.launch.yaml" => vec![("file".into(), path.display().to_string())],
+            "replay_bag.launch.yaml" => vec![("bag".into(), dir.join("../bags/sim_rig_multisine").display().to_string())],
             _ => Vec::new(),
         };
         Graph::from_launch(&path, &args, &[], None).unwrap_or_else(|e| panic!("{name}: {e}"));
         let _ = std::fs::remove_dir_all(&bag);
     }
     assert!(seen >= 4);
+}
+
+/// replay.launch.yaml takes an ASCII record; given a bag directory it says so and names the
+/// launch file that re-estimates a bag.
+#[test]
+fn replay_given_a_bag_points_at_replay_bag() {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bags/sim_rig_multisine");
+    let args = [("file".to_string(), bag.display().to_string())];
+    let e = Graph::from_launch(&shipped("replay.launch.yaml"), &args, &[], None).err().expect("a bag is not an ASCII record").to_string();
+    assert!(e.contains("is a directory") && e.contains("replay_bag.launch.yaml") && e.contains("file"), "{e}");
+}
+
+/// A bag recorded by record_sim_rig.launch.yaml says which parameters its conditioner and
+/// estimator ran with (its /parameter_events), and re-estimating it with them, offline (the
+/// path of `oilfilm identify BAG`) and through replay_bag.launch.yaml's player, conditioner
+/// and estimator, gives the live estimates bit for bit.
+#[test]
+fn a_recorded_bag_holds_its_parameters_and_re_estimates_to_the_live_estimates() {
+    use oilfilm_graph::conditioner::ConditionerParams;
+    use oilfilm_graph::estimator::EstimatorParams;
+    use oilfilm_graph::params::{load, parse_args};
+    use oilfilm_graph::runner::bag::{reanalyse, recorded_parameters_of};
+    let dir = scratch("params");
+    let args = [("bag".to_string(), dir.display().to_string())];
+    let mut g = Graph::from_launch(&shipped("record_sim_rig.launch.yaml"), &args, &[("daq", "duration_s", "11.0")], None).unwrap();
+    let mut live = g.tap::<CoefficientEstimate>(&topics::ESTIMATES).unwrap();
+    g.run().unwrap();
+    let live = live.drain();
+    assert!(live.len() >= 2 && live.iter().all(|e| e.solved), "{} live estimates", live.len());
+
+    let bag = Bag::open(&dir).unwrap();
+    let recorded = recorded_parameters_of(&bag).unwrap();
+    assert_eq!(recorded.nodes.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(), ["/oilfilm/recorder", "/oilfilm/exciter", "/oilfilm/daq", "/oilfilm/conditioner", "/oilfilm/estimator"]);
+    assert!(recorded.changed_later.is_empty());
+    let from_file = |node: &str| parse_args(node, ["--ros-args".to_string(), "--params-file".into(), shipped("params/sim_rig.yaml").display().to_string()]).unwrap();
+    let (c, e) = (recorded.of::<ConditionerParams>("conditioner").unwrap().unwrap(), recorded.of::<EstimatorParams>("estimator").unwrap().unwrap());
+    assert_eq!((c.0.as_str(), e.0.as_str()), ("/oilfilm/conditioner", "/oilfilm/estimator"));
+    assert_eq!(c.1, load::<ConditionerParams>(&from_file("conditioner")).unwrap().0, "the conditioner's parameters as the params file gave them");
+    assert_eq!(e.1, load::<EstimatorParams>(&from_file("estimator")).unwrap().0);
+    assert_ne!(e.1, EstimatorParams::default(), "the file's are not the defaults, so the test can tell");
+
+    let (mut frames, mut status) = (Vec::new(), Vec::new());
+    for m in bag.messages().unwrap() {
+        match m.decode_ours().unwrap() {
+            OilfilmMessage::DaqFrame(f) => frames.push(f),
+            OilfilmMessage::RigStatus(s) => status.push(s),
+            _ => {}
+        }
+    }
+    let offline = reanalyse(&RigConfig::zhou2004().unwrap(), &c.1, &e.1, &frames, &status).unwrap();
+    assert_eq!(bytes(&offline.estimates), bytes(&live), "offline, with the recorded parameters");
+
+    let mut g = Graph::from_launch(&shipped("replay_bag.launch.yaml"), &args, &[], None).unwrap();
+    let mut replayed = g.tap::<CoefficientEstimate>(&topics::ESTIMATES).unwrap();
+    g.run().unwrap();
+    assert_eq!(bytes(&replayed.drain()), bytes(&live), "through replay_bag.launch.yaml's nodes");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -143,3 +143,85 @@ impl<M, I: Iterator<Item = M>> Receive<M> for Iter<I> {
         Ok(self.0.next())
     }
 }
+
+/// The parameters a bag's nodes ran with, from its `/parameter_events` (ADR 0026): for each
+/// node, the parameters it declared when it started, with every change recorded before the
+/// bag's first DAQ frame; and the changes recorded after it, which no single parameter set
+/// can reproduce.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RecordedParameters {
+    /// Fully qualified node name -> its parameters (`use_sim_time` left out).
+    pub nodes: Vec<(String, serde_json::Map<String, serde_json::Value>)>,
+    /// `node: parameter` changed after the first DAQ frame.
+    pub changed_later: Vec<String>,
+}
+
+impl RecordedParameters {
+    /// The recorded parameters of the one node whose parameters are `P`'s (recognised by
+    /// their names, so a renamed node is found too; with several, the one named `name`).
+    /// `None` when the bag has no such node.
+    pub fn of<P: crate::params::NodeParams>(&self, name: &str) -> Result<Option<(String, P)>, NodeError> {
+        let names: Vec<&str> = P::specs().iter().map(|s| s.name).collect();
+        let fits = |m: &serde_json::Map<String, serde_json::Value>| m.len() == names.len() && names.iter().all(|n| m.contains_key(*n));
+        let candidates: Vec<&(String, serde_json::Map<String, serde_json::Value>)> = self.nodes.iter().filter(|(_, m)| fits(m)).collect();
+        let chosen = match candidates.as_slice() {
+            [] => return Ok(None),
+            [one] => *one,
+            several => match several.iter().find(|(n, _)| n.rsplit('/').next() == Some(name)) {
+                Some(c) => *c,
+                None => {
+                    let all: Vec<&str> = several.iter().map(|(n, _)| n.as_str()).collect();
+                    return Err(NodeError::parameter(
+                        "(recorded parameters)",
+                        format!("the bag holds several nodes of this kind ({}) and none is named `{name}`: give the parameters with --params", all.join(", ")),
+                    ));
+                }
+            },
+        };
+        let p = crate::params::checked::<P>(&chosen.1).map_err(|e| NodeError::parameter("(recorded parameters)", format!("{}: {e}", chosen.0)))?;
+        Ok(Some((chosen.0.clone(), p)))
+    }
+}
+
+/// Folds `events` (log time, event), in log-time order, into the parameters in force at
+/// `first_frame` (log time of the first DAQ frame; `None`: the end).
+pub fn recorded_parameters(events: &[(u64, oilfilm_msgs::ParameterEvent)], first_frame: Option<u64>) -> RecordedParameters {
+    let mut out = RecordedParameters::default();
+    for (t, e) in events {
+        let later = first_frame.is_some_and(|f| *t > f);
+        let at = match out.nodes.iter().position(|(n, _)| *n == e.node) {
+            Some(i) => i,
+            None => {
+                out.nodes.push((e.node.clone(), serde_json::Map::new()));
+                out.nodes.len() - 1
+            }
+        };
+        let declared = !e.new_parameters.is_empty();
+        for p in e.new_parameters.iter().chain(&e.changed_parameters) {
+            if p.name == crate::params::USE_SIM_TIME {
+                continue;
+            }
+            let Some(v) = crate::params::from_ros_value(&p.value) else { continue };
+            if later && !declared {
+                if out.nodes[at].1.get(&p.name) != Some(&v) {
+                    out.changed_later.push(format!("{}: {}", e.node, p.name));
+                }
+                continue;
+            }
+            out.nodes[at].1.insert(p.name.clone(), v);
+        }
+    }
+    out
+}
+
+/// [`recorded_parameters`] of the bag at `dir` (an empty set when it has no
+/// `/parameter_events`: bags recorded before the recorder kept them).
+pub fn recorded_parameters_of(bag: &oilfilm_bag::Bag) -> Result<RecordedParameters, NodeError> {
+    use oilfilm_msgs::RosMessage;
+    let is_event = |_: &str, ty: &str| ty == oilfilm_msgs::ParameterEvent::TYPE_NAME;
+    let events: Vec<(u64, oilfilm_msgs::ParameterEvent)> =
+        bag.read_topics(&is_event, &|m| m.decode::<oilfilm_msgs::ParameterEvent>().map(|e| (m.log_time, e)), 1, |s| s.collect())?;
+    let is_frame = |_: &str, ty: &str| ty == DaqFrame::TYPE_NAME;
+    let first_frame: Option<u64> = bag.read_topics(&is_frame, &|m| Ok(m.log_time), 1, |s| s.next())?;
+    Ok(recorded_parameters(&events, first_frame))
+}

@@ -54,12 +54,61 @@ impl Buses {
     /// The bus of `topic`, made on first use; a topic carries one type.
     pub fn bus<M: Message>(&mut self, topic: &Topic) -> Result<Bus<M>, NodeError> {
         let name = topics::qualified(&self.namespace, topic);
-        let bus = self.typed.entry(name.clone()).or_insert_with(|| Box::new(Bus::<M>::new()));
+        self.bus_named(&name)
+    }
+
+    fn bus_named<M: Message>(&mut self, name: &str) -> Result<Bus<M>, NodeError> {
+        let bus = self.typed.entry(name.to_string()).or_insert_with(|| Box::new(Bus::<M>::new()));
         bus.downcast_ref::<Bus<M>>().cloned().ok_or_else(|| NodeError::parameter("topics", format!("{name} carries another type than {}", M::TYPE_NAME)))
+    }
+
+    /// For a raw writer of one of our types (a player): its typed readers' bus, fed by
+    /// decoding what it sends, as DDS would hand it to them.
+    fn typed_sink(&mut self, topic: &RawTopic) -> Result<Option<TypedSink>, NodeError> {
+        fn sink<M: Message>(bus: Bus<M>) -> TypedSink {
+            let mut p = bus.publisher();
+            Box::new(move |cdr: &RawCdr| {
+                let m: M = oilfilm_msgs::decode(&cdr.0).map_err(|e| NodeError::BadMessage { topic: M::TYPE_NAME.into(), sequence: 0, reason: e.to_string() })?;
+                p.publish(m)
+            })
+        }
+        use oilfilm_msgs::RosMessage;
+        Ok(Some(match topic.type_name.as_str() {
+            ExciterCommand::TYPE_NAME => sink(self.bus_named::<ExciterCommand>(&topic.name)?),
+            DaqFrame::TYPE_NAME => sink(self.bus_named::<DaqFrame>(&topic.name)?),
+            RigStatus::TYPE_NAME => sink(self.bus_named::<RigStatus>(&topic.name)?),
+            ConditionedFrame::TYPE_NAME => sink(self.bus_named::<ConditionedFrame>(&topic.name)?),
+            CoefficientEstimate::TYPE_NAME => sink(self.bus_named::<CoefficientEstimate>(&topic.name)?),
+            _ => return Ok(None),
+        }))
     }
 
     fn raw_bus(&mut self, topic: &RawTopic) -> Bus<RawCdr> {
         self.raw.entry(topic.name.clone()).or_default().clone()
+    }
+}
+
+/// Decodes a raw message onto a typed bus.
+type TypedSink = Box<dyn FnMut(&RawCdr) -> Result<(), NodeError>>;
+
+/// A raw writer (a player) whose messages also reach the typed readers of its topic.
+struct RawBridged {
+    raw: Publisher<RawCdr>,
+    typed: Option<TypedSink>,
+}
+
+impl Publish<RawCdr> for RawBridged {
+    fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
+        if let Some(t) = &mut self.typed {
+            t(&message)?;
+        }
+        self.raw.publish(message)
+    }
+
+    fn readers(&mut self) -> Option<usize> {
+        // The typed readers are not counted: a player waits for raw ones only when there
+        // are no typed ones, which in memory are all there from the start.
+        Some(self.raw.readers().unwrap_or(0) + usize::from(self.typed.is_some()))
     }
 }
 
@@ -94,12 +143,13 @@ impl Connect for Buses {
         Ok(Box::new(Bridged { typed, raw }))
     }
     /// A raw reader gets what typed and raw writers publish; a raw writer (a player) reaches
-    /// raw readers only.
+    /// raw readers and, for one of our types, typed readers too (decoded).
     fn raw_input(&mut self, topic: &RawTopic) -> Result<Input<'static, RawCdr>, NodeError> {
         Ok(Box::new(self.raw_bus(topic).subscriber()))
     }
     fn raw_output(&mut self, topic: &RawTopic) -> Result<Output<'static, RawCdr>, NodeError> {
-        Ok(Box::new(self.raw_bus(topic).publisher()))
+        let typed = self.typed_sink(topic)?;
+        Ok(Box::new(RawBridged { raw: self.raw_bus(topic).publisher(), typed }))
     }
 }
 
@@ -129,7 +179,21 @@ impl Graph {
             let wired = wire_launched(n, g.now, rig, &mut g.buses)?;
             g.nodes.push(wired);
         }
+        g.announce_parameters()?;
         Ok(g)
+    }
+
+    /// Every node's declared parameters on `/parameter_events`, as each node does on DDS when
+    /// it starts (a recorder of the graph keeps them).
+    pub fn announce_parameters(&mut self) -> Result<(), NodeError> {
+        let t = &topics::PARAMETER_EVENTS;
+        let topic = RawTopic { name: t.name.into(), type_name: t.type_name.into(), qos: crate::recorder::bag_qos(&t.qos) };
+        let mut events = self.buses.raw_bus(&topic).publisher();
+        for n in &self.nodes {
+            let (name, params) = n.parameters();
+            events.publish(RawCdr(oilfilm_msgs::encode(&params::declaration_event(name, params, false, self.now))))?;
+        }
+        Ok(())
     }
 
     /// Adds node `N` named `name` with `params`; `rig` (if given) instead of the rig file

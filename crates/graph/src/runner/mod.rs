@@ -10,6 +10,8 @@ pub mod memory;
 
 use std::any::Any;
 
+use serde_json::{Map, Value};
+
 use oilfilm_physics::config::RigConfig;
 
 use crate::conditioner::Conditioner;
@@ -31,6 +33,9 @@ pub trait Running {
     fn finish(&mut self, now: Stamp) -> Result<(), NodeError>;
     /// The node itself, for [`memory::Graph::node`].
     fn node(&self) -> &dyn Any;
+    /// Its fully qualified name and the parameters it was built with (what it announces on
+    /// `/parameter_events`).
+    fn parameters(&self) -> (&str, &Map<String, Value>);
 }
 
 /// A node connected to its ports.
@@ -38,6 +43,10 @@ pub struct Wired<N: Node> {
     pub name: String,
     pub node: N,
     pub ports: N::Ports<'static>,
+    /// `/namespace/name`.
+    pub fully_qualified: String,
+    /// Its parameters as ROS parameters.
+    pub params: Map<String, Value>,
 }
 
 impl<N: Node + 'static> Wired<N> {
@@ -45,7 +54,12 @@ impl<N: Node + 'static> Wired<N> {
     pub fn new<C: Connect>(name: &str, params: &N::Params, start: &Start, connect: &mut C) -> Result<Self, NodeError> {
         let node = N::new(params, start)?;
         let ports = node.connect(connect)?;
-        Ok(Self { name: name.to_string(), node, ports })
+        let map = match serde_json::to_value(params) {
+            Ok(Value::Object(m)) => m,
+            _ => Map::new(),
+        };
+        let fully_qualified = format!("{}/{name}", start.namespace.trim_end_matches('/'));
+        Ok(Self { name: name.to_string(), node, ports, fully_qualified, params: map })
     }
 }
 
@@ -61,6 +75,9 @@ impl<N: Node + 'static> Running for Wired<N> {
     }
     fn node(&self) -> &dyn Any {
         &self.node
+    }
+    fn parameters(&self) -> (&str, &Map<String, Value>) {
+        (&self.fully_qualified, &self.params)
     }
 }
 
