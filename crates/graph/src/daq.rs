@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 
 use oilfilm_identification::simulate::limits_of;
-use oilfilm_msgs::{DaqFrame, ExciterCommand, Header, RigStatus, BEARING_FRAME_ID};
+use oilfilm_msgs::{Clock, DaqFrame, ExciterCommand, Header, RigStatus, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::{Calibration, ChannelId, DaqScan};
 use oilfilm_physics::rig::RigInput;
@@ -20,6 +20,7 @@ use crate::error::NodeError;
 use crate::lines::LineDaq;
 use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
 use crate::params::{NodeParams, Rule, Spec};
+use crate::ports::Publish;
 use crate::topics;
 use crate::stamp::Stamp;
 
@@ -318,6 +319,13 @@ impl SimDaqCore {
         self.epoch
     }
 
+    /// Puts scan 0 at `epoch`, while no scan has run (later: nothing changes).
+    pub fn start_at(&mut self, epoch: Stamp) {
+        if self.next_scan == 0 {
+            self.epoch = epoch;
+        }
+    }
+
     /// The rig clock now: the start of the next scan.
     pub fn now(&self) -> Stamp {
         self.epoch.after_samples(self.next_scan as i64, self.rate_hz)
@@ -459,12 +467,18 @@ impl Node for Daq {
         }
     }
 
+    /// The frames go out through a [`ClockTap`] when the stamps are not the wall clock's
+    /// ([`publishes_clock`]), so `/clock` follows the rig time of the last frame.
     fn connect<C: Connect>(&self, c: &mut C) -> Result<DaqPorts<'static>, NodeError> {
-        let commands = match self {
-            Daq::Sim(_) => Some(c.input(&topics::EXCITER_COMMAND)?),
-            Daq::Lines(_) => None,
+        let (commands, params) = match self {
+            Daq::Sim(s) => (Some(c.input(&topics::EXCITER_COMMAND)?), &s.params),
+            Daq::Lines(l) => (None, l.params()),
         };
-        Ok(DaqPorts { commands, frames: c.output(&topics::DAQ_FRAMES)?, status: c.output(&topics::RIG_STATUS)? })
+        let mut frames = c.output(&topics::DAQ_FRAMES)?;
+        if publishes_clock(params) {
+            frames = Box::new(ClockTap { frames, clock: c.output(&topics::CLOCK)? });
+        }
+        Ok(DaqPorts { commands, frames, status: c.output(&topics::RIG_STATUS)? })
     }
 
     fn turn(&mut self, now: Stamp, ports: &mut DaqPorts<'_>) -> Result<Turn, NodeError> {
@@ -479,6 +493,45 @@ impl Node for Daq {
             Daq::Sim(_) => Ok(()),
             Daq::Lines(l) => l.finish(ports),
         }
+    }
+}
+
+/// Whether the DAQ's stamps are not the wall clock's, so it publishes them on `/clock` (the
+/// ROS time source of nodes with `use_sim_time`): a simulated rig running faster or slower
+/// than real time or from a given `start_stamp_ns`, and an ASCII replay (stamped with the
+/// record's time). A simulated rig at `rate_factor` 1 is stamped with the wall clock, and a
+/// TCP stream with the acquisition's clock: ROS time is the wall clock's there.
+pub fn publishes_clock(p: &DaqParams) -> bool {
+    match p.source.as_str() {
+        "sim" => p.rate_factor != 1.0 || p.start_stamp_ns != 0,
+        "ascii" => true,
+        _ => false,
+    }
+}
+
+/// The frames' port, publishing on `/clock`, after each frame, the rig time just after its
+/// last scan (the time of the next scan).
+struct ClockTap<'a> {
+    frames: Output<'a, DaqFrame>,
+    clock: Output<'a, Clock>,
+}
+
+impl Publish<DaqFrame> for ClockTap<'_> {
+    fn publish(&mut self, frame: DaqFrame) -> Result<(), NodeError> {
+        let end = (frame.sample_rate_hz > 0.0).then(|| Stamp::from_time(&frame.header.stamp).after_samples(i64::from(frame.scan_count), frame.sample_rate_hz));
+        self.frames.publish(frame)?;
+        if let Some(end) = end {
+            self.clock.publish(Clock { clock: end.to_time() })?;
+        }
+        Ok(())
+    }
+
+    fn readers(&mut self) -> Option<usize> {
+        self.frames.readers()
+    }
+
+    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
+        self.frames.flush(timeout)
     }
 }
 
@@ -525,6 +578,11 @@ impl SimDaq {
                 }
                 if readers == Some(0) {
                     tracing::warn!(node = "daq", "no subscriber on {} after {READER_WAIT_S} s: publishing anyway", topics::DAQ_FRAMES.name);
+                }
+                if self.params.start_stamp_ns == 0 {
+                    // Scan 0 is now, not when the node was built: at rate_factor 1 a frame's
+                    // stamps are then the wall clock's when it is published.
+                    self.core.start_at(now);
                 }
                 *self.wall_start.insert(now)
             }

@@ -256,6 +256,10 @@ pub struct LineDaq {
 }
 
 impl LineDaq {
+    pub fn params(&self) -> &DaqParams {
+        &self.params
+    }
+
     pub fn new(params: &DaqParams, rig: &oilfilm_physics::config::RigConfig) -> Result<Self, NodeError> {
         let (kind, name) = if params.source == "ascii" { ("ascii replay", params.file.clone()) } else { ("tcp stream", format!("tcp://{}", params.address)) };
         let core = ReplayCore::new(rig, params, kind, &name)?;
