@@ -62,6 +62,9 @@ pub fn run<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: &Map<Str
 /// [`run`], errors about a parameter value found when the node is built (against its rig
 /// file) named with the file and key that gave it (`sources`).
 pub fn run_located<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: &Map<String, Value>, sources: &Sources) -> Result<N, NodeError> {
+    // The command line's tools (`oilfilm record`, `play`) build their parameters in code:
+    // the same rules as a params file.
+    params::checked::<N::Params>(map)?;
     let use_sim_time = params::use_sim_time(args)?;
     if let (true, Some(why)) = (use_sim_time, N::CLOCK_SOURCE) {
         return Err(NodeError::parameter(USE_SIM_TIME, format!("cannot be true: {why}")));
