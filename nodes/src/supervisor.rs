@@ -1,7 +1,13 @@
 //! Starts a launch file's nodes as processes ([`oilfilm_graph::launch::read`] says which,
 //! with their `--ros-args`), watches them, and stops them all (SIGINT, then SIGKILL after a
 //! grace period) when one dies, when asked, or at the end.
+//!
+//! A node also stops when its launcher dies without stopping it (SIGKILL, a crash): each
+//! is started with the parent-death signal SIGTERM (Linux `prctl(PR_SET_PDEATHSIG)`), which
+//! it handles as it handles SIGINT, so the exciter ramps to zero and the recorder closes
+//! its bag, as `ros2 launch` stops its nodes.
 
+use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
@@ -22,7 +28,24 @@ impl Supervisor {
         let mut s = Self { children: Vec::new(), reported: Vec::new() };
         for n in nodes {
             let exe = bin_dir.join(&n.exec);
-            match Command::new(&exe).args(&n.args).spawn() {
+            let mut command = Command::new(&exe);
+            command.args(&n.args);
+            let launcher = std::process::id() as libc::pid_t;
+            // SAFETY: between fork and exec the closure calls only async-signal-safe
+            // functions (prctl, getppid, _exit) and allocates nothing.
+            unsafe {
+                command.pre_exec(move || {
+                    if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0) != 0 {
+                        return Err(std::io::Error::last_os_error());
+                    }
+                    // The launcher died before the signal was armed: it will never come.
+                    if libc::getppid() != launcher {
+                        libc::_exit(1);
+                    }
+                    Ok(())
+                })
+            };
+            match command.spawn() {
                 Ok(child) => s.children.push((n.clone(), child)),
                 Err(e) => {
                     s.stop(Duration::from_secs(2));
@@ -51,8 +74,9 @@ impl Supervisor {
     pub fn stop(&mut self, grace: Duration) {
         for (_, c) in &mut self.children {
             if let Ok(None) = c.try_wait() {
-                // SAFETY-free: `kill` with SIGINT via the system command (std has no signal API).
-                let _ = Command::new("kill").args(["-INT", &c.id().to_string()]).status();
+                // SAFETY: kill(2) on our own child's pid, which `try_wait` just saw running
+                // and which we have not reaped, so the pid is still ours.
+                unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGINT) };
             }
         }
         let deadline = Instant::now() + grace;
