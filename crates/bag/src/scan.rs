@@ -123,12 +123,14 @@ pub fn scan(bytes: &[u8]) -> ScannedFile {
                         out.footer = true;
                         Ok(())
                     }
-                    // The summary repeats schemas and channels: they were seen already.
                     other if in_data_section => {
                         let mut staged = Staged::default();
                         staged.take(&out, Owned::from(other)).map(|()| staged.commit(&mut out))
                     }
-                    _ => Ok(()),
+                    // The summary repeats schemas and channels. The data section's copies
+                    // outside chunks have no CRC, so a copy that differs is damage to one of
+                    // them (a flipped byte in a type name would otherwise read as another type).
+                    other => summary_agrees(&out, Owned::from(other)),
                 };
                 if let Err(what) = result {
                     out.stop = Some(ScanStop { offset: fed as u64, what, truncated: false });
@@ -138,6 +140,21 @@ pub fn scan(bytes: &[u8]) -> ScannedFile {
         }
     }
     out
+}
+
+/// Whether a schema or channel repeated in the summary is the one the data section declared.
+fn summary_agrees(file: &ScannedFile, r: Owned) -> Result<(), String> {
+    match r {
+        Owned::Schema(id, s) => match file.schemas.get(&id) {
+            Some(old) if *old != s => Err(format!("schema {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.name, s.name)),
+            _ => Ok(()),
+        },
+        Owned::Channel(id, c) => match file.channels.get(&id) {
+            Some(old) if *old != c => Err(format!("channel {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.topic, c.topic)),
+            _ => Ok(()),
+        },
+        _ => Ok(()),
+    }
 }
 
 /// A record from inside a chunk, owned (its bytes were decompressed here).
