@@ -81,6 +81,8 @@ pub fn run_located<N: Node + 'static>(args: &NodeArgs, params: &N::Params, map: 
     let mut ros = RosNode::new(args)?;
     ros.declare_parameters(N::Params::specs(), declared, use_sim_time, sim_time_of::<N>())?;
     let mut ports = node.connect(&mut ros)?;
+    // Tests and tools wait for this line: the parameter services and the ports exist from here.
+    tracing::info!(node = %args.fully_qualified_name(), "ready: {} parameters served, topics connected", N::Params::specs().len() + 1);
     let stop = shutdown_flag()?;
     let turned = (|| -> Result<(), NodeError> {
         while !stop.load(Ordering::SeqCst) {

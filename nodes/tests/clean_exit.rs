@@ -32,10 +32,10 @@ fn a_node_stopped_with_sigint_exits_0_without_an_error_line() {
             let _ = tx.send(line);
         }
     });
-    // Up once it has applied its parameters: its parameter services exist from then on.
+    // Up once it says so: its parameter services and ports exist from then on.
     let mut log = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(30);
-    while !log.iter().any(|l: &String| l.contains("parameters changed")) {
+    while !log.iter().any(|l: &String| l.contains("ready:")) {
         let left = deadline.saturating_duration_since(Instant::now());
         match rx.recv_timeout(left) {
             Ok(line) => log.push(line),
