@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# `oilfilm launch` as a process tree, from rclpy (test_launch_lifecycle.py): no estimate ->
+# non-zero exit naming the silent node; launcher killed -> its nodes exit, the exciter ramping
+# to zero. Needs the binaries of `cargo test --workspace --profile test` (target/debug) or of
+# a release build: pass their directory as $1.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+bin_dir=${1:-target/debug}
+[ -x "$bin_dir/oilfilm" ] && [ -x "$bin_dir/oilfilm-daq" ] || { echo "no oilfilm binaries in $bin_dir (build them first)" >&2; exit 1; }
+eval "$(bash tests/interop/setup-ros-venv.sh)"
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((100 + RANDOM % 100))}
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_LOCALHOST_ONLY=1
+echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"
+exec timeout 300 "$OILFILM_ROS_PYTHON_BIN" tests/interop/test_launch_lifecycle.py "$(cd "$bin_dir" && pwd)"
