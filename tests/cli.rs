@@ -143,6 +143,24 @@ fn identify_a_bag_gives_the_live_estimates() {
         w.write_message(frames, ns(&f.header), f).unwrap();
     }
     w.close().unwrap();
+    // The same frames in a second bag that also keeps the nodes' parameters, as the recorder
+    // records them (/parameter_events, each node's declaration when it started).
+    let with_params = scratch("graph-bag-with-params");
+    let mut w = BagWriter::create(&with_params, WriterOptions::default()).unwrap();
+    let (frames, status) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap());
+    let events = w.add_topic(spec(&topics::PARAMETER_EVENTS)).unwrap();
+    let t0 = ns(&live.frames[0].header);
+    for (node, params) in [("/oilfilm/conditioner", serde_json::to_value(&p.conditioner).unwrap()), ("/oilfilm/estimator", serde_json::to_value(&p.estimator).unwrap())] {
+        let event = oilfilm_graph::params::declaration_event(node, params.as_object().unwrap(), false, oilfilm_graph::stamp::Stamp(t0 as i64 - 1_000_000));
+        w.write_message(events, t0 - 1_000_000, &event).unwrap();
+    }
+    for s in &live.status[..1] {
+        w.write_message(status, ns(&s.header), s).unwrap();
+    }
+    for f in &live.frames {
+        w.write_message(frames, ns(&f.header), f).unwrap();
+    }
+    w.close().unwrap();
     let params = scratch("graph-bag-params.yaml");
     std::fs::write(&params, "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n").unwrap();
 
@@ -179,6 +197,26 @@ fn identify_a_bag_gives_the_live_estimates() {
             assert!(rel.abs() < 0.05, "K{} batch {:.4e} against live {live_k:.4e}", i, k[i / 2][i % 2]);
         }
     }
+    // Without --params, the bag's recorded parameters: --replay gives the live estimates bit
+    // for bit, and the batch path takes the recorded low-pass and window.
+    let out = oilfilm(&["identify", with_params.to_str().unwrap(), "--replay", "--json"]);
+    assert!(out.status.success(), "identify BAG --replay failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("the estimator's parameters are the ones /oilfilm/estimator ran with"), "{}", String::from_utf8_lossy(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let got = doc["estimates"].as_array().expect("estimates");
+    assert_eq!(got.len(), live.estimates.len());
+    for (g, e) in got.iter().zip(&live.estimates) {
+        let k: Vec<f64> = g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        assert_eq!(k, e.stiffness_n_m.to_vec(), "stiffness of window {} from the recorded parameters", e.window_start_sample);
+    }
+    let out = oilfilm(&["identify", with_params.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
+    let id: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(id["lowpass_cutoff_hz"], p.conditioner.lowpass_cutoff_hz, "the recorded low-pass, not adapted");
+    // 12 s at 5 kHz in the recorded 25 000-scan windows: 2 (the batch default, 50 000: 1).
+    assert_eq!(p.estimator.window, 25_000);
+    assert_eq!(id["windows"].as_array().expect("windows").len(), 2, "the recorded window length");
+
     let empty = scratch("not-a-bag");
     std::fs::create_dir_all(&empty).unwrap();
     let out = oilfilm(&["identify", empty.to_str().unwrap()]);
