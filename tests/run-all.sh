@@ -102,6 +102,7 @@ interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopb
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 interop "oilfilm launch as a process tree: a run without an estimate exits non-zero naming the silent node; SIGKILL of the launcher stops its nodes, the exciter ramping to zero" bash tests/interop/run-launch-lifecycle.sh target/debug
+interop "the real ros2 command line (ros2cli on the rclpy wheels) against the live graph and oilfilm play: node/topic/service list, topic info -v, echo --once, hz, param list/describe/get/set, refusals on /rosout, the player named" bash tests/interop/run-ros2-cli.sh target/debug
 interop "oilfilm play seen from rclpy: /clock is rosgraph_msgs/Clock on the bag's log time and a use_sim_time node follows it; every message arrives with its recorded stamp" bash tests/interop/run-rclpy-player.sh target/debug
 phase "ROS 2 interop"
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
