@@ -37,6 +37,18 @@ pub enum Rule {
     ListOf(&'static [&'static str]),
 }
 
+/// A range bound as a person reads it: `1e300`, not three hundred digits; `.inf` as YAML
+/// and `ros2 param set` spell infinity.
+fn bound(x: f64) -> String {
+    if x.is_infinite() {
+        if x > 0.0 { ".inf" } else { "-.inf" }.to_string()
+    } else if x != 0.0 && !(1e-3..1e6).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
+}
+
 impl Rule {
     /// A number in `[min, max]`.
     pub const fn number(min: f64, max: f64) -> Self {
@@ -53,8 +65,8 @@ impl Rule {
         match self {
             Rule::Any => String::new(),
             Rule::Integer { min, max } => format!("an integer in [{min}, {max}]"),
-            Rule::Number { min, max, above_min: false } => format!("a number in [{min}, {max}]"),
-            Rule::Number { min, max, above_min: true } => format!("a number above {min}, at most {max}"),
+            Rule::Number { min, max, above_min: false } => format!("a number in [{}, {}]", bound(*min), bound(*max)),
+            Rule::Number { min, max, above_min: true } => format!("a number above {}, at most {}", bound(*min), bound(*max)),
             Rule::OneOf(words) => format!("one of: {}", words.join(", ")),
             Rule::ListOf(words) => format!("a list of: {}", words.join(", ")),
         }
@@ -436,6 +448,14 @@ pub fn declaration_event(fully_qualified: &str, params: &Map<String, Value>, use
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rule_states_its_bounds_as_a_person_reads_them() {
+        assert_eq!(Rule::number(1.0, 1e300).describe(), "a number in [1, 1e300]");
+        assert_eq!(Rule::above(0.0, f64::INFINITY).describe(), "a number above 0, at most .inf");
+        assert_eq!(Rule::number(0.5, 1e7).describe(), "a number in [0.5, 1e7]");
+        assert_eq!(Rule::number(0.0, 3600.0).describe(), "a number in [0, 3600]");
+    }
     use crate::estimator::EstimatorParams;
 
     fn args(v: &[&str]) -> Vec<String> {
