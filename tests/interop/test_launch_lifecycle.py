@@ -22,7 +22,7 @@ import time
 import rclpy
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from oilfilm_msgs.msg import ExciterCommand
+from oilfilm_msgs.msg import DaqFrame, ExciterCommand
 
 sys.path.insert(0, os.path.dirname(__file__))
 from test_rclpy_live import NS, ROOT, check, check_no_step, failures, spin_until  # noqa: E402
@@ -46,15 +46,43 @@ def group_alive(pgid):
 
 
 def no_estimate(oilfilm):
-    """1. The estimator's 40 s window in a 6 s run."""
+    """1. The estimator's 40 s window in a 6 s run. Its DAQ runs at real time (rate_factor 1),
+    so its frames are stamped with the wall clock: a frame arrives just after the wall-clock
+    time of the scan after its last (its stamp + scan_count / rate)."""
+    rclpy.init()
+    node = rclpy.create_node("oilfilm_rclpy_stamp_probe")
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    lags = []
+
+    def frame(f):
+        end_ns = f.header.stamp.sec * 1_000_000_000 + f.header.stamp.nanosec + round(f.scan_count * 1e9 / f.sample_rate_hz)
+        lags.append((time.time_ns() - end_ns) * 1e-9)
+    node.create_subscription(DaqFrame, f"{NS}/daq/frames", frame,
+                             QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
     launch_file = os.path.join(ROOT, "tests/interop/live/silent_estimator.launch.yaml")
-    run = subprocess.run([oilfilm, "launch", launch_file, "--seconds", "6"], capture_output=True, text=True, timeout=120, start_new_session=True)
-    out = run.stdout + run.stderr
+    run = subprocess.Popen([oilfilm, "launch", launch_file, "--seconds", "6"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                           text=True, start_new_session=True)
+    try:
+        spin_until(executor, lambda: run.poll() is not None, 120)
+        out = run.communicate(timeout=30)[0]
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+            run.wait()
+        node.destroy_node()
+        rclpy.shutdown()
     check(run.returncode != 0, f"a run without an estimate exits non-zero (exit {run.returncode})")
     said = [line for line in out.splitlines() if line.startswith("Error: ")]
     check(bool(said) and "node `estimator` published nothing" in said[0] and "conditioner published" in said[0] and "daq published" in said[0],
           f"its error names the silent estimator and what the nodes upstream published: {said[0] if said else '(none)'}")
     check("0 estimate(s) received" in out, "it counts the estimates it received (0)")
+    # The least lag is the transport's alone: within 20 ms of the wall clock (a DAQ that
+    # took its start before waiting for subscribers lagged ~0.6 s; one run 4x fast, seconds ahead).
+    lags.sort()
+    check(len(lags) >= 20 and abs(lags[0]) < 0.020 and lags[len(lags) // 2] < 0.2,
+          f"at rate_factor 1 a DAQ frame's end stamp is the wall clock's: least lag {1e3 * lags[0]:.1f} ms, median "
+          f"{1e3 * lags[len(lags) // 2]:.1f} ms over {len(lags)} frames" if lags else "no DAQ frame received")
 
 
 def launcher_killed(oilfilm):
