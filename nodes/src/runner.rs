@@ -21,8 +21,10 @@ const IDLE: Duration = Duration::from_micros(500);
 /// The longest a node waits for the time it asked to be woken at (a DAQ's next block).
 const MAX_NAP: Duration = Duration::from_millis(20);
 /// After the last turn, before the node leaves DDS: reliable readers take what was last
-/// published (the exciter's ramp to zero, a DAQ's last frames, the last estimate).
-const LINGER: Duration = Duration::from_millis(500);
+/// published (the exciter's ramp to zero, a DAQ's last frames, the last estimate). Longer
+/// than RustDDS's slow heartbeat (1 s), so a sample whose first sending was lost (every node
+/// of a graph stopping at once on a loaded machine) is repaired before the writer goes.
+const LINGER: Duration = Duration::from_millis(1500);
 
 /// A node binary's `main`: parses `--ros-args`, loads the typed parameters (a bad value is
 /// named with the file and key, or the `-p`, that gave it), runs the node until
