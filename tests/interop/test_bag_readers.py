@@ -71,7 +71,9 @@ def test_rosbags_anyreader_decodes_every_message(expected):
         assert types["/oilfilm/daq/frames"] == "oilfilm_msgs/msg/DaqFrame"
         qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
         assert qos["/oilfilm/rig/status"][0].depth == 10
-        assert qos["/oilfilm/rig/status"][0].durability.name == "TRANSIENT_LOCAL"
+        # Only exciter/command keeps history for late joiners (ADR 0025).
+        assert qos["/oilfilm/rig/status"][0].durability.name == "VOLATILE"
+        assert qos["/oilfilm/exciter/command"][0].durability.name == "TRANSIENT_LOCAL"
         entries = []
         last = 0
         for conn, t, raw in reader.messages():
