@@ -108,6 +108,9 @@ fn descriptor(spec: &Spec, value: &Value) -> raw::ParameterDescriptor {
     }
 }
 
+/// A set as it would leave the node: its parameters, `use_sim_time`, and the names it changes.
+type Prepared = (Map<String, Value>, bool, Vec<String>);
+
 impl ParameterServer {
     /// The services of `node` (`fqn`: its fully qualified name) for parameters `specs` with
     /// their values `values`, and `use_sim_time`; announces the declared parameters on
@@ -181,7 +184,7 @@ impl ParameterServer {
 
     /// Checks a set of `(name, value)` against the specs: the names known, the types kept,
     /// read-only ones unchanged. Returns the values as they would be and what changes.
-    fn prepare(&self, set: &[raw::Parameter]) -> Result<(Map<String, Value>, bool, Vec<String>), String> {
+    fn prepare(&self, set: &[raw::Parameter]) -> Result<Prepared, String> {
         let mut next = self.values.clone();
         let mut sim = self.use_sim_time;
         let mut changed = Vec::new();
