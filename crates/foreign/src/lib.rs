@@ -15,6 +15,7 @@
 
 pub mod csv_file;
 pub mod error;
+pub mod fixtures;
 pub mod map;
 pub mod mat;
 pub mod record;
