@@ -17,8 +17,12 @@ use crate::RigSource;
 
 #[derive(Debug, clap::Args)]
 pub struct DiagnoseArgs {
-    /// An ASCII record (format: docs/manual/ascii-format.md) or a rosbag2 bag directory holding DAQ frames.
+    /// An ASCII record (format: docs/manual/ascii-format.md), a rosbag2 bag directory holding
+    /// DAQ frames, or with --map a TDMS, .mat or CSV record.
     input: PathBuf,
+    /// Channel map (TOML) of a TDMS, .mat or CSV record (README "Records from other tools").
+    #[arg(long, value_name = "MAP")]
+    map: Option<PathBuf>,
     #[command(flatten)]
     source: RigSource,
     /// Shaft speed, rpm, if the record does not state it.
@@ -132,7 +136,13 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let name = args.input.display().to_string();
-    let (loaded, rig, rig_source) = if args.input.is_dir() {
+    let (loaded, rig, rig_source) = if let Some(map) = &args.map {
+        let rig = nominal(args.source.load()?);
+        let source = args.source.path().map_or("built-in zhou2004".to_string(), |p| format!("{} (--rig)", p.display()));
+        let f = crate::foreign_input::load_raw(&args.input, map, &rig)?;
+        let (speed_rpm, speed_source) = crate::foreign_input::speed_source(args.speed_rpm, f.speed_rpm, &rig);
+        (Loaded { raw: f.raw, calibration: f.calibration, speed_rpm, speed_source }, rig, source)
+    } else if args.input.is_dir() {
         let rig = nominal(args.source.load()?);
         let source = args.source.path().map_or("built-in zhou2004".to_string(), |p| format!("{} (--rig)", p.display()));
         (load_bag(args, &rig)?, rig, source)

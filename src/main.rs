@@ -13,6 +13,8 @@ mod ascii_input;
 mod diagnose;
 mod diagnose_report;
 mod identify_corrected;
+mod foreign_input;
+mod import;
 
 use std::path::PathBuf;
 
@@ -77,8 +79,12 @@ enum Command {
     Coefficients(CoefficientArgs),
     /// Simulate a record of the rig (any excitation, any injected effect) in the ASCII format.
     Simulate(records::SimulateArgs),
-    /// Identify the coefficients of an ASCII record, window by window.
+    /// Identify the coefficients of an ASCII record, window by window (or of a bag, or of a
+    /// TDMS, .mat or CSV record with --map).
     Identify(records::IdentifyArgs),
+    /// Write a record (TDMS, .mat or CSV through --map, or our ASCII format) as a rosbag2
+    /// bag of DAQ frames and rig status, as the DAQ node would publish and the recorder record it.
+    Import(import::ImportArgs),
     /// What the simulation gets wrong about a record (ASCII or bag): the cause named from a
     /// catalog and judged on held-out data, the extended model's parameters and its gain,
     /// with a report (figures + report.md). `--json` prints the stable contract.
@@ -175,6 +181,7 @@ fn main() -> Result<()> {
         Command::Coefficients(args) => run_coefficients(&args),
         Command::Simulate(args) => records::run_simulate(&args),
         Command::Identify(args) => records::run_identify(&args),
+        Command::Import(args) => import::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Campaign(args) => campaign::run(&args.source.load()?, &args.out, args.quick, args.json),
     }

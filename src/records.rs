@@ -177,8 +177,14 @@ pub struct IdentifyArgs {
     /// An ASCII record (format: docs/manual/ascii-format.md), or a rosbag2 bag directory (MCAP)
     /// recorded from the node graph: its DAQ frames, as one record, go through the same
     /// identification as an ASCII record (with `--replay`: through the very conditioner and
-    /// estimator the nodes run, so the estimates equal the live ones, bit for bit).
-    file: PathBuf,
+    /// estimator the nodes run, so the estimates equal the live ones, bit for bit); or, with
+    /// `--map`, a TDMS, .mat or CSV record, read as a bag of it would be.
+    pub(crate) file: PathBuf,
+    /// Channel map (TOML) of a TDMS, .mat or CSV record (docs/manual/foreign-records.md): the
+    /// record is read as the DAQ node's foreign source publishes it and identified as
+    /// `oilfilm import` then `identify BAG` would (`--params` and `--replay` apply).
+    #[arg(long, value_name = "MAP")]
+    pub(crate) map: Option<PathBuf>,
     /// For a bag: a ROS 2 params file for the conditioner and estimator
     /// (`/oilfilm/conditioner`, `/oilfilm/estimator` sections, e.g.
     /// launch_configs/params/sim_rig.yaml), whose chain and window settings are used (the
@@ -186,13 +192,14 @@ pub struct IdentifyArgs {
     /// estimator ran with (recorded on /parameter_events), else the identification's
     /// defaults (with `--replay`: the nodes').
     #[arg(long, value_name = "FILE")]
-    params: Option<PathBuf>,
-    /// For a bag: re-run the node graph's conditioner and estimator on its frames instead of
-    /// the batch identification, giving the estimates the graph published live.
+    pub(crate) params: Option<PathBuf>,
+    /// For a bag (or a `--map` record): re-run the node graph's conditioner and estimator on
+    /// its frames instead of the batch identification, giving the estimates the graph
+    /// published live.
     #[arg(long)]
-    replay: bool,
+    pub(crate) replay: bool,
     #[command(flatten)]
-    source: RigSource,
+    pub(crate) source: RigSource,
     /// Shaft speed, rpm, if the record does not state it.
     #[arg(long)]
     speed_rpm: Option<f64>,
@@ -213,7 +220,7 @@ pub struct IdentifyArgs {
     no_deskew: bool,
     /// Print JSON instead of tables.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     /// Diagnose the record and report the coefficients a user can keep (corrected for a
     /// measurement effect, an added mass or friction separated, at the start for a drift)
     /// even when no window is refused (a refused window always does this).
@@ -225,15 +232,27 @@ pub struct IdentifyArgs {
 }
 
 pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
+    if let (Some(map), true) = (&args.map, args.replay) {
+        return crate::foreign_input::identify(args, map);
+    }
     if args.file.is_dir() && args.replay {
         return replay_bag(args);
     }
-    anyhow::ensure!(!args.replay, "--replay applies to bags (the node graph re-run); {} is a file", args.file.display());
+    anyhow::ensure!(!args.replay, "--replay applies to bags and --map records (the node graph re-run); {} is a file", args.file.display());
     let name = args.file.display().to_string();
     // The record, its schedule, the speed it states and its rig: from a bag's DAQ frames and
     // rig status (the rig file), or from an ASCII record (the rig its header names, else the
     // rig file).
-    let (raw, offsets, stated_rpm, mut config, rig) = if args.file.is_dir() {
+    let (raw, offsets, stated_rpm, mut config, rig) = if let Some(map) = &args.map {
+        anyhow::ensure!(!args.file.is_dir(), "{name} is a directory: --map is for a TDMS, .mat or CSV file");
+        let rig = args.source.load()?;
+        let l = crate::foreign_input::load_raw(&args.file, map, &rig)?;
+        let config = match node_params(args)? {
+            (c, e, ParamsFrom::File | ParamsFrom::Bag) => params_config(&c, &e, l.raw.sample_rate_hz)?,
+            (_, _, ParamsFrom::Defaults) => PipelineConfig::default(),
+        };
+        (l.raw, l.offsets_s, l.speed_rpm, config, rig)
+    } else if args.file.is_dir() {
         let rig = args.source.load()?;
         let b = oilfilm::bags::record_of_bag(&args.file)?;
         if !b.ignored.is_empty() {
@@ -328,7 +347,7 @@ enum ParamsFrom {
 /// The conditioner's and estimator's parameters: from `--params`; without it, for a bag that
 /// recorded them, the ones its nodes ran with (said on stderr, with a warning when they
 /// changed during the recording); else the nodes' defaults.
-fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams, ParamsFrom)> {
+pub(crate) fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams, ParamsFrom)> {
     use oilfilm_graph::conditioner::ConditionerParams;
     use oilfilm_graph::estimator::EstimatorParams;
     use oilfilm_graph::params::{self, NodeArgs};
@@ -467,6 +486,14 @@ fn replay_bag(args: &IdentifyArgs) -> Result<()> {
             );
         }
     }
+    apply_estimator_options(args, &mut estimator)?;
+    replay_and_print(args, &rig, &conditioner, &estimator)
+}
+
+/// `--window`, `--hop`, `--model`, `--solver`, `--speed-rpm` over the estimator's parameters;
+/// `--no-deskew` is refused (the conditioner's `deskew` parameter says it).
+pub(crate) fn apply_estimator_options(args: &IdentifyArgs, estimator: &mut oilfilm_graph::estimator::EstimatorParams) -> Result<()> {
+    let name = args.file.display().to_string();
     if let Some(w) = args.window {
         estimator.window = w as i64;
         estimator.hop = args.hop.unwrap_or(w) as i64;
@@ -492,9 +519,15 @@ fn replay_bag(args: &IdentifyArgs) -> Result<()> {
         estimator.speed_rpm = rpm;
     }
     if args.no_deskew {
-        bail!("{name}: --no-deskew is for ASCII records; for a bag set `deskew: false` in the conditioner's params");
+        bail!("{name}: --no-deskew is for ASCII records; for a bag or a --map record set `deskew: false` in the conditioner's params");
     }
-    let (out, frames, status) = reanalyse_bag(&args.file, &rig, &conditioner, &estimator, reader_threads_beside_analysis())?;
+    Ok(())
+}
+
+/// The bag's frames through the node conditioner and estimator, printed.
+fn replay_and_print(args: &IdentifyArgs, rig: &RigConfig, conditioner: &oilfilm_graph::conditioner::ConditionerParams, estimator: &oilfilm_graph::estimator::EstimatorParams) -> Result<()> {
+    let name = args.file.display().to_string();
+    let (out, frames, status) = reanalyse_bag(&args.file, rig, conditioner, estimator, reader_threads_beside_analysis())?;
     if args.json {
         let doc = serde_json::json!({
             "bag": name,

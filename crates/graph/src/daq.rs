@@ -30,10 +30,14 @@ use crate::stamp::Stamp;
 pub struct DaqParams {
     /// Rig file (TOML); empty: the built-in Zhou et al. (2004) rig.
     pub rig: String,
-    /// `sim` (the simulated rig), `ascii` (replay `file`) or `tcp` (connect to `address`).
+    /// `sim` (the simulated rig), `ascii` (replay `file`), `foreign` (replay `file`, a TDMS,
+    /// .mat or CSV record, through the channel map `map`) or `tcp` (connect to `address`).
     pub source: String,
-    /// ASCII record to replay (source `ascii`).
+    /// Record to replay (sources `ascii` and `foreign`).
     pub file: String,
+    /// Channel map (TOML) of the foreign record (source `foreign`; README "Records from
+    /// other tools").
+    pub map: String,
     /// `host:port` of the acquisition process (source `tcp`).
     pub address: String,
     /// Scans per published frame.
@@ -61,6 +65,7 @@ impl Default for DaqParams {
             rig: String::new(),
             source: "sim".into(),
             file: String::new(),
+            map: String::new(),
             address: String::new(),
             block_scans: 500,
             rate_factor: 1.0,
@@ -95,11 +100,14 @@ impl NodeParams for DaqParams {
 
 impl DaqParams {
     pub fn validate(&self) -> Result<(), NodeError> {
-        if !["sim", "ascii", "tcp"].contains(&self.source.as_str()) {
-            return Err(NodeError::parameter("source", format!("`{}`: expected `sim`, `ascii` (replay `file`) or `tcp` (connect to `address`)", self.source)));
+        if !["sim", "ascii", "foreign", "tcp"].contains(&self.source.as_str()) {
+            return Err(NodeError::parameter("source", format!("`{}`: expected `sim`, `ascii` (replay `file`), `foreign` (replay `file` through `map`) or `tcp` (connect to `address`)", self.source)));
         }
-        if self.source == "ascii" && self.file.is_empty() {
-            return Err(NodeError::parameter("file", "source `ascii` needs the record's path"));
+        if (self.source == "ascii" || self.source == "foreign") && self.file.is_empty() {
+            return Err(NodeError::parameter("file", format!("source `{}` needs the record's path", self.source)));
+        }
+        if self.source == "foreign" && self.map.is_empty() {
+            return Err(NodeError::parameter("map", "source `foreign` needs the record's channel map (TOML)"));
         }
         if self.source == "tcp" && self.address.is_empty() {
             return Err(NodeError::parameter("address", "source `tcp` needs host:port"));

@@ -31,6 +31,10 @@ pub enum NodeError {
     /// Writing or reading a bag failed (the error names the file).
     #[error(transparent)]
     Bag(#[from] oilfilm_bag::BagError),
+    /// A record from another tool (TDMS, .mat, CSV) or its channel map is unusable (the
+    /// error names the file, the channel and the place, or the map's key).
+    #[error(transparent)]
+    Foreign(#[from] oilfilm_foreign::ForeignError),
     #[error("{what}: {source}")]
     Io { what: String, source: std::io::Error },
 }

@@ -17,6 +17,7 @@ pub mod daq;
 pub mod error;
 pub mod estimator;
 pub mod exciter;
+pub mod foreign;
 pub mod launch;
 pub mod lines;
 pub mod node;

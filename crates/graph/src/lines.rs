@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use crate::daq::{DaqParams, DaqPorts, READER_WAIT_S};
 use crate::error::NodeError;
+use crate::foreign::ForeignSource;
 use crate::node::Turn;
 use crate::replay::{Produced, ReplayCore};
 use crate::stamp::Stamp;
@@ -244,6 +245,33 @@ struct Reader {
 enum Source {
     Ascii(std::fs::File),
     Tcp(String),
+    /// A TDMS, .mat or CSV record through its channel map (it has no lines: the reading
+    /// thread runs [`run_foreign_source`] instead of the line reader).
+    Foreign(Box<ForeignSource>),
+}
+
+/// Replays a foreign record's frames (each with its status) to `emit`, paced as an ASCII
+/// replay is. Returns at the end of the record, after `duration_s` of rig time or at
+/// `stop()`; `Err` when the record turns out unreadable (the error names the file, the
+/// channel and the scan) or from `emit`.
+pub fn run_foreign_source(source: &mut ForeignSource, pace: &ReplayPace, stop: &dyn Fn() -> bool, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
+    let wall_start = Instant::now();
+    let mut origin: Option<Stamp> = None;
+    while !stop() {
+        let Some((frame, status)) = source.next()? else { break };
+        let first = *origin.get_or_insert_with(|| Stamp::from_time(&frame.header.stamp));
+        let rig_s = Stamp::from_time(&status.header.stamp).seconds_since(first);
+        if pace.rate_factor > 0.0 {
+            let due = Duration::try_from_secs_f64((rig_s / pace.rate_factor).max(0.0)).unwrap_or(Duration::MAX);
+            sleep_unless(due.saturating_sub(wall_start.elapsed()), stop);
+        }
+        emit(Produced { frames: vec![(frame, status)], bad_row: None })?;
+        if pace.duration_s > 0.0 && rig_s >= pace.duration_s {
+            break;
+        }
+    }
+    tracing::info!(node = "daq", "{}: replay finished: {} frame(s)", source.record().path.display(), source.frames());
+    Ok(())
 }
 
 /// The DAQ node on a line source (`source: ascii` or `tcp`).
@@ -261,12 +289,17 @@ impl LineDaq {
     }
 
     pub fn new(params: &DaqParams, rig: &oilfilm_physics::config::RigConfig) -> Result<Self, NodeError> {
-        let (kind, name) = if params.source == "ascii" { ("ascii replay", params.file.clone()) } else { ("tcp stream", format!("tcp://{}", params.address)) };
+        let (kind, name) = match params.source.as_str() {
+            "ascii" => ("ascii replay", params.file.clone()),
+            "foreign" => ("foreign replay", params.file.clone()),
+            _ => ("tcp stream", format!("tcp://{}", params.address)),
+        };
         let core = ReplayCore::new(rig, params, kind, &name)?;
-        let source = if params.source == "ascii" {
-            Source::Ascii(std::fs::File::open(&params.file).map_err(|e| NodeError::Io { what: format!("ascii record `{}`", params.file), source: e })?)
-        } else {
-            Source::Tcp(params.address.clone())
+        let source = match params.source.as_str() {
+            "ascii" => Source::Ascii(std::fs::File::open(&params.file).map_err(|e| NodeError::Io { what: format!("ascii record `{}`", params.file), source: e })?),
+            // Opened here, so that a bad map or file fails the node before it runs.
+            "foreign" => Source::Foreign(Box::new(ForeignSource::open(std::path::Path::new(&params.file), std::path::Path::new(&params.map), rig, params)?)),
+            _ => Source::Tcp(params.address.clone()),
         };
         Ok(Self { params: params.clone(), idle: Some((core, source)), reader: None, reader_wait: None })
     }
@@ -284,6 +317,7 @@ impl LineDaq {
                 let mut emit = |out: Produced| tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into()));
                 match source {
                     Source::Ascii(file) => run_ascii_source(BufReader::new(file), &mut core, &pace, &stopped, &mut emit)?,
+                    Source::Foreign(mut source) => run_foreign_source(&mut source, &pace, &stopped, &mut emit)?,
                     Source::Tcp(address) => {
                         let backoff = Backoff { initial: Duration::from_millis(100), max: Duration::from_secs(5) };
                         run_tcp_source(&address, &mut core, &backoff, &stopped, &mut emit)?
