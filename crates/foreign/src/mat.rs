@@ -113,7 +113,7 @@ fn class_name(class: u8) -> &'static str {
 }
 
 /// A byte source that knows its position and can skip.
-trait Source: Read {
+trait Source: Read + Send {
     fn pos(&self) -> u64;
     fn skip(&mut self, n: u64) -> std::io::Result<()>;
 }
