@@ -20,7 +20,7 @@ pub struct DiagnoseArgs {
     /// An ASCII record (format: docs/manual/ascii-format.md), a rosbag2 bag directory holding
     /// DAQ frames, or with --map a TDMS, .mat or CSV record.
     input: PathBuf,
-    /// Channel map (TOML) of a TDMS, .mat or CSV record (README "Records from other tools").
+    /// Channel map (TOML) of a TDMS, .mat or CSV record (docs/manual/foreign-records.md).
     #[arg(long, value_name = "MAP")]
     map: Option<PathBuf>,
     #[command(flatten)]

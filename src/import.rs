@@ -27,7 +27,7 @@ use crate::RigSource;
 pub struct ImportArgs {
     /// The record: TDMS, .mat or CSV (with --map), or our ASCII format (plain or gzip).
     file: PathBuf,
-    /// Channel map (TOML) of a TDMS, .mat or CSV record (README "Records from other tools").
+    /// Channel map (TOML) of a TDMS, .mat or CSV record (docs/manual/foreign-records.md).
     #[arg(long, value_name = "MAP")]
     map: Option<PathBuf>,
     /// The bag directory to write (it must not exist).

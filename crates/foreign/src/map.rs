@@ -1,7 +1,7 @@
 //! The channel map: a TOML file that says which channel of a foreign record is which of the
 //! rig's ten, in what unit, with what scale, offset and sign, at what sample rate and on
 //! what multiplexer schedule, and where the shaft speed and the bearing temperature come
-//! from. The README's "Records from other tools" section documents every key; this module
+//! from. docs/manual/foreign-records.md documents every key; this module
 //! reads the file ([`ChannelMap::from_toml_str`]) and checks it whole before any record is
 //! opened, so that a bad map is refused with the key at fault and nothing is read.
 //!

@@ -35,8 +35,7 @@ pub struct DaqParams {
     pub source: String,
     /// Record to replay (sources `ascii` and `foreign`).
     pub file: String,
-    /// Channel map (TOML) of the foreign record (source `foreign`; README "Records from
-    /// other tools").
+    /// Channel map (TOML) of the foreign record (source `foreign`; docs/manual/foreign-records.md).
     pub map: String,
     /// `host:port` of the acquisition process (source `tcp`).
     pub address: String,
