@@ -139,7 +139,7 @@ fn diagnose_reads_a_tdms_record_as_it_reads_the_ascii_one() {
 }
 
 #[test]
-fn a_truncated_tdms_is_refused_and_nothing_is_written() {
+fn broken_files_and_maps_are_refused_and_nothing_is_written() {
     let f = files("refused");
     let (tdms, map) = &f.foreign[0];
     let bytes = std::fs::read(tdms).unwrap();
@@ -166,6 +166,21 @@ fn a_truncated_tdms_is_refused_and_nothing_is_written() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("ragged.csv") && err.contains("11 fields, the header has 10") && err.contains("nothing was written"), "{err}");
     assert!(!bag.exists());
+    // A map naming a channel the file lacks, and one naming a file channel twice: refused
+    // before anything is read, the map's key and the file's channel named, no bag.
+    let map_text = std::fs::read_to_string(map).unwrap();
+    for (name, text, words) in [
+        ("missing", map_text.replace("Forces/Exciter 2", "Forces/Exciter 3"), vec!["record.tdms", "`Forces/Exciter 3` (f2)", "no such channel"]),
+        ("twice", map_text.replace("Forces/Exciter 2", "Forces/Exciter 1"), vec!["twice.map.toml", "channel[7].from", "`Forces/Exciter 1` is mapped twice", "channel[6] (f1)"]),
+    ] {
+        let bad_map = f.dir.join(format!("{name}.map.toml"));
+        std::fs::write(&bad_map, text).unwrap();
+        let bag = f.dir.join(format!("{name}-bag"));
+        let out = oilfilm(&["import", s(tdms), "--map", s(&bad_map), "-o", s(&bag)]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && words.iter().all(|w| err.contains(w)), "{name}: {err}");
+        assert!(!bag.exists(), "{name}: no bag");
+    }
     // An existing output is never overwritten.
     let out = oilfilm(&["import", s(tdms), "--map", s(map), "-o", s(&f.dir)]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("already exists"));

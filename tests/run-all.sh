@@ -108,6 +108,8 @@ phase "ROS 2 interop"
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
 interop "rosbags (type hashes checked) and mcap-ros2-support decode our bags (also a killed one after our recovery); pymcap-cli doctor finds no error; rosbags-convert round-trips via sqlite3; our reader and oilfilm identify read rosbags' bags" bash tests/interop/run-bag-readers.sh
 interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
+echo "== Records from other tools (npTDMS, scipy, pandas from PyPI, in .venv-foreign)"
+interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
 
 phase "bag interop"
 echo
