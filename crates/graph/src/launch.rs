@@ -124,7 +124,10 @@ pub fn read_with(path: &Path, launch_args: &[(String, String)]) -> Result<Vec<No
                 }
                 ParamEntry::Value { name: k, value } => {
                     let v = serde_yaml_ng::to_string(value).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
-                    args.extend(["-p".into(), format!("{k}:={}", substitute(v.trim()))]);
+                    // An argument substituted to nothing is the empty string, as in ROS 2
+                    // launch, not YAML's null (which no string parameter takes).
+                    let v = substitute(v.trim());
+                    args.extend(["-p".into(), format!("{k}:={}", if v.is_empty() { "''" } else { v.as_str() })]);
                 }
             }
         }

@@ -4,20 +4,14 @@
 //! replayed from our ASCII format; a map naming a channel the file lacks stops the node
 //! before it publishes, with the file and the channel named.
 
-use std::path::{Path, PathBuf};
-
 use oilfilm_foreign::fixtures::{self, TdmsChannel, TdmsLayout};
-use oilfilm_graph::launch::Graph;
+use oilfilm_graph::runner::memory::{shipped, Graph};
 use oilfilm_graph::topics;
 use oilfilm_identification::ascii::{self, Units};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{simulate, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, DaqFrame};
 use oilfilm_physics::config::RigConfig;
-
-fn shipped(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch_configs").join(name)
-}
 
 fn run(args: &[(&str, String)]) -> Result<(Vec<DaqFrame>, Vec<CoefficientEstimate>), oilfilm_graph::NodeError> {
     let args: Vec<(String, String)> = args.iter().map(|(k, v)| (k.to_string(), v.clone())).chain([("rate_factor".to_string(), "0".to_string())]).collect();
@@ -32,7 +26,7 @@ fn run(args: &[(&str, String)]) -> Result<(Vec<DaqFrame>, Vec<CoefficientEstimat
 #[test]
 fn a_tdms_record_replays_as_its_ascii_twin() {
     let rig = RigConfig::zhou2004().unwrap();
-    let sim = simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), 4.0, SimulateOptions::default(), &mut |_| {}).unwrap();
+    let sim = simulate(&rig, &ExcitationPlan::two_tone(23.0, 37.0, 100.0), 6.0, SimulateOptions::default(), &mut |_| {}).unwrap();
     let record = sim.to_ascii(&rig, Units::Volts).unwrap();
     let dir = std::env::temp_dir().join(format!("oilfilm-foreign-source-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -56,7 +50,7 @@ fn a_tdms_record_replays_as_its_ascii_twin() {
         // The rig name differs (the ASCII header's against the rig file's): all else is equal.
         assert_eq!(DaqFrame { rig: String::new(), ..f.clone() }, DaqFrame { rig: String::new(), ..a.clone() }, "frame {}", f.sequence);
     }
-    assert!(estimates.len() >= 2 && estimates.iter().all(|e| e.solved));
+    assert!(estimates.len() >= 2 && estimates.iter().all(|e| e.solved), "{} estimates, solved: {:?}", estimates.len(), estimates.iter().map(|e| (e.solved, e.refusal_reason.clone())).collect::<Vec<_>>());
     assert_eq!(estimates, ascii_estimates, "the same estimates");
 
     // A map naming a channel the file does not have: the node does not start.
