@@ -185,7 +185,7 @@ pub struct IdentifyArgs {
     /// `oilfilm import` then `identify BAG` would (`--params` and `--replay` apply).
     #[arg(long, value_name = "MAP")]
     pub(crate) map: Option<PathBuf>,
-    /// For a bag: a ROS 2 params file for the conditioner and estimator
+    /// For a bag or a `--map` record: a ROS 2 params file for the conditioner and estimator
     /// (`/oilfilm/conditioner`, `/oilfilm/estimator` sections, e.g.
     /// launch_configs/params/sim_rig.yaml), whose chain and window settings are used (the
     /// low-pass as set, not adapted); default: the parameters the bag's conditioner and

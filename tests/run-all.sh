@@ -27,6 +27,8 @@ mkdir -p target
 ros_venv_pid=$!
 ( bash tests/interop/setup-bag-venv.sh >target/setup-bag-venv.log 2>&1; echo "$?" >target/setup-bag-venv.status ) &
 bag_venv_pid=$!
+( bash tests/interop/setup-foreign-venv.sh >target/setup-foreign-venv.log 2>&1; echo "$?" >target/setup-foreign-venv.status ) &
+foreign_venv_pid=$!
 
 echo "== format and lints (cargo fmt --check, cargo clippy -D warnings)"
 set +e
@@ -77,8 +79,8 @@ fi
 phase "Rust build and tests"
 
 echo "== ROS 2 interop (rclpy and rosidl from PyPI, in .venv-ros)"
-wait "$ros_venv_pid" "$bag_venv_pid" || true
-for v in ros bag; do
+wait "$ros_venv_pid" "$bag_venv_pid" "$foreign_venv_pid" || true
+for v in ros bag foreign; do
   if [ "$(cat target/setup-$v-venv.status 2>/dev/null)" != 0 ]; then
     echo "setting up .venv-$v failed; its log:"
     tail -40 "target/setup-$v-venv.log"
@@ -108,10 +110,11 @@ phase "ROS 2 interop"
 echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
 interop "rosbags (type hashes checked) and mcap-ros2-support decode our bags (also a killed one after our recovery); pymcap-cli doctor finds no error; rosbags-convert round-trips via sqlite3; our reader and oilfilm identify read rosbags' bags" bash tests/interop/run-bag-readers.sh
 interop "the recorder binary SIGKILLed mid-chunk: after oilfilm bag recover, rosbags and mcap-ros2-support read exactly our reader's messages, every complete chunk's" bash tests/interop/run-bag-crash.sh
-echo "== Records from other tools (npTDMS, scipy, pandas from PyPI, in .venv-foreign)"
-interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
 
 phase "bag interop"
+echo "== Records from other tools (npTDMS, scipy, pandas from PyPI, in .venv-foreign)"
+interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
+phase "foreign-record interop"
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
 [ "$failed" -eq 0 ]
