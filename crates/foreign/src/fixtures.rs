@@ -182,7 +182,7 @@ fn double_matrix(name: &str, rows: usize, cols: usize, values: impl Iterator<Ite
 
 /// Writes `columns` (all of one length) and `scalars` as a level-5 MAT-file.
 pub fn mat(path: &Path, columns: &[(&str, &[f64])], scalars: &[(&str, f64)], layout: MatLayout, compress: bool) -> std::io::Result<()> {
-    let mut header = format!("MATLAB 5.0 MAT-file, written by oilfilm's test fixtures").into_bytes();
+    let mut header = b"MATLAB 5.0 MAT-file, written by oilfilm's test fixtures".to_vec();
     header.resize(116, b' ');
     header.extend([0u8; 8]);
     header.extend([0x00, 0x01, b'I', b'M']);

@@ -397,7 +397,7 @@ impl TdmsFile {
                 if chunk == 0 {
                     return Err(bad(segment, pos, format!("{raw} bytes of raw data but no object with data in the segment")));
                 }
-                if raw % chunk != 0 {
+                if !raw.is_multiple_of(chunk) {
                     return Err(bad(segment, pos, format!("its {raw} bytes of raw data are not a whole number of {chunk}-byte chunks: the segment is damaged or truncated")));
                 }
                 let interleaved = toc & TOC_INTERLEAVED != 0;
