@@ -42,14 +42,14 @@ pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<()> {
         None => {
             let mut first = ForeignSource::with_map(&args.file, &map, &rig, &daq)?;
             let mut status = Vec::new();
-            while let Some((_, s)) = first.next()? {
+            while let Some((_, s)) = first.next_frame()? {
                 status.push(s);
             }
             status
         }
     };
     let failed: RefCell<Option<anyhow::Error>> = RefCell::new(None);
-    let frames = std::iter::from_fn(|| match source.next() {
+    let frames = std::iter::from_fn(|| match source.next_frame() {
         Ok(next) => next.map(|(frame, _)| frame),
         Err(e) => {
             *failed.borrow_mut() = Some(e.into());

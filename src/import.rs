@@ -113,7 +113,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     let result = (|| -> Result<()> {
         match &mut foreign {
             Some(source) => {
-                while let Some((frame, status)) = source.next()? {
+                while let Some((frame, status)) = source.next_frame()? {
                     sink.put(frame, status)?;
                 }
             }

@@ -98,7 +98,7 @@ impl ForeignSource {
     }
 
     /// The next frame and the status after it; `None` at the end of the record.
-    pub fn next(&mut self) -> Result<Option<(DaqFrame, RigStatus)>, NodeError> {
+    pub fn next_frame(&mut self) -> Result<Option<(DaqFrame, RigStatus)>, NodeError> {
         let n = self.record.next_block(self.block_scans, &mut self.block)?;
         if n == 0 {
             return Ok(None);

@@ -258,7 +258,7 @@ pub fn run_foreign_source(source: &mut ForeignSource, pace: &ReplayPace, stop: &
     let wall_start = Instant::now();
     let mut origin: Option<Stamp> = None;
     while !stop() {
-        let Some((frame, status)) = source.next()? else { break };
+        let Some((frame, status)) = source.next_frame()? else { break };
         let first = *origin.get_or_insert_with(|| Stamp::from_time(&frame.header.stamp));
         let rig_s = Stamp::from_time(&status.header.stamp).seconds_since(first);
         if pace.rate_factor > 0.0 {
