@@ -55,7 +55,7 @@ fn a_tdms_record_replays_as_its_ascii_twin() {
 
     // A map naming a channel the file does not have: the node does not start.
     std::fs::write(&map_path, map.replace("Loads/f2", "Loads/F2")).unwrap();
-    let err = run(&[("file", tdms.display().to_string()), ("source", "foreign".into()), ("map", map_path.display().to_string())]).err().expect("refused").to_string();
+    let err = run(&[("file", tdms.display().to_string()), ("source", "foreign".into()), ("map", map_path.display().to_string())]).expect_err("refused").to_string();
     assert!(err.contains("run.tdms") && err.contains("`Loads/F2` (f2)") && err.contains("no such channel"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
