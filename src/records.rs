@@ -335,7 +335,7 @@ fn params_config(conditioner: &oilfilm_graph::conditioner::ConditionerParams, es
 
 /// Where the conditioner's and estimator's parameters came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ParamsFrom {
+pub(crate) enum ParamsFrom {
     /// `--params FILE`.
     File,
     /// The bag's `/parameter_events`: what its nodes ran with (ADR 0026).

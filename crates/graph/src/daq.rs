@@ -80,8 +80,9 @@ impl NodeParams for DaqParams {
     fn specs() -> Vec<Spec> {
         vec![
             Spec::fixed("rig", "rig file (TOML): the simulated rig, or the calibration of the real one; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
-            Spec::fixed("source", "sim (the simulated rig, driven by exciter/command), ascii (replay the record `file`) or tcp (the acquisition process's stream at `address`)", Rule::OneOf(&["sim", "ascii", "tcp"])),
-            Spec::fixed("file", "ASCII record (format v1) to replay (source ascii)", Rule::Any).with_constraints("not empty for source ascii"),
+            Spec::fixed("source", "sim (the simulated rig, driven by exciter/command), ascii (replay the record `file`), foreign (replay the TDMS, .mat or CSV record `file` through the channel map `map`) or tcp (the acquisition process's stream at `address`)", Rule::OneOf(&["sim", "ascii", "foreign", "tcp"])),
+            Spec::fixed("file", "record to replay: ASCII format v1 (source ascii), TDMS, .mat or CSV (source foreign)", Rule::Any).with_constraints("not empty for sources ascii and foreign"),
+            Spec::fixed("map", "channel map (TOML) of the foreign record (source foreign; docs/manual/foreign-records.md)", Rule::Any).with_constraints("not empty for source foreign"),
             Spec::fixed("address", "host:port of the acquisition process (source tcp)", Rule::Any).with_constraints("host:port for source tcp"),
             Spec::fixed("block_scans", "scans per published frame", Rule::Integer { min: 1, max: 1_000_000 }),
             Spec::fixed("rate_factor", "pace: 1 real time (stamps are wall time), 4 four times faster and 0 as fast as the consumers allow (stamps are sim time, published on /clock); not used by tcp", Rule::number(0.0, 1e6)),
