@@ -199,6 +199,14 @@ pub fn qos_to_channel_metadata(profiles: &[QosProfile]) -> String {
     serde_yaml_ng::to_string(profiles).map(|s| s.trim_end().to_string()).unwrap_or_default()
 }
 
+impl BagInfo {
+    /// The YAML of the fields alone (rosbag2's `serialized_metadata`).
+    pub fn to_yaml(&self) -> String {
+        // As MetadataFile::to_yaml: plain data, serialising cannot fail.
+        serde_yaml_ng::to_string(self).unwrap_or_default()
+    }
+}
+
 impl MetadataFile {
     pub fn to_yaml(&self) -> String {
         // Plain structs of strings, numbers and maps of strings: serialising cannot fail.

@@ -18,7 +18,11 @@ pub(crate) mod op {
     pub const CHUNK: u8 = 0x06;
     pub const MESSAGE_INDEX: u8 = 0x07;
     pub const CHUNK_INDEX: u8 = 0x08;
+    pub const ATTACHMENT: u8 = 0x09;
+    pub const ATTACHMENT_INDEX: u8 = 0x0A;
     pub const STATISTICS: u8 = 0x0B;
+    pub const METADATA: u8 = 0x0C;
+    pub const METADATA_INDEX: u8 = 0x0D;
     pub const SUMMARY_OFFSET: u8 = 0x0E;
     pub const DATA_END: u8 = 0x0F;
 }
@@ -197,6 +201,7 @@ pub(crate) struct Statistics {
     pub chunk_count: u32,
     pub start_ns: u64,
     pub end_ns: u64,
+    pub metadata_count: u32,
     /// Messages of each channel that has any, by channel id.
     pub channel_message_counts: BTreeMap<u16, u64>,
 }
@@ -207,7 +212,7 @@ pub(crate) fn statistics(b: &mut Vec<u8>, s: &Statistics) {
         u16le(b, s.schema_count);
         u32le(b, s.channel_count);
         u32le(b, 0); // attachments
-        u32le(b, 0); // metadata records
+        u32le(b, s.metadata_count);
         u32le(b, s.chunk_count);
         u64le(b, s.start_ns);
         u64le(b, s.end_ns);
@@ -217,6 +222,28 @@ pub(crate) fn statistics(b: &mut Vec<u8>, s: &Statistics) {
                 u64le(b, n);
             }
         });
+    });
+}
+
+/// A metadata record: a name and a map of strings.
+pub(crate) fn metadata(b: &mut Vec<u8>, name: &str, entries: &BTreeMap<String, String>) {
+    record(b, op::METADATA, |b| {
+        string(b, name);
+        prefixed(b, |b| {
+            for (k, v) in entries {
+                string(b, k);
+                string(b, v);
+            }
+        });
+    });
+}
+
+/// A metadata index record of the summary: where a metadata record is and its name.
+pub(crate) fn metadata_index(b: &mut Vec<u8>, offset: u64, length: u64, name: &str) {
+    record(b, op::METADATA_INDEX, |b| {
+        u64le(b, offset);
+        u64le(b, length);
+        string(b, name);
     });
 }
 

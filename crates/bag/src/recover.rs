@@ -2,11 +2,15 @@
 //! magic (and may end mid-chunk) and there is no metadata.yaml (or only one from before the
 //! last split).
 //!
-//! Every `*.mcap` file of the directory is read with [`crate::scan::scan`]. A complete file
-//! is kept as it is. A damaged one is rewritten (same schemas, channels, ids, sequence
-//! numbers and times) from every message of its complete chunks, and the original is kept
-//! beside it as `NAME_k.mcap.damaged`: nothing recorded is deleted. Then metadata.yaml is
-//! written from what the files hold.
+//! Every `*.mcap` file of the directory is read with [`crate::scan::scan`], which skips a
+//! damaged chunk and resynchronises on the next good record. A complete, undamaged file is
+//! kept as it is. A damaged or cut one is rewritten (same schemas, channels, ids, sequence
+//! numbers and times, and rosbag2's metadata record) from every message of its intact
+//! chunks, and the original is kept beside it as `NAME_k.mcap.damaged`: nothing recorded is
+//! deleted. Then metadata.yaml is written from what the files hold.
+//!
+//! A bag whose writer is alive (its recording lock held, [`crate::lock`]) is refused: moving
+//! its files would pull them from under it.
 
 use std::collections::BTreeMap;
 use std::fs::{self, File};
@@ -17,7 +21,8 @@ use mcap::records::MessageHeader;
 
 use crate::error::{io, mcap_err, BagError, Result};
 use crate::metadata::{parse_qos_text, FileInfo, MetadataFile, TopicMetadata, TopicWithCount};
-use crate::scan::{scan, ScanStop, ScannedFile};
+use crate::lock::{recording_state, remove_stale, Recording};
+use crate::scan::{scan, Damage, ScanStop, ScannedFile};
 use crate::writer::write_atomically;
 use crate::{Duration, StartingTime, METADATA_FILE};
 
@@ -31,8 +36,11 @@ pub struct FileRecovery {
     pub chunks: usize,
     /// Where the damaged original was moved, if the file was rewritten or dropped.
     pub original: Option<PathBuf>,
-    /// Why the original could not be read to its end, if it could not.
+    /// Why the original could not be read to its end, if it could not: its first problem.
     pub stop: Option<ScanStop>,
+    /// Every damaged place of the original, skipped (`stop` is the first of these or the
+    /// place the file was cut).
+    pub damage: Vec<Damage>,
     /// The file held not even an MCAP header and is left out of the bag.
     pub dropped: bool,
 }
@@ -53,6 +61,12 @@ impl Recovery {
 /// only metadata.yaml, with the same content.
 pub fn recover(dir: impl AsRef<Path>) -> Result<Recovery> {
     let dir = dir.as_ref();
+    if let Recording::Alive { holder } = recording_state(dir)? {
+        return Err(BagError::Usage {
+            path: dir.to_path_buf(),
+            what: format!("the bag is still being recorded ({holder}); stop the recorder first (it closes the bag itself), then recover only if it was killed"),
+        });
+    }
     let mut paths: Vec<PathBuf> = fs::read_dir(dir)
         .map_err(io(dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -73,39 +87,49 @@ pub fn recover(dir: impl AsRef<Path>) -> Result<Recovery> {
             distro = m.rosbag2_bagfile_information.ros_distro;
         }
     }
+    // First what every file holds (the metadata of the whole bag goes into each rewritten
+    // file), then the rewriting, one file in memory at a time.
     for path in paths {
         let bytes = fs::read(&path).map_err(io(&path))?;
         let scanned = scan(&bytes);
         drop(bytes);
-        let sound = scanned.stop.is_none() && scanned.footer;
-        let mut report = FileRecovery {
+        let report = FileRecovery {
             path: path.clone(),
             messages: scanned.messages.len() as u64,
             chunks: scanned.chunks,
             original: None,
             stop: scanned.stop.clone(),
-            dropped: false,
+            damage: scanned.damage.clone(),
+            dropped: scanned.profile.is_none() && scanned.messages.is_empty(),
         };
-        if scanned.profile.is_none() {
-            report.original = Some(set_aside(&path)?);
-            report.dropped = true;
-            report.messages = 0;
-            files.push(report);
-            continue;
+        if !report.dropped {
+            add_topics(&path, &scanned, &mut topics)?;
+            infos.push(file_info(&path, &scanned));
         }
-        if !sound {
-            let tmp = path.with_extension("mcap.recovering");
-            rewrite(&tmp, &scanned)?;
-            report.original = Some(set_aside(&path)?);
-            fs::rename(&tmp, &path).map_err(io(&path))?;
-        }
-        add_topics(&path, &scanned, &mut topics)?;
-        infos.push(file_info(&path, &scanned));
         files.push(report);
     }
     let topics = topics.into_iter().map(|(topic_metadata, message_count)| TopicWithCount { topic_metadata, message_count }).collect();
     let metadata = MetadataFile::for_mcap(topics, infos, &distro);
+    for report in &mut files {
+        let path = report.path.clone();
+        if report.dropped {
+            report.original = Some(set_aside(&path)?);
+            report.messages = 0;
+            continue;
+        }
+        let sound = report.stop.is_none();
+        if !sound {
+            let bytes = fs::read(&path).map_err(io(&path))?;
+            let scanned = scan(&bytes);
+            drop(bytes);
+            let tmp = path.with_extension("mcap.recovering");
+            rewrite(&tmp, &scanned, &metadata)?;
+            report.original = Some(set_aside(&path)?);
+            fs::rename(&tmp, &path).map_err(io(&path))?;
+        }
+    }
     write_atomically(&dir.join(METADATA_FILE), metadata.to_yaml().as_bytes())?;
+    remove_stale(dir)?;
     Ok(Recovery { files, metadata })
 }
 
@@ -128,10 +152,11 @@ fn set_aside(path: &Path) -> Result<PathBuf> {
     Ok(to)
 }
 
-fn rewrite(tmp: &Path, s: &ScannedFile) -> Result<()> {
+fn rewrite(tmp: &Path, s: &ScannedFile, bag: &MetadataFile) -> Result<()> {
     let file = File::create(tmp).map_err(io(tmp))?;
+    // A file whose header was lost but whose chunks were read is a rosbag2 file still.
     let options = mcap::WriteOptions::new()
-        .profile(s.profile.clone().unwrap_or_default())
+        .profile(s.profile.clone().unwrap_or_else(|| "ros2".into()))
         .library(concat!("oilfilm-bag ", env!("CARGO_PKG_VERSION"), " (recovered)"));
     let mut w = options.create(BufWriter::new(file)).map_err(mcap_err(tmp))?;
     for (&id, schema) in &s.schemas {
@@ -144,6 +169,10 @@ fn rewrite(tmp: &Path, s: &ScannedFile) -> Result<()> {
         let header = MessageHeader { channel_id: m.channel_id, sequence: m.sequence, log_time: m.log_time, publish_time: m.publish_time };
         w.write_to_known_channel(&header, &m.data).map_err(mcap_err(tmp))?;
     }
+    let mut entries = BTreeMap::new();
+    entries.insert("serialized_metadata".to_string(), bag.rosbag2_bagfile_information.to_yaml());
+    entries.insert("ROS_DISTRO".to_string(), bag.rosbag2_bagfile_information.ros_distro.clone());
+    w.write_metadata(&mcap::records::Metadata { name: crate::writer::ROSBAG2_METADATA.into(), metadata: entries }).map_err(mcap_err(tmp))?;
     w.finish().map_err(mcap_err(tmp))?;
     let mut sink = w.into_inner();
     sink.flush().map_err(io(tmp))?;

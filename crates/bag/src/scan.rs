@@ -1,16 +1,26 @@
 //! The sans-IO core of reading: one MCAP file's bytes in, its schemas, channels and messages
-//! out, with where and why reading stopped if it did not reach a clean end.
+//! out, with every place the file is damaged and where reading went on after it.
 //!
-//! Chunks are taken whole (the MCAP linear reader with `emit_chunks`), decompressed and
-//! CRC-checked here, and their records kept only if the whole chunk is good: a file cut
-//! mid-chunk (a killed writer) gives every message of every complete chunk and none of
-//! the partial one, which is what recovery promises.
+//! The records are framed here (opcode, length, body) rather than by the mcap crate's
+//! linear reader, which stops at the first bad record: a chunk whose CRC, compression or
+//! records are bad, or any record that does not parse, is skipped, and reading
+//! **resynchronises** on the next record that proves itself (a chunk whose records match
+//! its CRC, a schema or channel that parses, the data end or the footer; [`resync`]). So one
+//! flipped bit in a chunk loses that chunk alone, and a length field gone wrong loses only
+//! the bytes up to the next good record. A chunk is kept only whole, so a file cut
+//! mid-chunk (a killed writer) gives every message of every complete chunk and none of the
+//! partial one, which is what recovery promises.
+//!
+//! The data section's CRC (in the data end record) and the summary's (in the footer) are
+//! checked too: a flipped bit in a place no chunk CRC covers (a chunk's time range, a
+//! message index, the summary) is found and reported, though no message is lost to it.
 
 use std::collections::BTreeMap;
 use std::io::Read;
 
 use mcap::records::Record;
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+use crate::records::{op, MAGIC};
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SchemaRecord {
@@ -36,15 +46,30 @@ pub struct RawMessage {
     pub data: Vec<u8>,
 }
 
-/// Why a scan stopped before a clean end of file, and where.
+/// Why a scan did not reach a clean end of file, and where: the first problem found.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ScanStop {
-    /// Bytes of the file read when the problem was found (the end of the record or chunk at
-    /// fault, or the end of the file when it was cut short).
+    /// Byte offset of the record at fault (or of the end of the file when it was cut short).
     pub offset: u64,
     pub what: String,
     /// The file ended early (truncated), rather than holding bad bytes.
     pub truncated: bool,
+}
+
+/// Bad bytes found and skipped.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Damage {
+    /// Byte offset of the record at fault.
+    pub offset: u64,
+    /// What is wrong.
+    pub what: String,
+    /// Where reading went on: the next record that proved itself, `None` if nothing after
+    /// the damage could be read. Equal to the end of the record for a CRC mismatch that
+    /// cost no message (the data section's or the summary's).
+    pub resumed_at: Option<u64>,
+    /// Messages lost with it are not known in general (a damaged chunk's count is in bytes
+    /// that cannot be trusted); the time range of a skipped chunk when its header parsed.
+    pub log_times: Option<(u64, u64)>,
 }
 
 /// What one MCAP file holds, as far as it could be read.
@@ -61,85 +86,212 @@ pub struct ScannedFile {
     pub chunks: usize,
     /// The footer was read (the writer closed the file).
     pub footer: bool,
-    /// `None` when the file was read to its end magic.
+    /// Every damaged place, in file order.
+    pub damage: Vec<Damage>,
+    /// Where the file ends early (mid-record, or with no footer): a writer killed or still
+    /// writing.
+    pub truncated_at: Option<u64>,
+    /// `None` when the file was read to its end magic with no damage; else the first problem.
     pub stop: Option<ScanStop>,
 }
 
-/// Reads everything it can from one MCAP file's bytes. Never panics on bad input.
+impl ScannedFile {
+    fn damaged(&mut self, offset: usize, what: String, resumed_at: Option<usize>, log_times: Option<(u64, u64)>) {
+        if self.stop.is_none() {
+            self.stop = Some(ScanStop { offset: offset as u64, what: what.clone(), truncated: false });
+        }
+        self.damage.push(Damage { offset: offset as u64, what, resumed_at: resumed_at.map(|p| p as u64), log_times });
+    }
+
+    fn cut_short(&mut self, offset: usize, what: String) {
+        self.truncated_at = Some(offset as u64);
+        if self.stop.is_none() {
+            self.stop = Some(ScanStop { offset: offset as u64, what, truncated: true });
+        }
+    }
+}
+
+/// Where the scanner is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Section {
+    Data,
+    Summary,
+}
+
+/// What a record did to the scan.
+enum Step {
+    Next,
+    /// The footer and the closing magic: the end.
+    End,
+}
+
+/// `u64` little-endian at `at` (the caller checked 8 bytes are there).
+fn u64_at(bytes: &[u8], at: usize) -> u64 {
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&bytes[at..at + 8]);
+    u64::from_le_bytes(b)
+}
+
+/// The end of the record starting at `at` (opcode, length, body), if it lies in the file.
+fn record_end(bytes: &[u8], at: usize) -> Option<usize> {
+    if bytes.len().saturating_sub(at) < 9 {
+        return None;
+    }
+    let len = u64_at(bytes, at + 1);
+    usize::try_from(len).ok().and_then(|l| l.checked_add(at + 9)).filter(|&e| e <= bytes.len())
+}
+
+/// Reads everything it can from one MCAP file's bytes. Never panics on bad input, and
+/// never allocates more than the file's size plus what its chunks decompress to (each
+/// checked against its header's size and CRC).
 pub fn scan(bytes: &[u8]) -> ScannedFile {
     let mut out = ScannedFile::default();
-    // No record can be longer than the file: a corrupt length must not make the reader
-    // wait for (or allocate) more.
-    let options = LinearReaderOptions::default()
-        .with_emit_chunks(true)
-        .with_record_length_limit(bytes.len().max(64));
-    let mut reader = LinearReader::new_with_options(options);
-    let mut fed = 0usize;
-    let mut in_data_section = true;
-    while let Some(event) = reader.next_event() {
-        let event = match event {
-            Ok(e) => e,
-            Err(e) => {
-                let truncated = fed >= bytes.len();
-                out.stop = Some(ScanStop { offset: fed as u64, what: e.to_string(), truncated });
-                return out;
-            }
-        };
-        match event {
-            LinearReadEvent::ReadRequest(want) => {
-                let n = want.min(bytes.len() - fed);
-                reader.insert(n).copy_from_slice(&bytes[fed..fed + n]);
-                reader.notify_read(n);
-                fed += n;
-            }
-            LinearReadEvent::Record { opcode, data } => {
-                let record = match mcap::parse_record(opcode, data) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        out.stop = Some(ScanStop { offset: fed as u64, what: e.to_string(), truncated: false });
-                        return out;
-                    }
-                };
-                let result = match record {
-                    Record::Header(h) => {
-                        out.profile = Some(h.profile);
-                        out.library = Some(h.library);
-                        Ok(())
-                    }
-                    Record::Chunk { header, data } => read_chunk(&header, &data).and_then(|records| {
-                        let mut staged = Staged::default();
-                        for r in records {
-                            staged.take(&out, r)?;
-                        }
-                        staged.commit(&mut out);
-                        out.chunks += 1;
-                        Ok(())
-                    }),
-                    Record::DataEnd(_) => {
-                        in_data_section = false;
-                        Ok(())
-                    }
-                    Record::Footer(_) => {
-                        out.footer = true;
-                        Ok(())
-                    }
-                    other if in_data_section => {
-                        let mut staged = Staged::default();
-                        staged.take(&out, Owned::from(other)).map(|()| staged.commit(&mut out))
-                    }
-                    // The summary repeats schemas and channels. The data section's copies
-                    // outside chunks have no CRC, so a copy that differs is damage to one of
-                    // them (a flipped byte in a type name would otherwise read as another type).
-                    other => summary_agrees(&out, Owned::from(other)),
-                };
-                if let Err(what) = result {
-                    out.stop = Some(ScanStop { offset: fed as u64, what, truncated: false });
-                    return out;
+    if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != *MAGIC {
+        if MAGIC.starts_with(bytes) {
+            out.cut_short(bytes.len(), "the file ends inside the MCAP magic".into());
+        } else {
+            out.damaged(0, "not an MCAP file (no MCAP magic at its start)".into(), None, None);
+        }
+        return out;
+    }
+    let mut pos = MAGIC.len();
+    let mut section = Section::Data;
+    let mut summary_start = None;
+    loop {
+        if pos == bytes.len() {
+            out.cut_short(pos, format!("the file ends after {} complete chunks without a footer", out.chunks));
+            break;
+        }
+        let Some(end) = record_end(bytes, pos) else {
+            // Cut short by a killed writer, or a length field gone wrong.
+            let what = if bytes.len() - pos < 9 {
+                format!("the file ends inside a record header at byte {pos}")
+            } else {
+                format!("a record (opcode {:#04x}) at byte {pos} claims {} bytes, more than the file holds", bytes[pos], u64_at(bytes, pos + 1))
+            };
+            match resync(bytes, pos + 1, &out) {
+                Some(next) => {
+                    out.damaged(pos, what, Some(next), None);
+                    pos = next;
+                    continue;
+                }
+                None => {
+                    out.cut_short(pos, what);
+                    break;
                 }
             }
+        };
+        match record(bytes, pos, end, &mut section, &mut summary_start, &mut out) {
+            Ok(Step::Next) => pos = end,
+            Ok(Step::End) => break,
+            Err((what, log_times)) => match resync(bytes, pos + 1, &out) {
+                Some(next) => {
+                    out.damaged(pos, what, Some(next), log_times);
+                    pos = next;
+                }
+                None => {
+                    out.damaged(pos, what, None, log_times);
+                    if !out.footer {
+                        out.truncated_at.get_or_insert(bytes.len() as u64);
+                    }
+                    break;
+                }
+            },
         }
     }
     out
+}
+
+/// One record (the bytes `at..end`): taken into `out`, or an error and, for a chunk whose
+/// header parsed, its time range.
+fn record(bytes: &[u8], at: usize, end: usize, section: &mut Section, summary_start: &mut Option<usize>, out: &mut ScannedFile) -> Result<Step, (String, Option<(u64, u64)>)> {
+    let opcode = bytes[at];
+    let body = &bytes[at + 9..end];
+    let plain = |what: String| (what, None);
+    if at == MAGIC.len() {
+        if opcode != op::HEADER {
+            return Err(plain("the first record is not an MCAP header".into()));
+        }
+        return match mcap::parse_record(opcode, body) {
+            Ok(Record::Header(h)) => {
+                out.profile = Some(h.profile);
+                out.library = Some(h.library);
+                Ok(Step::Next)
+            }
+            Ok(_) | Err(_) => Err(plain("the MCAP header record does not parse".into())),
+        };
+    }
+    match (opcode, *section) {
+        (op::HEADER, _) => Err(plain("a second header record".into())),
+        (op::FOOTER, _) => {
+            if body.len() != 20 || end + MAGIC.len() != bytes.len() || bytes[end..] != *MAGIC {
+                return Err(plain("a footer record that is not followed by the closing magic at the end of the file".into()));
+            }
+            let start = summary_start.unwrap_or(at);
+            let saved = u32::from_le_bytes([body[16], body[17], body[18], body[19]]);
+            if saved != 0 {
+                let calculated = crc32fast::hash(&bytes[start..at + 9 + 16]);
+                if calculated != saved {
+                    out.damaged(start, format!("summary CRC {calculated:#010x} differs from the footer's {saved:#010x}: the summary (the chunk index) is damaged"), Some(end), None);
+                }
+            }
+            out.footer = true;
+            Ok(Step::End)
+        }
+        (op::DATA_END, Section::Data) => {
+            if body.len() != 4 {
+                return Err(plain(format!("a data end record of {} bytes (4 expected)", body.len())));
+            }
+            let saved = u32::from_le_bytes([body[0], body[1], body[2], body[3]]);
+            if saved != 0 {
+                let calculated = crc32fast::hash(&bytes[..at]);
+                if calculated != saved {
+                    out.damaged(at, format!("data section CRC {calculated:#010x} differs from the data end record's {saved:#010x}"), Some(end), None);
+                }
+            }
+            *section = Section::Summary;
+            *summary_start = Some(end);
+            Ok(Step::Next)
+        }
+        (op::CHUNK, Section::Data) => {
+            let (header, data) = match mcap::parse_record(op::CHUNK, body) {
+                Ok(Record::Chunk { header, data }) => (header, data),
+                _ => return Err(plain("a chunk record whose header does not parse".into())),
+            };
+            let times = Some((header.message_start_time, header.message_end_time));
+            let records = read_chunk(&header, &data).map_err(|e| (format!("chunk: {e}"), times))?;
+            let mut staged = Staged::default();
+            for r in records {
+                staged.take(out, r).map_err(|e| (format!("chunk: {e}"), times))?;
+            }
+            staged.commit(out);
+            out.chunks += 1;
+            Ok(Step::Next)
+        }
+        (op::SCHEMA | op::CHANNEL | op::MESSAGE, Section::Data) => {
+            let r = mcap::parse_record(opcode, body).map_err(|e| plain(format!("record does not parse: {e}")))?;
+            let mut staged = Staged::default();
+            staged.take(out, Owned::from(r)).map_err(plain)?;
+            staged.commit(out);
+            Ok(Step::Next)
+        }
+        // The summary repeats schemas and channels. The data section's copies outside chunks
+        // have no CRC, so a copy that differs is damage to one of them (a flipped byte in a
+        // type name would otherwise read as another type).
+        (op::SCHEMA | op::CHANNEL, Section::Summary) => {
+            let r = mcap::parse_record(opcode, body).map_err(|e| plain(format!("record (opcode {opcode:#04x}) does not parse: {e}")))?;
+            summary_agrees(out, Owned::from(r)).map_err(plain)?;
+            Ok(Step::Next)
+        }
+        // Indexes and records no reader here uses: they must parse, nothing more.
+        (op::MESSAGE_INDEX | op::ATTACHMENT | op::METADATA, Section::Data)
+        | (op::CHUNK_INDEX | op::ATTACHMENT_INDEX | op::METADATA_INDEX | op::STATISTICS | op::SUMMARY_OFFSET, Section::Summary) => {
+            mcap::parse_record(opcode, body).map_err(|e| plain(format!("record (opcode {opcode:#04x}) does not parse: {e}")))?;
+            Ok(Step::Next)
+        }
+        (_, Section::Data) => Err(plain(format!("a record with opcode {opcode:#04x}, which does not belong in the data section"))),
+        (_, Section::Summary) => Err(plain(format!("a record with opcode {opcode:#04x}, which does not belong in the summary section"))),
+    }
 }
 
 /// Whether a schema or channel repeated in the summary is the one the data section declared.
@@ -155,6 +307,41 @@ fn summary_agrees(file: &ScannedFile, r: Owned) -> Result<(), String> {
         },
         _ => Ok(()),
     }
+}
+
+/// The first offset from `from` on where a record starts that proves itself: a chunk whose
+/// records decompress to its CRC, a schema or channel that parses (and fits what `file`
+/// declared), a data end record followed by a summary record, or the footer at the end of
+/// the file. A chunk with a zero CRC (none given) must parse record by record instead.
+/// Message, message index and other records are not trusted as landing places: a damaged
+/// chunk's bytes can look like them, and the next chunk is what matters.
+pub(crate) fn resync(bytes: &[u8], from: usize, file: &ScannedFile) -> Option<usize> {
+    let n = bytes.len();
+    (from..n.saturating_sub(8)).find(|&p| {
+        let opcode = bytes[p];
+        if !matches!(opcode, op::CHUNK | op::SCHEMA | op::CHANNEL | op::DATA_END | op::FOOTER) {
+            return false;
+        }
+        let Some(end) = record_end(bytes, p) else { return false };
+        let body = &bytes[p + 9..end];
+        match opcode {
+            op::FOOTER => body.len() == 20 && end + MAGIC.len() == n && bytes[end..] == *MAGIC,
+            op::DATA_END => body.len() == 4 && record_end(bytes, end).is_some_and(|_| matches!(bytes[end], op::SCHEMA | op::CHANNEL | op::STATISTICS | op::CHUNK_INDEX | op::METADATA_INDEX | op::ATTACHMENT_INDEX | op::SUMMARY_OFFSET | op::FOOTER)),
+            op::CHUNK => match mcap::parse_record(op::CHUNK, body) {
+                // The CRC proves the records; without one they must parse.
+                Ok(Record::Chunk { header, data }) if header.uncompressed_crc != 0 => decompress_chunk(&header, &data).is_ok(),
+                Ok(Record::Chunk { header, data }) => read_chunk(&header, &data).is_ok_and(|r| !r.is_empty()),
+                _ => false,
+            },
+            _ => match mcap::parse_record(opcode, body) {
+                Ok(Record::Schema { header, .. }) => header.id != 0 && !header.name.is_empty() && !header.encoding.is_empty(),
+                Ok(Record::Channel(c)) => {
+                    !c.topic.is_empty() && !c.message_encoding.is_empty() && (c.schema_id == 0 || file.schemas.contains_key(&c.schema_id))
+                }
+                _ => false,
+            },
+        }
+    })
 }
 
 /// A record from inside a chunk, owned (its bytes were decompressed here).

@@ -29,6 +29,7 @@ use crate::chunks::{FileSink, Gathered, Pipeline};
 use crate::error::{io, BagError, Result};
 use crate::records::{self, ChunkIndex};
 use crate::metadata::{qos_to_channel_metadata, FileInfo, MetadataFile, QosProfile, TopicMetadata, TopicWithCount};
+use crate::lock::RecordingLock;
 use crate::{Duration as NsDuration, StartingTime, METADATA_FILE};
 
 /// Compression of the MCAP chunks.
@@ -193,8 +194,9 @@ impl OpenFile {
     }
 
     /// The summary section and footer for a data section of `data_len` bytes (the data end
-    /// record included) holding `chunks`.
-    fn summary(&self, data_len: u64, chunks: &[ChunkIndex]) -> Vec<u8> {
+    /// record included) holding `chunks` and the rosbag2 metadata record at `metadata`
+    /// (offset, length).
+    fn summary(&self, data_len: u64, chunks: &[ChunkIndex], metadata: (u64, u64)) -> Vec<u8> {
         let mut b = Vec::with_capacity(self.schema_records.len() + self.channel_records.len() + 128 * (chunks.len() + 4));
         let mut groups = Vec::new();
         let mut group = |b: &mut Vec<u8>, opcode: u8, start: usize| {
@@ -213,6 +215,7 @@ impl OpenFile {
             schema_count: self.schema_ids.len() as u16,
             channel_count: self.channels.len() as u32,
             chunk_count: chunks.len() as u32,
+            metadata_count: 1,
             start_ns: self.first.unwrap_or(0),
             end_ns: if self.first.is_some() { self.last } else { 0 },
             channel_message_counts: self.channel_counts.clone(),
@@ -224,6 +227,9 @@ impl OpenFile {
             records::chunk_index(&mut b, c);
         }
         group(&mut b, records::op::CHUNK_INDEX, start);
+        let start = b.len();
+        records::metadata_index(&mut b, metadata.0, metadata.1, ROSBAG2_METADATA);
+        group(&mut b, records::op::METADATA_INDEX, start);
         let summary_offset_start = data_len + b.len() as u64;
         for (opcode, start, len) in groups {
             records::summary_offset(&mut b, opcode, start, len);
@@ -249,6 +255,8 @@ pub struct BagWriter {
     current: Option<OpenFile>,
     /// Compresses closed chunks and writes them in order (`compression_threads` workers).
     pipeline: Pipeline,
+    /// Held while the bag is open, so recovery can tell a live writer from a killed one.
+    lock: Option<RecordingLock>,
 }
 
 impl BagWriter {
@@ -270,7 +278,8 @@ impl BagWriter {
             .to_string();
         let pipeline = Pipeline::new(options.compression, options.compression_level, options.compression_threads as usize, &dir)?;
         fs::create_dir_all(&dir).map_err(io(&dir))?;
-        let mut w = Self { dir, name, options, topics: Vec::new(), hashes: Vec::new(), counts: Vec::new(), files: Vec::new(), current: None, pipeline };
+        let lock = Some(RecordingLock::acquire(&dir)?);
+        let mut w = Self { dir, name, options, topics: Vec::new(), hashes: Vec::new(), counts: Vec::new(), files: Vec::new(), current: None, pipeline, lock };
         w.open_next()?;
         Ok(w)
     }
@@ -383,6 +392,7 @@ impl BagWriter {
     pub fn close(mut self) -> Result<PathBuf> {
         self.finish_current()?;
         self.write_metadata()?;
+        drop(self.lock.take());
         Ok(std::mem::take(&mut self.dir))
     }
 
@@ -430,12 +440,6 @@ impl BagWriter {
             close_chunk(&mut f, &mut self.pipeline, g)?;
         }
         let mut sink = self.pipeline.finish_file()?;
-        let mut end = Vec::with_capacity(16);
-        records::data_end(&mut end, sink.take_crc());
-        sink.put(&end).map_err(io(&f.path))?;
-        let summary = f.summary(sink.position(), &sink.chunk_indexes);
-        sink.put(&summary).map_err(io(&f.path))?;
-        sink.sync().map_err(io(&f.path))?;
         let first = f.first.unwrap_or(0);
         self.files.push(FileInfo {
             path: f.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
@@ -443,10 +447,25 @@ impl BagWriter {
             duration: NsDuration { nanoseconds: f.last.saturating_sub(first) },
             message_count: f.count,
         });
-        Ok(())
+        // rosbag2's own record of the bag so far (its MCAP plugin writes one on each file's
+        // close): what `ros2 bag` and `pymcap-cli doctor` look for.
+        let mut entries = BTreeMap::new();
+        entries.insert("serialized_metadata".to_string(), self.metadata().rosbag2_bagfile_information.to_yaml());
+        entries.insert("ROS_DISTRO".to_string(), self.options.ros_distro.clone());
+        let mut meta = Vec::new();
+        records::metadata(&mut meta, ROSBAG2_METADATA, &entries);
+        let meta_at = (sink.position(), meta.len() as u64);
+        sink.put(&meta).map_err(io(&f.path))?;
+        let mut end = Vec::with_capacity(16);
+        records::data_end(&mut end, sink.take_crc());
+        sink.put(&end).map_err(io(&f.path))?;
+        let summary = f.summary(sink.position(), &sink.chunk_indexes, meta_at);
+        sink.put(&summary).map_err(io(&f.path))?;
+        sink.sync().map_err(io(&f.path))
     }
 
-    fn write_metadata(&self) -> Result<()> {
+    /// The bag's metadata.yaml content for the files closed so far.
+    fn metadata(&self) -> MetadataFile {
         let topics = self
             .topics
             .iter()
@@ -463,8 +482,11 @@ impl BagWriter {
                 message_count: n,
             })
             .collect();
-        let meta = MetadataFile::for_mcap(topics, self.files.clone(), &self.options.ros_distro);
-        write_atomically(&self.dir.join(METADATA_FILE), meta.to_yaml().as_bytes())
+        MetadataFile::for_mcap(topics, self.files.clone(), &self.options.ros_distro)
+    }
+
+    fn write_metadata(&self) -> Result<()> {
+        write_atomically(&self.dir.join(METADATA_FILE), self.metadata().to_yaml().as_bytes())
     }
 }
 
@@ -486,6 +508,10 @@ impl Drop for BagWriter {
         }
     }
 }
+
+/// The name of the metadata record rosbag2's MCAP plugin writes (keys `serialized_metadata`,
+/// the bag's metadata.yaml content without its top-level key, and `ROS_DISTRO`).
+pub const ROSBAG2_METADATA: &str = "rosbag2";
 
 /// The MCAP channel metadata key of the RIHS01 type hash (as rosbag2_storage_mcap writes it).
 pub const TYPE_HASH_KEY: &str = "topic_type_hash";

@@ -154,7 +154,21 @@ fn check_file(path: &Path, compression: Compression) -> Vec<Msg> {
     if !summary.chunk_indexes.is_empty() {
         want_groups.push(0x08);
     }
-    assert_eq!(opcodes, want_groups, "{name}: schemas, channels, statistics, chunk indexes");
+    want_groups.push(0x0D);
+    assert_eq!(opcodes, want_groups, "{name}: schemas, channels, statistics, chunk indexes, metadata indexes");
+    // rosbag2's metadata record, as its MCAP plugin writes one: found through its index, its
+    // `serialized_metadata` the bag's metadata.yaml fields (this file listed) and the distro.
+    assert_eq!(stats.metadata_count, 1, "{name}");
+    assert_eq!(summary.metadata_indexes.len(), 1, "{name}");
+    let mi = &summary.metadata_indexes[0];
+    assert_eq!(mi.name, "rosbag2", "{name}");
+    let meta = mcap::read::metadata(&bytes, mi).unwrap();
+    assert_eq!(meta.name, "rosbag2");
+    let info: oilfilm_bag::metadata::BagInfo = serde_yaml_ng::from_str(&meta.metadata["serialized_metadata"]).unwrap();
+    let file_name = path.file_name().unwrap().to_string_lossy().into_owned();
+    assert_eq!(info.relative_file_paths.last(), Some(&file_name), "{name}: the bag so far, this file last");
+    assert_eq!(info.files.last().map(|f| f.message_count), Some(linear.len() as u64), "{name}");
+    assert_eq!(meta.metadata["ROS_DISTRO"], info.ros_distro, "{name}");
     for g in &groups {
         let slice = &bytes[g.group_start as usize..(g.group_start + g.group_length) as usize];
         let mut n = 0;
@@ -164,6 +178,7 @@ fn check_file(path: &Path, compression: Compression) -> Vec<Msg> {
                 Record::Channel(_) => 0x04,
                 Record::Statistics(_) => 0x0B,
                 Record::ChunkIndex(_) => 0x08,
+                Record::MetadataIndex(_) => 0x0D,
                 other => panic!("{name}: {other:?} in a summary group"),
             };
             assert_eq!(kind, g.group_opcode, "{name}: a record of another kind in group {:#04x}", g.group_opcode);
@@ -172,7 +187,7 @@ fn check_file(path: &Path, compression: Compression) -> Vec<Msg> {
         let expected = match g.group_opcode {
             0x03 => summary.schemas.len(),
             0x04 => summary.channels.len(),
-            0x0B => 1,
+            0x0B | 0x0D => 1,
             _ => summary.chunk_indexes.len(),
         };
         assert_eq!(n, expected, "{name}: group {:#04x}", g.group_opcode);
@@ -223,7 +238,9 @@ fn every_file_reads_in_the_mcap_crate_with_crcs_summary_and_indexes_checked() {
             let mut written: Vec<(u32, Vec<Vec<u8>>)> = Vec::new();
             for workers in [0u32, 1, 3] {
                 let name = format!("{compression:?}-{per_topic}-{workers}");
-                let dir = tmp(&name);
+                // One bag name for all, so the file names (in rosbag2's metadata record too)
+                // agree.
+                let dir = tmp(&name).join("bag");
                 let options = WriterOptions {
                     compression,
                     chunk_per_topic: per_topic,
