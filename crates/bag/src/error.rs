@@ -25,6 +25,12 @@ pub enum BagError {
     #[error("{}: message {index}{} on {topic} (log time {log_time} ns): {source}", path.display(), chunk_offset.map(|o| format!(" of the chunk at byte {o}")).unwrap_or_default())]
     Decode { path: PathBuf, topic: String, index: u64, chunk_offset: Option<u64>, log_time: u64, source: Box<oilfilm_msgs::CdrError> },
 
+    /// The bag holds less (or other) than it says: a damaged chunk, a file metadata.yaml
+    /// does not list or lacks, a count that differs. A partial read
+    /// ([`crate::ReadOptions::allow_partial`]) goes on past it.
+    #[error("{}: {what}", path.display())]
+    Incomplete { path: PathBuf, what: String },
+
     /// The caller asked for something the bag or writer cannot do (unknown topic id, a
     /// type this crate has no definition for, a message of another type).
     #[error("{}: {what}", path.display())]

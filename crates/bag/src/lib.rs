@@ -17,6 +17,7 @@
 
 mod chunks;
 pub mod error;
+pub mod integrity;
 pub mod lock;
 pub mod metadata;
 pub mod reader;
@@ -27,6 +28,7 @@ pub mod select;
 pub mod writer;
 
 pub use error::{BagError, Result};
+pub use integrity::{ReadOptions, Shortfall, ShortfallKind};
 pub use lock::{recording_state, Recording, LOCK_FILE};
 pub use metadata::{Duration, FileInfo, MetadataFile, QosProfile, StartingTime};
 pub use reader::{Bag, BagMessage, OilfilmMessage};

@@ -3,6 +3,7 @@
 //! The checks ([`messages_of_file`]) are a pure function of a file's bytes; [`Bag`] is the
 //! thin shell that reads the directory.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -10,6 +11,7 @@ use std::sync::Arc;
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, ParameterEvent, RigStatus, RosMessage};
 
 use crate::error::{io, BagError, Result};
+use crate::integrity::{difference, ReadOptions, Shortfall, ShortfallKind, Shortfalls};
 use crate::metadata::{BagInfo, MetadataFile};
 use crate::scan::scan;
 use crate::METADATA_FILE;
@@ -132,20 +134,59 @@ impl Bag {
     }
 
     /// Every message of the bag: file by file (in metadata.yaml's order), each file's in
-    /// log-time order (file order among equal times).
+    /// log-time order (file order among equal times). A strict read: see
+    /// [`Bag::messages_with`].
     pub fn messages(&self) -> Result<Vec<BagMessage>> {
+        self.messages_with(ReadOptions::STRICT).map(|(m, _)| m)
+    }
+
+    /// [`Bag::messages`] with `options`, checked as [`Bag::read_topics_with`] checks (the
+    /// directory, every record, the counts per topic against metadata.yaml and per file
+    /// against its entry there). A partial read skips damage and unreadable files and
+    /// returns every difference.
+    pub fn messages_with(&self, options: ReadOptions) -> Result<(Vec<BagMessage>, Vec<Shortfall>)> {
+        let mut found = Shortfalls::new(options);
+        self.check_directory(&mut found)?;
         let mut out = Vec::new();
-        for path in self.files() {
-            let bytes = fs::read(&path).map_err(io(&path))?;
-            out.extend(messages_of_file(&path, &bytes)?);
+        let mut per_topic: BTreeMap<String, u64> = BTreeMap::new();
+        for (path, listed) in self.files().into_iter().zip(&self.info().files) {
+            let bytes = match fs::read(&path) {
+                Ok(b) => b,
+                // A missing file was noted by check_directory (a strict read stopped there).
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound && options.allow_partial => continue,
+                Err(e) => return Err(io(&path)(e)),
+            };
+            let (messages, damage) = read_file(&path, &bytes, options.allow_partial)?;
+            for d in damage {
+                found.note(d)?;
+            }
+            if messages.len() as u64 != listed.message_count {
+                found.note(Shortfall::new(
+                    &path,
+                    ShortfallKind::Count,
+                    format!("metadata.yaml counts {} messages in this file, {} were read ({})", listed.message_count, messages.len(), difference(listed.message_count, messages.len() as u64)),
+                ))?;
+            }
+            for m in &messages {
+                *per_topic.entry(m.topic.to_string()).or_default() += 1;
+            }
+            out.extend(messages);
         }
-        Ok(out)
+        self.check_counts(&|_, _| true, &per_topic, &mut found)?;
+        Ok((out, found.found))
     }
 }
 
 /// The messages of one MCAP file of a bag, in log-time order, after checking it is a
 /// complete `ros2`-profile file with CDR channels and ROS 2 schemas.
 pub fn messages_of_file(path: &Path, bytes: &[u8]) -> Result<Vec<BagMessage>> {
+    read_file(path, bytes, false).map(|(m, _)| m)
+}
+
+/// [`messages_of_file`], or with `allow_partial` the messages of every intact chunk with a
+/// shortfall for each damaged place (and for a file cut short). A foreign profile or
+/// channels that are not CDR are errors either way.
+pub(crate) fn read_file(path: &Path, bytes: &[u8], allow_partial: bool) -> Result<(Vec<BagMessage>, Vec<Shortfall>)> {
     let scanned = scan(bytes);
     let format = |offset: Option<u64>, what: String| BagError::Format { path: path.to_path_buf(), offset, what };
     match scanned.profile.as_deref() {
@@ -153,7 +194,30 @@ pub fn messages_of_file(path: &Path, bytes: &[u8]) -> Result<Vec<BagMessage>> {
         Some(other) => return Err(format(None, format!("MCAP profile is `{other}`, not `ros2`: not a rosbag2 file"))),
         None => {}
     }
-    if let Some(stop) = &scanned.stop {
+    let mut shortfalls = Vec::new();
+    if allow_partial && scanned.profile.is_some() {
+        for d in &scanned.damage {
+            if d.crc_only {
+                let kind = if d.what.starts_with("summary CRC") { ShortfallKind::SummaryCrc } else { ShortfallKind::DamagedFile };
+                shortfalls.push(Shortfall::new(path, kind, d.what.clone()));
+                continue;
+            }
+            let kind = if d.log_times.is_some() { ShortfallKind::DamagedChunk } else { ShortfallKind::DamagedFile };
+            let times = d.log_times.map(|(a, b)| format!(" (log times {a}..={b} ns)")).unwrap_or_default();
+            let resumed = match d.resumed_at {
+                Some(r) => format!("reading went on at byte {r}"),
+                None => "nothing after it could be read".into(),
+            };
+            shortfalls.push(Shortfall::new(path, kind, format!("bad record at byte {}{times}: {}; {resumed}", d.offset, d.what)));
+        }
+        if let Some(at) = scanned.truncated_at {
+            shortfalls.push(Shortfall::new(
+                path,
+                ShortfallKind::DamagedFile,
+                format!("the file ends early at byte {at} (its writer was killed?): what it held after its last complete chunk is missing; `oilfilm bag recover` rewrites it"),
+            ));
+        }
+    } else if let Some(stop) = &scanned.stop {
         let what = if stop.truncated {
             format!(
                 "the file ends early ({}) after {} complete chunks: its writer was probably killed; `oilfilm bag recover DIR` keeps every complete chunk",
@@ -195,5 +259,5 @@ pub fn messages_of_file(path: &Path, bytes: &[u8]) -> Result<Vec<BagMessage>> {
         });
     }
     out.sort_by_key(|m| m.log_time); // stable: file order among equal times
-    Ok(out)
+    Ok((out, shortfalls))
 }

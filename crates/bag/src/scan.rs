@@ -64,12 +64,14 @@ pub struct Damage {
     /// What is wrong.
     pub what: String,
     /// Where reading went on: the next record that proved itself, `None` if nothing after
-    /// the damage could be read. Equal to the end of the record for a CRC mismatch that
-    /// cost no message (the data section's or the summary's).
+    /// the damage could be read (or nothing was skipped: `crc_only`).
     pub resumed_at: Option<u64>,
     /// Messages lost with it are not known in general (a damaged chunk's count is in bytes
     /// that cannot be trusted); the time range of a skipped chunk when its header parsed.
     pub log_times: Option<(u64, u64)>,
+    /// A CRC over bytes no message is read from failed (the data section's, the summary's):
+    /// nothing was skipped.
+    pub crc_only: bool,
 }
 
 /// What one MCAP file holds, as far as it could be read.
@@ -100,7 +102,15 @@ impl ScannedFile {
         if self.stop.is_none() {
             self.stop = Some(ScanStop { offset: offset as u64, what: what.clone(), truncated: false });
         }
-        self.damage.push(Damage { offset: offset as u64, what, resumed_at: resumed_at.map(|p| p as u64), log_times });
+        self.damage.push(Damage { offset: offset as u64, what, resumed_at: resumed_at.map(|p| p as u64), log_times, crc_only: false });
+    }
+
+    fn crc_failed(&mut self, offset: usize, what: String) {
+        self.damaged(offset, what, None, None);
+        if let Some(d) = self.damage.last_mut() {
+            d.crc_only = true;
+            d.resumed_at = None;
+        }
     }
 
     fn cut_short(&mut self, offset: usize, what: String) {
@@ -232,7 +242,7 @@ fn record(bytes: &[u8], at: usize, end: usize, section: &mut Section, summary_st
             if saved != 0 {
                 let calculated = crc32fast::hash(&bytes[start..at + 9 + 16]);
                 if calculated != saved {
-                    out.damaged(start, format!("summary CRC {calculated:#010x} differs from the footer's {saved:#010x}: the summary (the chunk index) is damaged"), Some(end), None);
+                    out.crc_failed(start, summary_crc_text(calculated, saved));
                 }
             }
             out.footer = true;
@@ -246,7 +256,7 @@ fn record(bytes: &[u8], at: usize, end: usize, section: &mut Section, summary_st
             if saved != 0 {
                 let calculated = crc32fast::hash(&bytes[..at]);
                 if calculated != saved {
-                    out.damaged(at, format!("data section CRC {calculated:#010x} differs from the data end record's {saved:#010x}"), Some(end), None);
+                    out.crc_failed(at, format!("data section CRC {calculated:#010x} differs from the data end record's {saved:#010x}: bytes no chunk CRC covers changed (a chunk's time range, a message index)"));
                 }
             }
             *section = Section::Summary;
@@ -307,6 +317,11 @@ fn summary_agrees(file: &ScannedFile, r: Owned) -> Result<(), String> {
         },
         _ => Ok(()),
     }
+}
+
+/// What a summary CRC mismatch is called, by every reader.
+pub(crate) fn summary_crc_text(calculated: u32, saved: u32) -> String {
+    format!("summary CRC {calculated:#010x} differs from the footer's {saved:#010x}: the summary (the chunk index) is damaged")
 }
 
 /// The first offset from `from` on where a record starts that proves itself: a chunk whose

@@ -22,7 +22,7 @@ use std::collections::{BTreeMap, BTreeSet, BinaryHeap};
 use std::fs::File;
 use std::io::{Read, Seek};
 use std::os::unix::fs::FileExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::sync::Arc;
@@ -32,7 +32,8 @@ use mcap::sans_io::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
 use oilfilm_msgs::RosMessage;
 
 use crate::error::{io, BagError, Result};
-use crate::reader::{messages_of_file, Bag};
+use crate::integrity::{difference, ReadOptions, Shortfall, ShortfallKind, Shortfalls};
+use crate::reader::{read_file, Bag};
 
 /// One message of a chunk, borrowed from the decompressed chunk.
 #[derive(Debug, Clone, Copy)]
@@ -73,8 +74,23 @@ impl MessageRef<'_> {
 /// A file's channels: topic, type, and whether the caller wants it.
 type Channels = BTreeMap<u16, (String, String, bool)>;
 
-/// A worker's result: the job's index and its decoded messages with their log times.
-type Done<T> = (usize, Result<Vec<(u64, T)>>);
+/// What a worker made of one chunk: its wanted messages decoded, with their log times, and
+/// how many of each wanted channel it held; or, in a partial read, why it was skipped.
+struct ChunkRead<T> {
+    values: Vec<(u64, T)>,
+    counts: BTreeMap<u16, u64>,
+    skipped: Option<Shortfall>,
+}
+
+/// A worker's result: the job's index and its chunk.
+type Done<T> = (usize, Result<ChunkRead<T>>);
+
+/// Why a chunk could not be read: damage (skipped in a partial read), or anything else (a
+/// message that does not decode, an I/O error), which ends every read.
+enum ChunkFail {
+    Damaged(BagError),
+    Fatal(BagError),
+}
 
 /// A chunk to read: which file, and its index.
 struct Job {
@@ -85,8 +101,14 @@ struct Job {
 /// What one file contributes: its chunks to read, or (no usable summary) its wanted
 /// messages already decoded by the full reader.
 enum Plan<T> {
-    Chunks { channels: Arc<Channels>, jobs: Vec<ChunkIndex> },
-    Decoded(Vec<T>),
+    Chunks {
+        channels: Arc<Channels>,
+        jobs: Vec<ChunkIndex>,
+        /// The summary's statistics: messages per wanted channel, if it has them.
+        expected: Option<BTreeMap<u16, u64>>,
+    },
+    /// Read whole: the wanted messages decoded, and how many of each topic.
+    Decoded { values: Vec<T>, counts: BTreeMap<String, u64> },
 }
 
 impl Bag {
@@ -94,7 +116,8 @@ impl Bag {
     /// `decode` on one of `threads` worker threads (at least 1), handed to `consume` as an
     /// iterator in [`Bag::messages`]' order while the workers decode what comes next.
     /// An error (I/O, a damaged chunk, `decode`'s) ends the iteration early and is returned
-    /// instead of `consume`'s result.
+    /// instead of `consume`'s result. A strict read ([`Bag::read_topics_with`]): when
+    /// `consume` took every message, what was read is checked against the bag's counts too.
     pub fn read_topics<T, R>(
         &self,
         wanted: &dyn Fn(&str, &str) -> bool,
@@ -105,24 +128,46 @@ impl Bag {
     where
         T: Send,
     {
-        let paths = self.files();
+        self.read_topics_with(ReadOptions::STRICT, wanted, decode, threads, consume).map(|(r, _)| r)
+    }
+
+    /// [`Bag::read_topics`] with `options`: checks the directory against metadata.yaml
+    /// (unlisted, missing files; a live writer), each file's summary CRC and each chunk's,
+    /// and, when `consume` took every message, the counts read per topic against
+    /// metadata.yaml's and per file against its statistics. A strict read fails on the first
+    /// difference; a partial one skips damaged chunks and files it cannot read, and returns
+    /// every difference beside `consume`'s result.
+    pub fn read_topics_with<T, R>(
+        &self,
+        options: ReadOptions,
+        wanted: &dyn Fn(&str, &str) -> bool,
+        decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync),
+        threads: usize,
+        consume: impl FnOnce(&mut dyn Iterator<Item = T>) -> R,
+    ) -> Result<(R, Vec<Shortfall>)>
+    where
+        T: Send,
+    {
+        let mut found = Shortfalls::new(options);
+        self.check_directory(&mut found)?;
+        let paths: Vec<PathBuf> = self.files().into_iter().filter(|p| !options.allow_partial || p.is_file()).collect();
         let mut plans = Vec::with_capacity(paths.len());
         for path in &paths {
-            plans.push(plan_file(path, wanted, decode)?);
+            plans.push(plan_file(path, wanted, decode, &mut found)?);
         }
         let jobs: Vec<Job> = plans
             .iter_mut()
             .enumerate()
             .flat_map(|(file, p)| match p {
                 Plan::Chunks { jobs, .. } => std::mem::take(jobs).into_iter().map(|index| Job { file, index }).collect(),
-                Plan::Decoded(_) => Vec::new(),
+                Plan::Decoded { .. } => Vec::new(),
             })
             .collect();
         let channels: Vec<Option<Arc<Channels>>> = plans
             .iter()
             .map(|p| match p {
                 Plan::Chunks { channels, .. } => Some(Arc::clone(channels)),
-                Plan::Decoded(_) => None,
+                Plan::Decoded { .. } => None,
             })
             .collect();
         let files: Vec<Option<File>> = plans
@@ -130,11 +175,12 @@ impl Bag {
             .zip(&paths)
             .map(|(p, path)| match p {
                 Plan::Chunks { .. } => File::open(path).map(Some).map_err(io(path)),
-                Plan::Decoded(_) => Ok(None),
+                Plan::Decoded { .. } => Ok(None),
             })
             .collect::<Result<_>>()?;
         let threads = threads.clamp(1, jobs.len().max(1));
         let stop = AtomicBool::new(false);
+        let allow_partial = options.allow_partial;
         // Jobs handed out in order to whichever worker is free (chunks differ in size: a
         // topic's chunks can alternate with another's much smaller ones).
         let taken = AtomicUsize::new(0);
@@ -156,7 +202,21 @@ impl Bag {
                             return;
                         }
                         let (Some(file), Some(ch)) = (&files[job.file], &channels[job.file]) else { continue };
-                        let out = read_chunk_of(file, &paths[job.file], &job.index, ch, decode, &mut buffers);
+                        let path = &paths[job.file];
+                        let out = match read_chunk_of(file, path, &job.index, ch, decode, &mut buffers) {
+                            Ok(read) => Ok(read),
+                            Err(ChunkFail::Damaged(e)) if allow_partial => {
+                                let what = format!(
+                                    "the chunk at byte {} (log times {}..={} ns) is skipped: {}",
+                                    job.index.chunk_start_offset,
+                                    job.index.message_start_time,
+                                    job.index.message_end_time,
+                                    strip_path(&e, path)
+                                );
+                                Ok(ChunkRead { values: Vec::new(), counts: BTreeMap::new(), skipped: Some(Shortfall::new(path, ShortfallKind::DamagedChunk, what)) })
+                            }
+                            Err(ChunkFail::Damaged(e) | ChunkFail::Fatal(e)) => Err(e),
+                        };
                         if out.is_err() {
                             stop.store(true, Ordering::Relaxed);
                         }
@@ -167,38 +227,126 @@ impl Bag {
                 });
             }
             drop(tx);
-            let mut stream = Stream { rx, pending: BTreeMap::new(), next: 0, dir: self.dir(), jobs: &jobs, plans: &mut plans, file: 0, heap: BinaryHeap::new(), rest_start: Vec::new(), file_start: 0, file_end: 0, current: Vec::new().into_iter(), error: None, stop: &stop };
+            let channels = &channels;
+            let mut stream = Stream {
+                rx,
+                pending: BTreeMap::new(),
+                next: 0,
+                dir: self.dir(),
+                jobs: &jobs,
+                plans: &mut plans,
+                file: 0,
+                heap: BinaryHeap::new(),
+                rest_start: Vec::new(),
+                file_start: 0,
+                file_end: 0,
+                current: Vec::new().into_iter(),
+                error: None,
+                stop: &stop,
+                topic_counts: BTreeMap::new(),
+                file_counts: vec![BTreeMap::new(); paths.len()],
+                skipped: Vec::new(),
+                exhausted: false,
+            };
             let r = consume(&mut stream);
             stream.stop.store(true, Ordering::Relaxed);
-            match stream.error.take() {
-                Some(e) => Err(e),
-                None => Ok(r),
+            if let Some(e) = stream.error.take() {
+                return Err(e);
             }
+            for s in std::mem::take(&mut stream.skipped) {
+                found.note(s)?;
+            }
+            if stream.exhausted {
+                // Counts are known only when every message was taken.
+                for (f, plan) in stream.plans.iter().enumerate() {
+                    let (Plan::Chunks { expected: Some(expected), .. }, Some(ch)) = (plan, &channels[f]) else { continue };
+                    for (id, &n) in expected {
+                        let got = stream.file_counts[f].get(id).copied().unwrap_or(0);
+                        if got != n {
+                            let topic = ch.get(id).map_or("?", |c| c.0.as_str());
+                            found.note(Shortfall::new(
+                                &paths[f],
+                                ShortfallKind::Count,
+                                format!("topic {topic}: the file's statistics count {n} messages, {got} were read ({})", difference(n, got)),
+                            ))?;
+                        }
+                    }
+                }
+                self.check_counts(wanted, &stream.topic_counts, &mut found)?;
+            }
+            Ok((r, found.found))
         })
     }
 }
 
-/// The summary of one file and the chunks to read, or the full reader's result.
-fn plan_file<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool, decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync)) -> Result<Plan<T>> {
-    if let Some(plan) = indexed_plan(path, wanted)? {
+/// The summary of one file and the chunks to read, or the full reader's result (a partial
+/// read: whatever the file's undamaged records hold, its damage noted).
+fn plan_file<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool, decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync), found: &mut Shortfalls) -> Result<Plan<T>> {
+    if let Some(plan) = indexed_plan(path, wanted, found)? {
         return Ok(plan);
     }
     let bytes = std::fs::read(path).map_err(io(path))?;
-    let mut out = Vec::new();
-    for m in messages_of_file(path, &bytes)? {
+    let (messages, damage) = read_file(path, &bytes, found.allow_partial)?;
+    for d in damage {
+        found.note(d)?;
+    }
+    let mut values = Vec::new();
+    let mut counts = BTreeMap::new();
+    for m in messages {
         if !wanted(&m.topic, &m.type_name) {
             continue;
         }
         let r = MessageRef { topic: &m.topic, type_name: &m.type_name, log_time: m.log_time, data: &m.data, file: path, chunk_offset: None, index: m.index };
-        out.push(decode(&r)?);
+        values.push(decode(&r)?);
+        *counts.entry(m.topic.to_string()).or_default() += 1;
     }
-    Ok(Plan::Decoded(out))
+    Ok(Plan::Decoded { values, counts })
+}
+
+/// The text of an error without the path it starts with (a shortfall names the path).
+fn strip_path(e: &BagError, path: &Path) -> String {
+    match e {
+        BagError::Format { what, .. } => what.clone(),
+        other => {
+            let text = other.to_string();
+            let prefix = format!("{}: ", path.display());
+            text.strip_prefix(&prefix).map(str::to_string).unwrap_or(text)
+        }
+    }
+}
+
+/// `Some(problem)` when the footer's summary CRC does not match the summary; `None` when it
+/// does, is not given (0), or there is no summary to check (the caller then reads the file
+/// whole). Streams the summary through the CRC: nothing is allocated from its size.
+fn summary_crc_problem(file: &File, len: u64) -> Option<String> {
+    const FOOTER_AND_MAGIC: u64 = 1 + 8 + 20 + 8;
+    let footer_at = len.checked_sub(FOOTER_AND_MAGIC)?;
+    let mut footer = [0u8; 29];
+    file.read_exact_at(&mut footer, footer_at).ok()?;
+    let summary_start = u64::from_le_bytes(footer[9..17].try_into().ok()?);
+    let saved = u32::from_le_bytes(footer[25..29].try_into().ok()?);
+    if saved == 0 || summary_start > footer_at {
+        return None;
+    }
+    let start = if summary_start == 0 { footer_at } else { summary_start };
+    let end = footer_at + 1 + 8 + 16;
+    let mut hasher = crc32fast::Hasher::new();
+    let mut buf = vec![0u8; 64 << 10];
+    let mut at = start;
+    while at < end {
+        let n = (end - at).min(buf.len() as u64) as usize;
+        file.read_exact_at(&mut buf[..n], at).ok()?;
+        hasher.update(&buf[..n]);
+        at += n as u64;
+    }
+    let calculated = hasher.finalize();
+    (calculated != saved).then(|| crate::scan::summary_crc_text(calculated, saved))
 }
 
 /// `None` when the file has no usable summary (the caller then reads it whole and reports
 /// what is wrong with it); errors only for what the full reader would refuse too (a foreign
 /// profile, channels that are not CDR).
-fn indexed_plan<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool) -> Result<Option<Plan<T>>> {
+fn indexed_plan<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool, found: &mut Shortfalls) -> Result<Option<Plan<T>>> {
     let format = |what: String| BagError::Format { path: path.to_path_buf(), offset: None, what };
     let mut file = File::open(path).map_err(io(path))?;
     let len = file.metadata().map_err(io(path))?.len();
@@ -219,6 +367,12 @@ fn indexed_plan<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool) -> Result<O
         Ok(Record::Header(h)) if h.profile == "ros2" => {}
         Ok(Record::Header(h)) => return Err(format(format!("MCAP profile is `{}`, not `ros2`: not a rosbag2 file", h.profile))),
         _ => return Ok(None),
+    }
+    if let Some(problem) = summary_crc_problem(&file, len) {
+        // Strict: the error. Partial: the file is read record by record instead, its damage
+        // (if any beyond the summary) noted there.
+        found.note(Shortfall::new(path, ShortfallKind::SummaryCrc, problem))?;
+        return Ok(None);
     }
     let Some(summary) = read_summary(&mut file, len) else { return Ok(None) };
     if summary.chunk_indexes.is_empty() && summary.stats.as_ref().is_none_or(|s| s.message_count > 0) {
@@ -252,7 +406,17 @@ fn indexed_plan<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool) -> Result<O
         }
     }
     jobs.sort_by_key(|c| c.chunk_start_offset);
-    Ok(Some(Plan::Chunks { channels: Arc::new(channels), jobs }))
+    // Per-channel counts, when the statistics give them (a writer may leave them out).
+    let expected = summary.stats.as_ref().filter(|s| !s.channel_message_counts.is_empty() || s.message_count == 0).map(|s| {
+        let mut e: BTreeMap<u16, u64> = wanted_ids.iter().map(|id| (*id, 0)).collect();
+        for (id, n) in &s.channel_message_counts {
+            if let Some(v) = e.get_mut(id) {
+                *v = *n;
+            }
+        }
+        e
+    });
+    Ok(Some(Plan::Chunks { channels: Arc::new(channels), jobs, expected }))
 }
 
 /// The summary section, read with seeks (the data section is not read); `None` if the file
@@ -283,14 +447,14 @@ fn read_chunk_of<T>(
     channels: &Channels,
     decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync),
     buffers: &mut crate::scan::ChunkBuffers,
-) -> Result<Vec<(u64, T)>> {
+) -> Result<ChunkRead<T>, ChunkFail> {
     let offset = index.chunk_start_offset;
-    let format = |what: String| BagError::Format { path: path.to_path_buf(), offset: Some(offset), what };
+    let format = |what: String| ChunkFail::Damaged(BagError::Format { path: path.to_path_buf(), offset: Some(offset), what });
     // indexed_plan() checked the chunk lies inside the file.
     let record = &mut buffers.record;
     record.clear();
     record.resize(index.chunk_length as usize, 0);
-    file.read_exact_at(record, offset).map_err(io(path))?;
+    file.read_exact_at(record, offset).map_err(|e| ChunkFail::Fatal(io(path)(e)))?;
     if record[0] != 0x06 {
         return Err(format("the chunk index points at a record that is not a chunk".into()));
     }
@@ -301,6 +465,7 @@ fn read_chunk_of<T>(
     };
     let records = crate::scan::decompress_chunk_reusing(&header, &data, &mut buffers.records, &mut buffers.zstd).map_err(format)?;
     let mut out = Vec::new();
+    let mut counts = BTreeMap::new();
     let mut at = 0usize;
     let mut n = 0u64;
     while at < records.len() {
@@ -337,11 +502,12 @@ fn read_chunk_of<T>(
         if !wanted {
             continue;
         }
+        *counts.entry(channel).or_default() += 1;
         let m = MessageRef { topic, type_name, log_time, data: &body[22..], file: path, chunk_offset: Some(offset), index: n - 1 };
-        out.push((log_time, decode(&m)?));
+        out.push((log_time, decode(&m).map_err(ChunkFail::Fatal)?));
     }
     out.sort_by_key(|(t, _)| *t); // stable: chunk order among equal times
-    Ok(out)
+    Ok(ChunkRead { values: out, counts, skipped: None })
 }
 
 /// The decoded values in order: chunks as the workers finish them, merged in job order;
@@ -354,7 +520,7 @@ fn read_chunk_of<T>(
 /// or a writer's that mixes all topics) are so handed out as each arrives.
 struct Stream<'a, T> {
     rx: mpsc::Receiver<Done<T>>,
-    pending: BTreeMap<usize, Result<Vec<(u64, T)>>>,
+    pending: BTreeMap<usize, Result<ChunkRead<T>>>,
     next: usize,
     dir: &'a Path,
     jobs: &'a [Job],
@@ -371,6 +537,13 @@ struct Stream<'a, T> {
     current: std::vec::IntoIter<T>,
     error: Option<BagError>,
     stop: &'a AtomicBool,
+    /// Wanted messages handed over per topic, and per file and channel (chunked files).
+    topic_counts: BTreeMap<String, u64>,
+    file_counts: Vec<BTreeMap<u16, u64>>,
+    /// Chunks skipped as damaged (partial reads).
+    skipped: Vec<Shortfall>,
+    /// Every message was handed out.
+    exhausted: bool,
 }
 
 /// A value ordered by its key alone.
@@ -395,7 +568,7 @@ impl<T> Ord for Keyed<T> {
 
 impl<T> Stream<'_, T> {
     /// The next job's values, waiting for them.
-    fn take_job(&mut self) -> Result<Vec<(u64, T)>> {
+    fn take_job(&mut self) -> Result<ChunkRead<T>> {
         loop {
             if let Some(r) = self.pending.remove(&self.next) {
                 self.next += 1;
@@ -408,7 +581,7 @@ impl<T> Stream<'_, T> {
                 // Every worker ended without sending this job: another job failed first and
                 // stopped them (its error is pending), or one panicked.
                 Err(_) => {
-                    let first_error = self.pending.values_mut().find(|r| r.is_err()).map(|r| std::mem::replace(r, Ok(Vec::new())));
+                    let first_error = self.pending.values_mut().find(|r| r.is_err()).map(|r| std::mem::replace(r, Ok(ChunkRead { values: Vec::new(), counts: BTreeMap::new(), skipped: None })));
                     return match first_error {
                         Some(Err(e)) => Err(e),
                         _ => Err(BagError::Usage { path: self.dir.to_path_buf(), what: "a bag reader thread stopped before its chunk".into() }),
@@ -422,7 +595,18 @@ impl<T> Stream<'_, T> {
     fn refill(&mut self) -> Result<bool> {
         if self.next < self.file_end {
             let job = self.next;
-            for (pos, (t, v)) in self.take_job()?.into_iter().enumerate() {
+            let read = self.take_job()?;
+            let file = self.jobs[job].file;
+            if let Some(Plan::Chunks { channels, .. }) = self.plans.get(file) {
+                for (&id, &n) in &read.counts {
+                    *self.file_counts[file].entry(id).or_default() += n;
+                    if let Some((topic, _, _)) = channels.get(&id) {
+                        *self.topic_counts.entry(topic.clone()).or_default() += n;
+                    }
+                }
+            }
+            self.skipped.extend(read.skipped);
+            for (pos, (t, v)) in read.values.into_iter().enumerate() {
                 self.heap.push(Reverse(Keyed((t, job, pos), v)));
             }
             let bound = self.rest_start[self.next - self.file_start];
@@ -434,11 +618,19 @@ impl<T> Stream<'_, T> {
             self.current = out.into_iter();
             return Ok(true);
         }
-        let Some(plan) = self.plans.get_mut(self.file) else { return Ok(false) };
+        let Some(plan) = self.plans.get_mut(self.file) else {
+            self.exhausted = true;
+            return Ok(false);
+        };
         let f = self.file;
         self.file += 1;
         match plan {
-            Plan::Decoded(v) => self.current = std::mem::take(v).into_iter(),
+            Plan::Decoded { values, counts } => {
+                for (topic, n) in counts.iter() {
+                    *self.topic_counts.entry(topic.clone()).or_default() += n;
+                }
+                self.current = std::mem::take(values).into_iter();
+            }
             Plan::Chunks { .. } => {
                 let mine: Vec<u64> = self.jobs.iter().filter(|j| j.file == f).map(|j| j.index.message_start_time).collect();
                 // rest_start[k]: the least start of this file's chunks k.. (k counted from
