@@ -5,13 +5,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use oilfilm_diagnosis::{diagnose, diagnose_prepared, evidence, show, Diagnosis, DiagnosisOptions, ShowConfig};
-use oilfilm_identification::conditioning::{RawRecord, RawUnits};
+use oilfilm_identification::conditioning::RawRecord;
 use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_identification::simulate;
 use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::daq::ChannelId;
 
 use crate::RigSource;
 
@@ -37,6 +36,10 @@ pub struct DiagnoseArgs {
     /// Skip the show (simulation against measurement) and the report: verdict only.
     #[arg(long)]
     no_report: bool,
+    /// For a bag: go on past damaged chunks, unlisted or missing files and counts that
+    /// differ, saying what is missing (as `oilfilm identify BAG --allow-partial`).
+    #[arg(long)]
+    allow_partial: bool,
 }
 
 /// A record ready for the libraries: raw columns, the rig's calibration on its schedule,
@@ -46,6 +49,8 @@ struct Loaded {
     calibration: oilfilm_physics::daq::Calibration,
     speed_rpm: f64,
     speed_source: SpeedSource,
+    /// What a partial read of a bag could not deliver.
+    shortfalls: Vec<oilfilm_bag::Shortfall>,
 }
 
 fn load_ascii(args: &DiagnoseArgs) -> Result<(Loaded, RigConfig, String)> {
@@ -63,7 +68,7 @@ fn load_ascii(args: &DiagnoseArgs) -> Result<(Loaded, RigConfig, String)> {
         (None, Some(v)) => (v, SpeedSource::Record),
         (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    Ok((Loaded { raw, calibration, speed_rpm, speed_source }, rig, input.rig_source))
+    Ok((Loaded { raw, calibration, speed_rpm, speed_source, shortfalls: Vec::new() }, rig, input.rig_source))
 }
 
 /// The rig as the diagnosis reads it: its nominal description, injected effects cleared.
@@ -75,66 +80,24 @@ fn nominal(mut rig: RigConfig) -> RigConfig {
     rig
 }
 
-/// The bag's DAQ frames, in order, as one raw record; they must be consecutive (a gap is an
-/// error naming the frame) and share one channel layout.
+/// The bag's DAQ frames, in order, as one raw record: [`oilfilm::bags::record_of_bag`], what
+/// `oilfilm identify BAG` analyses (the same reader, checks and frames, so the same messages).
 fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
     let name = args.input.display().to_string();
-    let bag = oilfilm_bag::Bag::open(&args.input)?;
-    let (mut frames, mut speeds) = (Vec::new(), Vec::new());
-    for m in bag.messages()? {
-        match m.decode_ours()? {
-            oilfilm_bag::OilfilmMessage::DaqFrame(f) => frames.push(f),
-            oilfilm_bag::OilfilmMessage::RigStatus(s) => speeds.push(s.speed_rad_s * 30.0 / std::f64::consts::PI),
-            _ => {}
-        }
+    let b = oilfilm::bags::record_of_bag(&args.input, oilfilm_bag::ReadOptions { allow_partial: args.allow_partial })?;
+    if !b.ignored.is_empty() {
+        eprintln!("{name}: channels not used by the diagnosis left out: {}", b.ignored.join(", "));
     }
-    let Some(first) = frames.first() else {
-        bail!("{name}: the bag holds no DAQ frames (topic {}); nothing to diagnose", oilfilm_graph::topics::DAQ_FRAMES.name);
-    };
-    let channels: Vec<ChannelId> = first
-        .channel_names
-        .iter()
-        .map(|c| ChannelId::parse(c).with_context(|| format!("{name}: frame 0 channel `{c}`")))
-        .collect::<Result<_>>()?;
-    let width = channels.len();
-    let mut columns = vec![Vec::new(); width];
-    let mut next_scan = first.first_scan;
-    let mut decoded = Vec::new();
-    for (i, f) in frames.iter().enumerate() {
-        if f.channel_names != first.channel_names || f.units != first.units || f.sample_rate_hz != first.sample_rate_hz {
-            bail!("{name}: DAQ frame {i} (sequence {}) changes the channel layout, units or rate of frame 0", f.sequence);
-        }
-        if f.first_scan != next_scan {
-            bail!("{name}: DAQ frame {i} (sequence {}) starts at scan {}, expected {next_scan}: the record has a gap", f.sequence, f.first_scan);
-        }
-        let samples = match f.samples(&mut decoded) {
-            Ok(s) => s,
-            Err(reason) => bail!("{name}: DAQ frame {i} (sequence {}): {reason}", f.sequence),
-        };
-        for scan in samples.chunks(width) {
-            for (c, v) in columns.iter_mut().zip(scan) {
-                c.push(*v);
-            }
-        }
-        next_scan += u64::from(f.scan_count);
-    }
-    let raw = RawRecord {
-        sample_rate_hz: first.sample_rate_hz,
-        start_time_s: first.first_scan as f64 / first.sample_rate_hz,
-        channels,
-        units: if first.units == oilfilm_msgs::DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts },
-        columns,
-    };
-    let calibration = pipeline::calibration_for(rig, &raw, &first.channel_offsets_s).with_context(|| format!("{name}: the rig's calibration on the frames' schedule"))?;
-    let (speed_rpm, speed_source) = match (args.speed_rpm, speeds.first()) {
+    let calibration = pipeline::calibration_for(rig, &b.raw, &b.offsets_s).with_context(|| format!("{name}: the rig's calibration on the frames' schedule"))?;
+    let (speed_rpm, speed_source) = match (args.speed_rpm, b.speed_rpm) {
         (Some(v), _) => (v, SpeedSource::User),
-        (None, Some(&v)) if v > 0.0 => (v, SpeedSource::Record),
-        _ => (rig.operating.speed_rpm, SpeedSource::RigFile),
+        (None, Some(v)) => (v, SpeedSource::Record),
+        (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    Ok(Loaded { raw, calibration, speed_rpm, speed_source })
+    Ok(Loaded { raw: b.raw, calibration, speed_rpm, speed_source, shortfalls: b.shortfalls })
 }
 
-pub fn run(args: &DiagnoseArgs) -> Result<()> {
+pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
     let name = args.input.display().to_string();
     let (loaded, rig, rig_source) = if let Some(map) = &args.map {
         let rig = nominal(args.source.load()?);
@@ -162,7 +125,13 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         // Too short or too poorly excited: the library's verdict says why.
         Err(_) => (diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options).with_context(|| format!("diagnosing {name}"))?, None),
     };
-    let value = serde_json::to_value(&d)?;
+    let mut value = serde_json::to_value(&d)?;
+    if args.input.is_dir() {
+        if let Some(map) = value.as_object_mut() {
+            map.insert("complete".into(), serde_json::Value::Bool(loaded.shortfalls.is_empty()));
+            map.insert("shortfalls".into(), serde_json::to_value(&loaded.shortfalls)?);
+        }
+    }
     let mut written = Vec::new();
     if !args.no_report {
         match prepared.as_ref().map(|p| show(p, &rig, d.model_update.as_ref(), &ShowConfig::default())) {
@@ -174,12 +143,17 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
+        oilfilm::bags::print_shortfalls(&name, &loaded.shortfalls);
         print_diagnosis(&name, &rig_source, &d);
         if let Some(report) = written.iter().find(|p| p.extension().is_some_and(|e| e == "md")) {
             println!("report: {} ({} files in {})", report.display(), written.len(), args.out.display());
         }
     }
-    Ok(())
+    Ok(if d.cause == oilfilm_diagnosis::catalog::Cause::InsufficientData {
+        crate::Outcome::Refused(format!("{name}: the record cannot be judged: {}", d.reason))
+    } else {
+        crate::Outcome::Done
+    })
 }
 
 fn matrix(m: &nalgebra::Matrix2<f64>) -> String {

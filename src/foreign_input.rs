@@ -25,7 +25,7 @@ pub fn daq_params() -> DaqParams {
 }
 
 /// `oilfilm identify FILE --map MAP --replay`.
-pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<()> {
+pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<crate::Outcome> {
     let name = args.file.display().to_string();
     anyhow::ensure!(!args.file.is_dir(), "{name} is a directory: --map is for a TDMS, .mat or CSV file");
     let rig = args.source.load()?;
@@ -74,7 +74,7 @@ pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<()> {
             "estimates": out.estimates,
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
-        return Ok(());
+        return Ok(outcome(&name, &out.estimates));
     }
     println!(
         "{name} ({} through {}): {frames} DAQ frames of {} Hz {} through the node conditioner and estimator",
@@ -88,7 +88,15 @@ pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<()> {
         crate::launch::print_estimate(e);
     }
     println!("{} estimate(s), {} solved", out.estimates.len(), out.estimates.iter().filter(|e| e.solved).count());
-    Ok(())
+    Ok(outcome(&name, &out.estimates))
+}
+
+/// Done when a window was solved; refused (a non-zero exit) when none was.
+fn outcome(name: &str, estimates: &[oilfilm_msgs::CoefficientEstimate]) -> crate::Outcome {
+    match estimates.iter().filter(|e| e.solved).count() {
+        0 => crate::Outcome::Refused(format!("{name}: {} estimate(s), none solved", estimates.len())),
+        _ => crate::Outcome::Done,
+    }
 }
 
 /// A foreign record as one raw record for the diagnosis, with its calibration and speed.

@@ -47,13 +47,22 @@ fn bag_recover(dir: &std::path::Path) -> Result<()> {
     let r = oilfilm_bag::recover(dir)?;
     for f in &r.files {
         let what = match (&f.original, f.dropped) {
-            (_, true) => "dropped (not even an MCAP header)".to_string(),
-            (Some(orig), false) => format!("rewritten from {} complete chunk(s); original kept as {}", f.chunks, orig.display()),
+            (_, true) => "dropped (no MCAP header and no readable chunk)".to_string(),
+            (Some(orig), false) => format!("rewritten from {} intact chunk(s); original kept as {}", f.chunks, orig.display()),
             (None, false) => "sound, kept as it was".to_string(),
         };
         println!("{}: {} message(s): {what}", f.path.display(), f.messages);
-        if let Some(stop) = &f.stop {
-            println!("    the original {} at byte {}: {}", if stop.truncated { "ended early" } else { "held bad bytes" }, stop.offset, stop.what);
+        for d in &f.damage {
+            let times = d.log_times.map(|(a, b)| format!(" (log times {a}..={b} ns)")).unwrap_or_default();
+            let after = match (d.crc_only, d.resumed_at) {
+                (true, _) => "no message lost to it".to_string(),
+                (false, Some(r)) => format!("skipped, read on from byte {r}"),
+                (false, None) => "nothing after it could be read".to_string(),
+            };
+            println!("    damage at byte {}{times}: {}; {after}", d.offset, d.what);
+        }
+        if let Some(stop) = f.stop.as_ref().filter(|s| s.truncated) {
+            println!("    the original ended early at byte {}: {}", stop.offset, stop.what);
         }
     }
     println!("{}: {} message(s) in {} file(s); metadata.yaml written", dir.display(), r.messages(), r.files.len());
@@ -170,20 +179,57 @@ struct CoefficientArgs {
     json: bool,
 }
 
-fn main() -> Result<()> {
+/// What a command that can decline did: what it was asked, or an answer it refused.
+pub enum Outcome {
+    Done,
+    /// The analysis ran and refused to answer (a refused record, no estimate): why.
+    Refused(String),
+}
+
+/// Exit status: 0 only when the command did what was asked (README, "Exit status").
+pub mod exit {
+    /// An error: input that cannot be read or is out of range, I/O, a failed node.
+    pub const ERROR: u8 = 1;
+    /// Command-line usage (clap's own).
+    pub const USAGE: u8 = 2;
+    /// The analysis ran and refused: a refused record, every window refused, no estimate.
+    pub const REFUSED: u8 = 3;
+    /// A bag is incomplete or differs from its metadata.yaml (`--allow-partial` goes on).
+    pub const INCOMPLETE: u8 = 4;
+}
+
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.command {
-        Command::Rig(args) => run_rig(&args),
-        Command::Launch(args) => launch::run(&args),
-        Command::Record(args) => record::run_record(&args),
-        Command::Play(args) => record::run_play(&args),
-        Command::Bag(BagCommand::Recover { dir }) => bag_recover(&dir),
-        Command::Coefficients(args) => run_coefficients(&args),
-        Command::Simulate(args) => records::run_simulate(&args),
+    let done = |r: Result<()>| r.map(|()| Outcome::Done);
+    let result = match cli.command {
+        Command::Rig(args) => done(run_rig(&args)),
+        Command::Launch(args) => done(launch::run(&args)),
+        Command::Record(args) => done(record::run_record(&args)),
+        Command::Play(args) => done(record::run_play(&args)),
+        Command::Bag(BagCommand::Recover { dir }) => done(bag_recover(&dir)),
+        Command::Coefficients(args) => done(run_coefficients(&args)),
+        Command::Simulate(args) => done(records::run_simulate(&args)),
         Command::Identify(args) => records::run_identify(&args),
         Command::Import(args) => import::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
-        Command::Campaign(args) => campaign::run(&args.source.load()?, &args.out, args.quick, args.json),
+        Command::Campaign(args) => done(args.source.load().map_err(anyhow::Error::from).and_then(|rig| campaign::run(&rig, &args.out, args.quick, args.json))),
+    };
+    match result {
+        Ok(Outcome::Done) => std::process::ExitCode::SUCCESS,
+        Ok(Outcome::Refused(why)) => {
+            eprintln!("refused: {why}");
+            std::process::ExitCode::from(exit::REFUSED)
+        }
+        Err(e) => {
+            let incomplete = e.chain().any(|c| matches!(c.downcast_ref::<oilfilm_bag::BagError>(), Some(oilfilm_bag::BagError::Incomplete { .. })));
+            if incomplete {
+                eprintln!("Error: {e:?}\n(the bag is not what its metadata.yaml says: `oilfilm bag recover DIR` rewrites it from what is intact, or --allow-partial analyses what is readable and says what is missing)");
+                std::process::ExitCode::from(exit::INCOMPLETE)
+            } else {
+                eprintln!("Error: {e:?}");
+                std::process::ExitCode::from(exit::ERROR)
+            }
+        }
     }
 }
 

@@ -14,10 +14,11 @@ use oilfilm_physics::effects::{ChannelDelay, FilmRelaxation, FluidInertia, Housi
 
 use std::io::Write;
 
-use oilfilm::bags::{reader_threads_beside_analysis, reanalyse_bag};
+use oilfilm::bags::{merge_shortfalls, print_shortfalls, reader_threads_beside_analysis, reanalyse_bag_with};
+use oilfilm_bag::{ReadOptions, Shortfall};
 pub use oilfilm::progress::Progress;
 
-use crate::RigSource;
+use crate::{Outcome, RigSource};
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 pub enum Excitation {
@@ -229,9 +230,14 @@ pub struct IdentifyArgs {
     /// Never diagnose: the windows as the estimator gives them.
     #[arg(long)]
     no_correct: bool,
+    /// For a bag: go on past damaged chunks, files metadata.yaml does not list or lacks and
+    /// counts that differ, analysing what is readable and saying what is missing (in the
+    /// output and the JSON's `shortfalls`). Without it any of these is an error (exit 4).
+    #[arg(long)]
+    allow_partial: bool,
 }
 
-pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
+pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
     if let (Some(map), true) = (&args.map, args.replay) {
         return crate::foreign_input::identify(args, map);
     }
@@ -239,6 +245,9 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
         return replay_bag(args);
     }
     anyhow::ensure!(!args.replay, "--replay applies to bags and --map records (the node graph re-run); {} is a file", args.file.display());
+    let is_bag = args.file.is_dir();
+    anyhow::ensure!(is_bag || !args.allow_partial, "--allow-partial applies to bags; a record file is read whole or refused at its first bad line");
+    let mut shortfalls = Vec::new();
     let name = args.file.display().to_string();
     // The record, its schedule, the speed it states and its rig: from a bag's DAQ frames and
     // rig status (the rig file), or from an ASCII record (the rig its header names, else the
@@ -254,7 +263,8 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
         (l.raw, l.offsets_s, l.speed_rpm, config, rig)
     } else if args.file.is_dir() {
         let rig = args.source.load()?;
-        let b = oilfilm::bags::record_of_bag(&args.file)?;
+        let b = oilfilm::bags::record_of_bag(&args.file, ReadOptions { allow_partial: args.allow_partial })?;
+        shortfalls = b.shortfalls;
         if !b.ignored.is_empty() {
             eprintln!("{name}: channels not used by the conditioning left out: {}", b.ignored.join(", "));
         }
@@ -308,11 +318,18 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
     };
     if args.json {
         let mut value = serde_json::to_value(&id)?;
-        if let (Some(c), Some(map)) = (&correction, value.as_object_mut()) {
-            map.insert("correction".into(), serde_json::to_value(c)?);
+        if let Some(map) = value.as_object_mut() {
+            if let Some(c) = &correction {
+                map.insert("correction".into(), serde_json::to_value(c)?);
+            }
+            if is_bag {
+                map.insert("complete".into(), serde_json::Value::Bool(shortfalls.is_empty()));
+                map.insert("shortfalls".into(), serde_json::to_value(&shortfalls)?);
+            }
         }
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
+        print_shortfalls(&name, &shortfalls);
         let drift = correction.as_ref().and_then(|c| c.relative_drift_per_s).map(|r| {
             let names = ["kxx", "kxy", "cxx", "cxy", "kyx", "kyy", "cyx", "cyy"];
             let direct: Vec<String> = [0usize, 5, 2, 7].iter().map(|&k| format!("{} {:+.2} %/s", names[k], 100.0 * r[k])).collect();
@@ -323,7 +340,13 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<()> {
             crate::identify_corrected::print(c);
         }
     }
-    Ok(())
+    // Done when a window was solved or the correction gave coefficients to keep.
+    let kept = correction.as_ref().is_some_and(|c| c.stiffness_n_m.iter().chain(c.damping_n_s_m.iter()).all(|v| v.is_finite()));
+    Ok(match &id.refusal {
+        _ if id.accepted().count() > 0 || kept => Outcome::Done,
+        Some(r) => Outcome::Refused(format!("{name}: refused: {r}")),
+        None => Outcome::Refused(format!("{name}: every one of {} window(s) refused", id.windows.len())),
+    })
 }
 
 /// The pipeline settings node parameters give (a params file's or those a bag recorded): the
@@ -454,18 +477,18 @@ fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
 
 /// The conditioning chain of a bag's first recorded conditioned frame (`causal` if it
 /// carries the flag `chain=causal`, else `zero_phase`), or `None` if the bag holds none.
-fn recorded_chain(dir: &std::path::Path) -> Result<Option<&'static str>> {
+fn recorded_chain(dir: &std::path::Path, options: ReadOptions) -> Result<(Option<&'static str>, Vec<Shortfall>)> {
     use oilfilm_msgs::RosMessage;
     let bag = oilfilm_bag::Bag::open(dir)?;
     let is_conditioned = |_: &str, type_name: &str| type_name == oilfilm_msgs::ConditionedFrame::TYPE_NAME;
-    let first = bag.read_topics(&is_conditioned, &|m| m.decode::<oilfilm_msgs::ConditionedFrame>(), 1, |frames| frames.next())?;
-    Ok(first.map(|f| if f.flags.iter().any(|x| x == "chain=causal") { "causal" } else { "zero_phase" }))
+    let (first, shortfalls) = bag.read_topics_with(options, &is_conditioned, &|m| m.decode::<oilfilm_msgs::ConditionedFrame>(), 1, |frames| frames.next())?;
+    Ok((first.map(|f| if f.flags.iter().any(|x| x == "chain=causal") { "causal" } else { "zero_phase" }), shortfalls))
 }
 
 /// `oilfilm identify BAG --replay`: the bag's DAQ frames and rig status through a fresh
 /// conditioner and estimator (the nodes, `oilfilm_graph::runner::bag::reanalyse`): the
 /// estimates the graph published live, bit for bit.
-fn replay_bag(args: &IdentifyArgs) -> Result<()> {
+fn replay_bag(args: &IdentifyArgs) -> Result<Outcome> {
     let rig = args.source.load()?;
     let name = args.file.display().to_string();
     let (mut conditioner, mut estimator, from) = node_params(args)?;
@@ -473,7 +496,9 @@ fn replay_bag(args: &IdentifyArgs) -> Result<()> {
     // `chain=causal`, ADR 0014): without a params file or recorded parameters it is the one
     // to re-run; parameters that name another get estimates that cannot equal the recorded
     // ones, so say so.
-    if let Some(recorded) = recorded_chain(&args.file)? {
+    let options = ReadOptions { allow_partial: args.allow_partial };
+    let (recorded, shortfalls) = recorded_chain(&args.file, options)?;
+    if let Some(recorded) = recorded {
         if from == ParamsFrom::Defaults {
             if conditioner.chain != recorded {
                 eprintln!("{name}: the recorded conditioned frames were made by the `{recorded}` chain: re-analysing with it");
@@ -487,7 +512,7 @@ fn replay_bag(args: &IdentifyArgs) -> Result<()> {
         }
     }
     apply_estimator_options(args, &mut estimator)?;
-    replay_and_print(args, &rig, &conditioner, &estimator)
+    replay_and_print(args, &rig, &conditioner, &estimator, shortfalls, options)
 }
 
 /// `--window`, `--hop`, `--model`, `--solver`, `--speed-rpm` over the estimator's parameters;
@@ -524,10 +549,21 @@ pub(crate) fn apply_estimator_options(args: &IdentifyArgs, estimator: &mut oilfi
     Ok(())
 }
 
-/// The bag's frames through the node conditioner and estimator, printed.
-fn replay_and_print(args: &IdentifyArgs, rig: &RigConfig, conditioner: &oilfilm_graph::conditioner::ConditionerParams, estimator: &oilfilm_graph::estimator::EstimatorParams) -> Result<()> {
+/// The bag's frames through the node conditioner and estimator, printed; `shortfalls`: what
+/// reading the bag so far found missing.
+fn replay_and_print(
+    args: &IdentifyArgs,
+    rig: &RigConfig,
+    conditioner: &oilfilm_graph::conditioner::ConditionerParams,
+    estimator: &oilfilm_graph::estimator::EstimatorParams,
+    mut shortfalls: Vec<Shortfall>,
+    options: ReadOptions,
+) -> Result<Outcome> {
     let name = args.file.display().to_string();
-    let (out, frames, status) = reanalyse_bag(&args.file, rig, conditioner, estimator, reader_threads_beside_analysis())?;
+    let r = reanalyse_bag_with(&args.file, rig, conditioner, estimator, reader_threads_beside_analysis(), options)?;
+    merge_shortfalls(&mut shortfalls, r.shortfalls);
+    let (out, frames, status) = (r.recording, r.frames, r.status);
+    let solved = out.estimates.iter().filter(|e| e.solved).count();
     if args.json {
         let doc = serde_json::json!({
             "bag": name,
@@ -536,15 +572,22 @@ fn replay_and_print(args: &IdentifyArgs, rig: &RigConfig, conditioner: &oilfilm_
             "conditioner": conditioner,
             "estimator": estimator,
             "estimates": out.estimates,
+            "complete": shortfalls.is_empty(),
+            "shortfalls": shortfalls,
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
-        return Ok(());
+    } else {
+        print_shortfalls(&name, &shortfalls);
+        println!("{name}: {frames} DAQ frames, {status} rig status messages through the node conditioner and estimator");
+        println!("frame: {}", pipeline::FRAME);
+        for e in &out.estimates {
+            crate::launch::print_estimate(e);
+        }
+        println!("{} estimate(s), {solved} solved", out.estimates.len());
     }
-    println!("{name}: {frames} DAQ frames, {status} rig status messages through the node conditioner and estimator");
-    println!("frame: {}", pipeline::FRAME);
-    for e in &out.estimates {
-        crate::launch::print_estimate(e);
-    }
-    println!("{} estimate(s), {} solved", out.estimates.len(), out.estimates.iter().filter(|e| e.solved).count());
-    Ok(())
+    Ok(if solved == 0 {
+        Outcome::Refused(format!("{name}: {} estimate(s), none solved", out.estimates.len()))
+    } else {
+        Outcome::Done
+    })
 }
