@@ -4,26 +4,26 @@
 //! record), or the built-in rig when the header names that; a header naming neither is warned
 //! about and the built-in rig is used.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use oilfilm_identification::ascii::{self, Record};
 use oilfilm_physics::config::RigConfig;
 
-/// The text of a record file, decompressed if it is gzip.
-pub fn read_text(path: &Path) -> Result<String> {
+/// The record in a file, plain or gzip (recognised by its magic bytes), read as a stream: the
+/// text is never held whole, only the record's columns.
+pub fn read_record(path: &Path) -> Result<Record> {
+    use std::io::BufRead;
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {name}"))?;
-    if bytes.starts_with(&[0x1f, 0x8b]) {
-        let mut text = String::new();
-        flate2::read::MultiGzDecoder::new(bytes.as_slice())
-            .read_to_string(&mut text)
-            .with_context(|| format!("{name}: not a valid gzip stream of UTF-8 text"))?;
-        Ok(text)
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read {name}"))?;
+    let mut stream = std::io::BufReader::with_capacity(1 << 16, file);
+    let gzip = stream.fill_buf().with_context(|| format!("cannot read {name}"))?.starts_with(&[0x1f, 0x8b]);
+    let record = if gzip {
+        ascii::read_stream(std::io::BufReader::with_capacity(1 << 16, flate2::bufread::MultiGzDecoder::new(stream)), &name)
     } else {
-        String::from_utf8(bytes).map_err(|e| anyhow::anyhow!("{name}: byte {} is not UTF-8 text", e.utf8_error().valid_up_to()))
-    }
+        ascii::read_stream(stream, &name)
+    };
+    Ok(record?)
 }
 
 /// A parsed record and the rig it is analysed with.
@@ -37,8 +37,7 @@ pub struct AsciiInput {
 /// Reads `path` and resolves its rig (`explicit` is `--rig`).
 pub fn load(path: &Path, explicit: Option<&Path>) -> Result<AsciiInput> {
     let name = path.display().to_string();
-    let text = read_text(path)?;
-    let record = ascii::read(&text, &name)?;
+    let record = read_record(path)?;
     let named = record.header.rig.trim().to_string();
     let beside = |n: &str| -> Option<PathBuf> {
         let p = Path::new(n);

@@ -49,12 +49,12 @@
 //! | key | required | value |
 //! | --- | --- | --- |
 //! | `rig` | yes | name or path of the rig configuration the record belongs to: the rest of the line without the blanks at its ends, non-empty, no control characters. With `units: volts` its DAQ calibration converts the values. |
-//! | `sample_rate_hz` | yes | scan rate, Hz, finite and > 0 (Zhou: 5000) |
+//! | `sample_rate_hz` | yes | scan rate, Hz, > 0 and <= 1e7 (Zhou: 5000) |
 //! | `channel_interval_s` | yes | time between the conversions of two successive channels of one scan by the multiplexer, s, >= 0 (0 for simultaneous sampling; Zhou's card at 100 kHz: 1e-5). The channel in position `p` of the column line (0-based) is converted `p * channel_interval_s` after the scan starts; `(channels - 1) * channel_interval_s` must be shorter than the scan period `1 / sample_rate_hz`. |
 //! | `channel_offsets_s` | no | for a DAQ that is not uniformly multiplexed: one offset per channel, in column-line order, blank-separated, each >= 0 and < `1 / sample_rate_hz`. Replaces `p * channel_interval_s` (which is then not checked against the scan period). |
 //! | `units` | yes | `si` (m, N, degC as in the channel table) or `volts` (amplifier outputs, converted with the calibration of the rig config named by `rig`) |
-//! | `start_time_s` | yes | time of scan index 0 on the recording's clock, s, finite (0, or seconds since the Unix epoch) |
-//! | `speed_rpm` | no | shaft speed during the record, rpm, finite and > 0. The ten channels carry no tachometer; without this key the rig configuration's operating speed is assumed, and tools say so. |
+//! | `start_time_s` | yes | time of scan index 0 on the recording's clock, s, from 0 to 2147483647 (0, or seconds since the Unix epoch up to the last second a ROS 2 stamp's int32 seconds hold) |
+//! | `speed_rpm` | no | shaft speed during the record, rpm, > 0 and <= 1e6. The ten channels carry no tachometer; without this key the rig configuration's operating speed is assumed, and tools say so. |
 //!
 //! ## 3. Column line
 //!
@@ -240,12 +240,12 @@ impl Header {
         if let Err(reason) = check_interval(self.channel_interval_s) {
             return bad("channel_interval_s", reason);
         }
-        if !self.start_time_s.is_finite() {
-            return bad("start_time_s", format!("must be finite, got {}", self.start_time_s));
+        if let Err(reason) = check_start_time(self.start_time_s) {
+            return bad("start_time_s", reason);
         }
         if let Some(v) = self.speed_rpm {
-            if !v.is_finite() || v <= 0.0 {
-                return bad("speed_rpm", format!("must be finite and > 0, got {v}"));
+            if let Err(reason) = check_speed(v) {
+                return bad("speed_rpm", reason);
             }
         }
         if let Err((_, reason)) = check_channels(self.channels.iter().map(String::as_str)) {
@@ -329,11 +329,20 @@ fn check_rig(rig: &str) -> Result<(), String> {
     }
 }
 
+/// Highest `sample_rate_hz` accepted, Hz: far above any DAQ's scan rate, low enough that
+/// the times and sizes derived from it stay meaningful.
+pub const MAX_SAMPLE_RATE_HZ: f64 = 10e6;
+/// Latest `start_time_s` accepted, s: the last second a ROS 2 `builtin_interfaces/Time`
+/// (int32 seconds) can stamp, so a replayed record's stamps are never pinned at the limit.
+pub const MAX_START_TIME_S: f64 = i32::MAX as f64;
+/// Highest `speed_rpm` accepted: above any journal-bearing rig's shaft speed.
+pub const MAX_SPEED_RPM: f64 = 1e6;
+
 fn check_sample_rate(x: f64) -> Result<(), String> {
-    if x.is_finite() && x > 0.0 {
+    if x.is_finite() && x > 0.0 && x <= MAX_SAMPLE_RATE_HZ {
         Ok(())
     } else {
-        Err(format!("sample_rate_hz must be finite and positive, got {x}"))
+        Err(format!("sample_rate_hz must be in (0, {MAX_SAMPLE_RATE_HZ:e}] Hz, got {x:?}"))
     }
 }
 
@@ -341,7 +350,25 @@ fn check_interval(x: f64) -> Result<(), String> {
     if x.is_finite() && x >= 0.0 {
         Ok(())
     } else {
-        Err(format!("channel_interval_s must be finite and non-negative, got {x}"))
+        Err(format!("channel_interval_s must be finite and non-negative, got {x:?}"))
+    }
+}
+
+fn check_start_time(x: f64) -> Result<(), String> {
+    if (0.0..=MAX_START_TIME_S).contains(&x) {
+        Ok(())
+    } else {
+        Err(format!(
+            "start_time_s must be in [0, {MAX_START_TIME_S}] s (0, or seconds since the Unix epoch up to ROS 2's int32 limit in 2038), got {x:?}"
+        ))
+    }
+}
+
+fn check_speed(x: f64) -> Result<(), String> {
+    if x > 0.0 && x <= MAX_SPEED_RPM {
+        Ok(())
+    } else {
+        Err(format!("speed_rpm must be in (0, {MAX_SPEED_RPM:e}] rpm, got {x:?}"))
     }
 }
 
@@ -414,8 +441,8 @@ fn check_timing(header: &Header) -> Result<(), (Option<usize>, String)> {
                     return Err((
                         Some(i),
                         format!(
-                            "offset {o} s of channel `{}` must be >= 0 and shorter than the scan \
-                             period 1/sample_rate_hz = {period} s",
+                            "offset {o:?} s of channel `{}` must be >= 0 and shorter than the scan \
+                             period 1/sample_rate_hz = {period:?} s",
                             header.channels.get(i).map(String::as_str).unwrap_or("?")
                         ),
                     ));
@@ -431,9 +458,9 @@ fn check_timing(header: &Header) -> Result<(), (Option<usize>, String)> {
                 Err((
                     None,
                     format!(
-                        "the last channel would be converted {last} s after the scan starts \
-                         ({} channels x channel_interval_s {} s), not within the scan period \
-                         1/sample_rate_hz = {period} s",
+                        "the last channel would be converted {last:?} s after the scan starts \
+                         ({} channels x channel_interval_s {:?} s), not within the scan period \
+                         1/sample_rate_hz = {period:?} s",
                         header.channels.len(),
                         header.channel_interval_s
                     ),
@@ -830,6 +857,54 @@ fn data_row(
     }
 }
 
+/// Reads a record from `stream`, line by line: the text is never held whole (only the
+/// record's columns are), so a record the size of the memory can be read. The same rules and
+/// errors as [`read`]; a byte that is not UTF-8 is an error at its line and column.
+pub fn read_stream(mut stream: impl std::io::BufRead, file_name: &str) -> Result<Record, IdentificationError> {
+    let mut reader = LineReader::new(file_name);
+    let mut scan_index: Vec<u64> = Vec::new();
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut bytes: Vec<u8> = Vec::new();
+    let (mut number, mut lines) = (0usize, 0usize);
+    loop {
+        bytes.clear();
+        let n = stream.read_until(b'\n', &mut bytes).map_err(|e| parse_error(file_name, number + 1, 0, format!("cannot read: {e}")))?;
+        number += 1;
+        let ended = bytes.last() == Some(&b'\n');
+        if ended {
+            bytes.pop();
+        }
+        let line = std::str::from_utf8(&bytes).map_err(|e| {
+            let at = e.valid_up_to();
+            let column = String::from_utf8_lossy(&bytes[..at]).chars().count() + 1;
+            parse_error(file_name, number, column, format!("byte 0x{:02x} is not UTF-8 text", bytes[at]))
+        })?;
+        // `str::lines` counts a last line only when it has text; `read` reports the same.
+        if n > 0 && (ended || !line.is_empty()) {
+            lines += 1;
+        }
+        match reader.feed(number, line)? {
+            Fed::Nothing => {}
+            Fed::Header(header) => columns = vec![Vec::new(); header.channels.len()],
+            Fed::Row(row) => {
+                for (column, x) in columns.iter_mut().zip(row.values) {
+                    column.push(x);
+                }
+                scan_index.push(row.scan_index);
+            }
+            Fed::Gap { gap: e, .. } | Fed::Bad(e) => return Err(e),
+        }
+        if !ended {
+            break;
+        }
+    }
+    let (header, column_line) = reader.finish(lines.max(1))?;
+    if scan_index.is_empty() {
+        return Err(parse_error(file_name, column_line, 0, "no data: no scan rows follow the column line".into()));
+    }
+    Ok(Record { header: header.clone(), scan_index, columns })
+}
+
 /// Reads a record from the text of a file; `file_name` only labels errors. Never panics;
 /// every refusal is an [`IdentificationError::Parse`] naming the line and column (see the
 /// module docs for the rules). The whole-file form of [`LineReader`]: the first problem of
@@ -938,22 +1013,10 @@ fn parse_header(
     };
     let sample_rate_hz = number("sample_rate_hz", check_sample_rate)?;
     let channel_interval_s = number("channel_interval_s", check_interval)?;
-    let start_time_s = number("start_time_s", |x| {
-        if x.is_finite() {
-            Ok(())
-        } else {
-            Err(format!("start_time_s must be finite, got {x}"))
-        }
-    })?;
+    let start_time_s = number("start_time_s", check_start_time)?;
     let speed_rpm = match entries.get("speed_rpm") {
         None => None,
-        Some(_) => Some(number("speed_rpm", |x| {
-            if x.is_finite() && x > 0.0 {
-                Ok(())
-            } else {
-                Err(format!("speed_rpm must be finite and > 0, got {x}"))
-            }
-        })?),
+        Some(_) => Some(number("speed_rpm", check_speed)?),
     };
     let units = {
         let e = get("units")?;

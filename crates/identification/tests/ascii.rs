@@ -165,7 +165,17 @@ fn each_rule_is_enforced_with_a_precise_position() {
         ),
         (good_with("# units: si", "# units: SI"), 5, 10, "`si` or `volts`"),
         (good_with("# units: si", "# units: millivolts"), 5, 10, "`si` or `volts`"),
-        (good_with("5000", "-5000"), 3, 19, "finite and positive"),
+        (good_with("5000", "-5000"), 3, 19, "must be in (0, 1e7] Hz, got -5000.0"),
+        (good_with("5000", "1e300"), 3, 19, "must be in (0, 1e7] Hz, got 1e300"),
+        // Out of range: the allowed range, and the value at a bounded width (the issue saw a
+        // 1e308 printed as a 309-digit number).
+        (good_with("# start_time_s: 0", "# start_time_s: 1e308"), 6, 17, "[0, 2147483647] s"),
+        (good_with("# start_time_s: 0", "# start_time_s: 9.3e9"), 6, 17, "got 9300000000.0"),
+        (good_with("# start_time_s: 0", "# start_time_s: -1"), 6, 17, "[0, 2147483647] s"),
+        (good_with("# start_time_s: 0", "# start_time_s: 2147483647"), 0, 0, ""),
+        (good_with("# units: si", "# units: si\n# speed_rpm: 1e308"), 6, 14, "(0, 1e6] rpm, got 1e308"),
+        (good_with("# units: si", "# units: si\n# speed_rpm: 0"), 6, 14, "(0, 1e6] rpm"),
+        (good_with("# units: si", "# units: si\n# speed_rpm: 1500"), 0, 0, ""),
         (good_with("5000", "inf"), 3, 19, "not a finite number"),
         (good_with("5000", "1e999"), 3, 19, "not a finite number"),
         (good_with("1e-5", "-1e-5"), 4, 23, "non-negative"),
@@ -237,6 +247,7 @@ fn each_rule_is_enforced_with_a_precise_position() {
         }
         let (l, c, message) = parse_error(result);
         assert!(message.contains(words), "`{message}` lacks `{words}`\n{text}");
+        assert!(message.len() < 400, "a message of bounded width: {message}");
         assert_eq!((l, c), (line, column), "{message}\n{text}");
     }
     // Long non-ASCII fields are shortened in messages, on character boundaries.
@@ -288,7 +299,10 @@ fn random_record(rng: &mut ChaCha8Rng, scans: usize) -> Record {
             channel_interval_s,
             channel_offsets_s,
             units: if rng.random::<bool>() { Units::Si } else { Units::Volts },
-            start_time_s: awkward(rng),
+            // Awkward values within the documented range (0 to ROS 2's int32 seconds).
+            start_time_s: std::iter::repeat_with(|| awkward(rng).abs())
+                .find(|t| *t <= ascii::MAX_START_TIME_S)
+                .expect("an endless iterator"),
             speed_rpm: rng.random::<bool>().then(|| 1.0 + rng.random::<f64>() * 5000.0),
             channels,
         },
@@ -371,6 +385,8 @@ fn writers_refuse_what_a_reader_would_refuse() {
         (Header { channel_interval_s: 1e-4, ..header.clone() }, "header.channel_interval_s"),
         (Header { start_time_s: f64::INFINITY, ..header.clone() }, "header.start_time_s"),
         (Header { speed_rpm: Some(0.0), ..header.clone() }, "header.speed_rpm"),
+        (Header { start_time_s: 9.3e9, ..header.clone() }, "header.start_time_s"),
+        (Header { speed_rpm: Some(1e308), ..header.clone() }, "header.speed_rpm"),
         (Header { speed_rpm: Some(f64::NAN), ..header.clone() }, "header.speed_rpm"),
         (
             Header { channel_offsets_s: Some(vec![0.0; 9]), ..header.clone() },
@@ -476,7 +492,7 @@ fn mutated_files_never_make_the_reader_panic() {
     let (mut ok, mut refused) = (0, 0);
     // OILFILM_FUZZ_CASES=200000 searches longer; the default keeps the suite fast.
     let cases: usize =
-        std::env::var("OILFILM_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(4000);
+        std::env::var("OILFILM_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000);
     for case in 0..cases {
         // A short file half the time, so that the header takes more of the damage.
         let base = match case % 4 {
@@ -492,6 +508,14 @@ fn mutated_files_never_make_the_reader_panic() {
         let outcome = std::panic::catch_unwind(|| ascii::read(&text, "mutant.txt"));
         let result =
             outcome.unwrap_or_else(|_| panic!("case {case}: the reader panicked on\n{text}"));
+        // The streaming reader gives the same record or the same error.
+        let streamed = std::panic::catch_unwind(|| ascii::read_stream(text.as_bytes(), "mutant.txt"))
+            .unwrap_or_else(|_| panic!("case {case}: the streaming reader panicked on\n{text}"));
+        match (&result, &streamed) {
+            (Ok(a), Ok(b)) => assert_bit_identical(a, b),
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "case {case}"),
+            _ => panic!("case {case}: read gave {result:?}, read_stream {streamed:?}"),
+        }
         match result {
             Ok(record) => {
                 ok += 1;
@@ -608,4 +632,22 @@ fn a_header_error_stops_the_line_reader_for_good() {
     let mut reader = LineReader::new("s");
     feed_all(&mut reader, "# oilfilm-ascii 1\n# rig: r");
     assert!(reader.finish(2).unwrap_err().to_string().starts_with("s:2:0: the file ends before the column line"));
+}
+
+#[test]
+fn the_streaming_reader_names_the_line_and_column_of_a_byte_that_is_not_utf8() {
+    let (text, _) = data("example-si.txt");
+    let streamed = ascii::read_stream(text.as_bytes(), "example-si.txt").expect("the example streams");
+    assert_bit_identical(&ascii::read(&text, "example-si.txt").unwrap(), &streamed);
+    // CR LF line ends and no line end at the end of the file read the same.
+    let crlf = text.replace('\n', "\r\n");
+    assert_bit_identical(&streamed, &ascii::read_stream(crlf.trim_end().as_bytes(), "crlf").expect("CR LF"));
+    let mut bytes = GOOD.as_bytes().to_vec();
+    let at = GOOD.find("5601").unwrap() + 2;
+    bytes[at] = 0xc3;
+    let (line, column, message) = parse_error(ascii::read_stream(bytes.as_slice(), "bad.txt"));
+    let expected_column = at - GOOD[..at].rfind('\n').unwrap();
+    assert_eq!((line, column), (9, expected_column), "{message}");
+    assert_eq!(&GOOD[at - expected_column + 1..at], "1 5.1e-05 -7.9e-05 5e-05 -8e-05 1e-08 -2e-08 3.6 5.2 56", "the column counts from 1");
+    assert!(message.contains("0xc3") && message.contains("not UTF-8"), "{message}");
 }

@@ -229,14 +229,19 @@ pub fn se_decimation(n: usize, sample_rate_hz: f64, signal_band_hz: Option<f64>)
     by_band.min(n / SE_MIN_SAMPLES).max(1)
 }
 
+/// The longest window (and hop) accepted, samples: 200 times the paper's 50 000 (33 min at
+/// its 5 kHz). A window's buffers grow with it, so a mistyped size is refused before anything
+/// is allocated rather than aborting the process.
+pub const MAX_WINDOW_SAMPLES: usize = 10_000_000;
+
 impl EstimatorConfig {
     /// Check every field; the error names the offending one.
     pub fn validate(&self) -> Result<(), IdentificationError> {
-        if self.window < 2 {
-            return Err(IdentificationError::invalid("window", format!("must be at least 2 samples, got {}", self.window)));
+        if !(2..=MAX_WINDOW_SAMPLES).contains(&self.window) {
+            return Err(IdentificationError::invalid("window", format!("must be 2 to {MAX_WINDOW_SAMPLES} samples, got {}", self.window)));
         }
-        if self.hop == 0 {
-            return Err(IdentificationError::invalid("hop", "must be at least 1 sample (0 would never advance)"));
+        if !(1..=MAX_WINDOW_SAMPLES).contains(&self.hop) {
+            return Err(IdentificationError::invalid("hop", format!("must be 1 to {MAX_WINDOW_SAMPLES} samples (0 would never advance), got {}", self.hop)));
         }
         if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
             return Err(IdentificationError::invalid(
