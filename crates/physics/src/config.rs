@@ -118,14 +118,14 @@ pub struct RigConfig {
 
 fn positive(field: &str, v: f64) -> Result<(), PhysicsError> {
     if !v.is_finite() || v <= 0.0 {
-        return Err(PhysicsError::invalid(field, format!("must be positive and finite, got {v}")));
+        return Err(PhysicsError::invalid(field, format!("must be positive and finite, got {v:?}")));
     }
     Ok(())
 }
 
 fn finite(field: &str, v: f64) -> Result<(), PhysicsError> {
     if !v.is_finite() {
-        return Err(PhysicsError::invalid(field, format!("must be finite, got {v}")));
+        return Err(PhysicsError::invalid(field, format!("must be finite, got {v:?}")));
     }
     Ok(())
 }
@@ -170,19 +170,19 @@ impl RigConfig {
         positive("housing.exciter_max_force_n", h.exciter_max_force_n)?;
         let [f_lo, f_hi] = h.exciter_band_hz;
         if !f_lo.is_finite() || !f_hi.is_finite() || f_lo < 0.0 || f_hi <= f_lo {
-            return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("must be [low, high] with 0 <= low < high, got [{f_lo}, {f_hi}]")));
+            return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("must be [low, high] with 0 <= low < high, got [{f_lo:?}, {f_hi:?}]")));
         }
         if f_hi >= 0.5 * self.daq.sample_rate_hz {
-            return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("upper edge {f_hi} Hz must stay below the DAQ's Nyquist frequency {} Hz", 0.5 * self.daq.sample_rate_hz)));
+            return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("upper edge {f_hi:?} Hz must stay below the DAQ's Nyquist frequency {:?} Hz", 0.5 * self.daq.sample_rate_hz)));
         }
         positive("housing.exciter_max_slew_n_per_s", h.exciter_max_slew_n_per_s)?;
         positive("housing.gravity_m_s2", h.gravity_m_s2)?;
         let s = &self.static_load;
         if !s.ripple_fraction.is_finite() || !(0.0..0.2).contains(&s.ripple_fraction) {
-            return Err(PhysicsError::invalid("static_load.ripple_fraction", format!("must lie in [0, 0.2), got {}", s.ripple_fraction)));
+            return Err(PhysicsError::invalid("static_load.ripple_fraction", format!("must lie in [0, 0.2), got {:?}", s.ripple_fraction)));
         }
         if !s.ripple_hz.is_finite() || s.ripple_hz < 0.0 {
-            return Err(PhysicsError::invalid("static_load.ripple_hz", format!("must be >= 0, got {}", s.ripple_hz)));
+            return Err(PhysicsError::invalid("static_load.ripple_hz", format!("must be >= 0, got {:?}", s.ripple_hz)));
         }
         positive("static_load.max_force_n", s.max_force_n)?;
         let o = &self.operating;
@@ -192,19 +192,19 @@ impl RigConfig {
         if bellows > s.max_force_n {
             return Err(PhysicsError::invalid(
                 "operating.bearing_load_n",
-                format!("needs a bellows force of {bellows:.0} N (load + housing weight), above static_load.max_force_n = {} N", s.max_force_n),
+                format!("needs a bellows force of {bellows:.3e} N (load + housing weight), above static_load.max_force_n = {:?} N", s.max_force_n),
             ));
         }
         finite("operating.bearing_temperature_c", o.bearing_temperature_c)?;
         self.oil.viscosity_pa_s(o.bearing_temperature_c).map_err(|e| PhysicsError::invalid("operating.bearing_temperature_c", e.to_string()))?;
         let j = &self.journal;
         if !j.orbit_amplitude_m.is_finite() || j.orbit_amplitude_m < 0.0 || j.orbit_amplitude_m >= 0.5 * self.bearing.clearance_m {
-            return Err(PhysicsError::invalid("journal.orbit_amplitude_m", format!("must lie in [0, c/2) = [0, {:e}) m, got {}", 0.5 * self.bearing.clearance_m, j.orbit_amplitude_m)));
+            return Err(PhysicsError::invalid("journal.orbit_amplitude_m", format!("must lie in [0, c/2) = [0, {:e}) m, got {:?}", 0.5 * self.bearing.clearance_m, j.orbit_amplitude_m)));
         }
         finite("journal.orbit_phase_deg", j.orbit_phase_deg)?;
         self.daq.validate("daq")?;
         if !(1..=64).contains(&self.simulation.substeps) {
-            return Err(PhysicsError::invalid("simulation.substeps", format!("must lie in 1..=64, got {}", self.simulation.substeps)));
+            return Err(PhysicsError::invalid("simulation.substeps", format!("must lie in 1..=64, got {:?}", self.simulation.substeps)));
         }
         self.effects.validate("effects")?;
         Ok(())

@@ -397,25 +397,25 @@ impl DaqConfig {
         if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
             return Err(PhysicsError::invalid(
                 f("sample_rate_hz"),
-                format!("must be finite and > 0, got {}", self.sample_rate_hz),
+                format!("must be finite and > 0, got {:?}", self.sample_rate_hz),
             ));
         }
         if !(self.channel_interval_s.is_finite() && self.channel_interval_s >= 0.0) {
             return Err(PhysicsError::invalid(
                 f("channel_interval_s"),
-                format!("must be finite and >= 0, got {}", self.channel_interval_s),
+                format!("must be finite and >= 0, got {:?}", self.channel_interval_s),
             ));
         }
         if !(8..=24).contains(&self.adc_bits) {
             return Err(PhysicsError::invalid(
                 f("adc_bits"),
-                format!("must be in 8..=24, got {}", self.adc_bits),
+                format!("must be in 8..=24, got {:?}", self.adc_bits),
             ));
         }
         if !(self.full_scale_v.is_finite() && self.full_scale_v > 0.0) {
             return Err(PhysicsError::invalid(
                 f("full_scale_v"),
-                format!("must be finite and > 0, got {}", self.full_scale_v),
+                format!("must be finite and > 0, got {:?}", self.full_scale_v),
             ));
         }
         let mut seen: [Option<usize>; CHANNEL_COUNT] = [None; CHANNEL_COUNT];
@@ -432,26 +432,26 @@ impl DaqConfig {
             if !(s.is_finite() && s != 0.0) {
                 return Err(PhysicsError::invalid(
                     cf("sensitivity_v_per_unit"),
-                    format!("must be finite and non-zero, got {s}"),
+                    format!("must be finite and non-zero, got {s:?}"),
                 ));
             }
             if !ch.offset_v.is_finite() {
                 return Err(PhysicsError::invalid(
                     cf("offset_v"),
-                    format!("must be finite, got {}", ch.offset_v),
+                    format!("must be finite, got {:?}", ch.offset_v),
                 ));
             }
             if !(ch.noise_rms.is_finite() && ch.noise_rms >= 0.0) {
                 return Err(PhysicsError::invalid(
                     cf("noise_rms"),
-                    format!("must be finite and >= 0, got {}", ch.noise_rms),
+                    format!("must be finite and >= 0, got {:?}", ch.noise_rms),
                 ));
             }
             let [lo, hi] = ch.linear_range;
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
                 return Err(PhysicsError::invalid(
                     cf("linear_range"),
-                    format!("must be finite [min, max] with min < max, got [{lo}, {hi}]"),
+                    format!("must be finite [min, max] with min < max, got [{lo:?}, {hi:?}]"),
                 ));
             }
             let [vlo, vhi] = ch.linear_range_v();
@@ -663,7 +663,7 @@ impl Calibration {
     /// `[0, 1 / sample_rate_hz)`.
     pub fn with_schedule(&self, sample_rate_hz: f64, schedule: &[(ChannelId, f64)]) -> Result<Self, PhysicsError> {
         if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
-            return Err(PhysicsError::invalid("schedule.sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz}")));
+            return Err(PhysicsError::invalid("schedule.sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz:?}")));
         }
         if schedule.len() != self.channels.len() {
             return Err(PhysicsError::invalid(
@@ -822,7 +822,7 @@ impl Daq {
                         return Err(PhysicsError::invalid(
                             "effects.probe_saturation.limit_m",
                             format!(
-                                "the band {zero} +- {limit} m about the calibrated zero of `{ch}` does not overlap its linear range [{}, {}] m",
+                                "the band {zero:?} +- {limit:?} m about the calibrated zero of `{ch}` does not overlap its linear range [{:?}, {:?}] m",
                                 c.linear_range[0], c.linear_range[1]
                             ),
                         ));

@@ -156,7 +156,7 @@ impl Effects {
             if !v.is_finite() || (!allow_negative && v < 0.0) {
                 return Err(PhysicsError::invalid(
                     format!("{prefix}.{field}"),
-                    if allow_negative { format!("must be finite, got {v}") } else { format!("must be finite and >= 0, got {v}") },
+                    if allow_negative { format!("must be finite, got {v:?}") } else { format!("must be finite and >= 0, got {v:?}") },
                 ));
             }
             Ok(())
@@ -190,7 +190,7 @@ impl Effects {
             check("film_relaxation.stiffness_n_m", e.stiffness_n_m, false)?;
             let tau = e.time_constant_s;
             if !tau.is_finite() || tau <= 0.0 {
-                return Err(PhysicsError::invalid(format!("{prefix}.film_relaxation.time_constant_s"), format!("must be finite and > 0, got {tau}")));
+                return Err(PhysicsError::invalid(format!("{prefix}.film_relaxation.time_constant_s"), format!("must be finite and > 0, got {tau:?}")));
             }
         }
         Ok(())

@@ -94,7 +94,7 @@ impl BearingGeometry {
             if !v.is_finite() || v <= 0.0 {
                 return Err(PhysicsError::invalid(
                     format!("{prefix}.{name}"),
-                    format!("must be a positive finite length in metres, got {v}"),
+                    format!("must be a positive finite length in metres, got {v:?}"),
                 ));
             }
             Ok(())
@@ -116,13 +116,13 @@ impl BearingGeometry {
             if !groove_arc_deg.is_finite() || !(0.0..90.0).contains(&groove_arc_deg) {
                 return Err(PhysicsError::invalid(
                     format!("{prefix}.kind.groove_arc_deg"),
-                    format!("must lie in [0, 90) degrees, got {groove_arc_deg}"),
+                    format!("must lie in [0, 90) degrees, got {groove_arc_deg:?}"),
                 ));
             }
             if !groove_centre_deg.is_finite() {
                 return Err(PhysicsError::invalid(
                     format!("{prefix}.kind.groove_centre_deg"),
-                    format!("must be finite, got {groove_centre_deg}"),
+                    format!("must be finite, got {groove_centre_deg:?}"),
                 ));
             }
         }

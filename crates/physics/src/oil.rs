@@ -193,7 +193,7 @@ impl Oil {
         if !viscosity_pa_s.is_finite() || viscosity_pa_s <= 0.0 {
             return Err(PhysicsError::invalid(
                 "viscosity",
-                format!("must be positive and finite to find its temperature, got {viscosity_pa_s} Pa s"),
+                format!("must be positive and finite to find its temperature, got {viscosity_pa_s:?} Pa s"),
             ));
         }
         if let ViscosityLaw::Constant { .. } = self.law {
@@ -264,7 +264,7 @@ impl Oil {
         if !alpha.is_finite() || !(0.0..0.005).contains(&alpha) {
             return Err(PhysicsError::invalid(
                 format!("{prefix}.thermal_expansion_per_c"),
-                format!("must lie in [0, 0.005) per C (mineral oils: about 6.5e-4), got {alpha}"),
+                format!("must lie in [0, 0.005) per C (mineral oils: about 6.5e-4), got {alpha:?}"),
             ));
         }
         let field = |name: &str| format!("{prefix}.law.{name}");
@@ -273,36 +273,36 @@ impl Oil {
                 if !viscosity_pa_s.is_finite() || viscosity_pa_s <= 0.0 {
                     return Err(PhysicsError::invalid(
                         field("viscosity_pa_s"),
-                        format!("must be positive and finite, got {viscosity_pa_s}"),
+                        format!("must be positive and finite, got {viscosity_pa_s:?}"),
                     ));
                 }
             }
             ViscosityLaw::Walther { a, b } => {
                 if !a.is_finite() {
-                    return Err(PhysicsError::invalid(field("a"), format!("must be finite, got {a}")));
+                    return Err(PhysicsError::invalid(field("a"), format!("must be finite, got {a:?}")));
                 }
                 if !b.is_finite() || b <= 0.0 {
                     return Err(PhysicsError::invalid(
                         field("b"),
-                        format!("must be positive (viscosity falls with temperature) and finite, got {b}"),
+                        format!("must be positive (viscosity falls with temperature) and finite, got {b:?}"),
                     ));
                 }
             }
             ViscosityLaw::Vogel { a_pa_s, b_c, c_c } => {
                 if !a_pa_s.is_finite() || a_pa_s <= 0.0 {
-                    return Err(PhysicsError::invalid(field("a_pa_s"), format!("must be positive and finite, got {a_pa_s}")));
+                    return Err(PhysicsError::invalid(field("a_pa_s"), format!("must be positive and finite, got {a_pa_s:?}")));
                 }
                 if !b_c.is_finite() || b_c <= 0.0 {
                     return Err(PhysicsError::invalid(
                         field("b_c"),
-                        format!("must be positive (viscosity falls with temperature) and finite, got {b_c}"),
+                        format!("must be positive (viscosity falls with temperature) and finite, got {b_c:?}"),
                     ));
                 }
                 if !c_c.is_finite() || c_c <= -VALID_RANGE_C.0 {
                     return Err(PhysicsError::invalid(
                         field("c_c"),
                         format!(
-                            "must exceed {} C so that T + c stays positive down to {} C, got {c_c}",
+                            "must exceed {} C so that T + c stays positive down to {} C, got {c_c:?}",
                             -VALID_RANGE_C.0, VALID_RANGE_C.0
                         ),
                     ));
@@ -344,7 +344,7 @@ fn check_density(field: &str, density: f64) -> Result<(), PhysicsError> {
     if !density.is_finite() || !(500.0..=2500.0).contains(&density) {
         return Err(PhysicsError::invalid(
             field,
-            format!("must be a liquid lubricant's density at 15 C, 500 to 2500 kg/m^3, got {density}"),
+            format!("must be a liquid lubricant's density at 15 C, 500 to 2500 kg/m^3, got {density:?}"),
         ));
     }
     Ok(())
@@ -356,7 +356,7 @@ fn check_temperature(temperature_c: f64) -> Result<(), PhysicsError> {
     if !(lo..=hi).contains(&temperature_c) {
         return Err(PhysicsError::invalid(
             "oil temperature",
-            format!("{temperature_c} C is outside the {lo} C to {hi} C range the viscosity laws are valid in"),
+            format!("{temperature_c:?} C is outside the {lo} C to {hi} C range the viscosity laws are valid in"),
         ));
     }
     Ok(())
@@ -374,7 +374,7 @@ fn checked_points(points: &[(f64, f64)]) -> Result<Vec<(f64, f64)>, PhysicsError
             ));
         }
         if !mu.is_finite() || mu <= 0.0 {
-            return Err(PhysicsError::invalid(field, format!("viscosity must be positive and finite, got {mu} Pa s")));
+            return Err(PhysicsError::invalid(field, format!("viscosity must be positive and finite, got {mu:?} Pa s")));
         }
     }
     let mut sorted = points.to_vec();

@@ -2,6 +2,7 @@
 //! build of the shared generics instead of one per file (the suite's build time).
 
 mod config;
+mod config_fuzz;
 mod daq;
 mod effects_observable;
 mod film_cross_check;
