@@ -70,7 +70,7 @@ pub fn read(path: &Path) -> Result<Vec<NodeLaunch>, NodeError> {
 /// Reads a launch file with launch arguments `(name, value)` (`name:=value`).
 pub fn read_with(path: &Path, launch_args: &[(String, String)]) -> Result<Vec<NodeLaunch>, NodeError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
+    let text = crate::params::read_yaml(path)?;
     let doc: LaunchFile = serde_yaml_ng::from_str(&text).map_err(|e| NodeError::File { file: file.clone(), reason: e.to_string() })?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };

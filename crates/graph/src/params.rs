@@ -294,7 +294,7 @@ pub fn parse_args(default_name: &str, args: impl IntoIterator<Item = String>) ->
 /// The parameters of `args`' node: defaults, then each params file's matching sections
 /// (`/**`, `name`, `/namespace/name`, in file order), then the `-p` overrides; every value
 /// checked against its rule and the set validated, an error naming the file and key (or the
-/// override) that gave the bad value.
+/// override) that gave the bad value. Each file is read through [`read_yaml`]'s checks.
 pub fn load<P: NodeParams>(args: &NodeArgs) -> Result<(P, Map<String, Value>), NodeError> {
     load_located(args).map(|(p, map, _)| (p, map))
 }
@@ -302,16 +302,22 @@ pub fn load<P: NodeParams>(args: &NodeArgs) -> Result<(P, Map<String, Value>), N
 /// [`load`], with where each value came from (to name it in errors found later, when the
 /// node is built against its rig file: [`Sources::locate`]).
 pub fn load_located<P: NodeParams>(args: &NodeArgs) -> Result<(P, Map<String, Value>, Sources), NodeError> {
+    let texts = args.params_files.iter().map(|f| Ok((f.display().to_string(), read_yaml(f)?))).collect::<Result<Vec<_>, NodeError>>()?;
+    load_texts(args, &texts)
+}
+
+/// [`load_located`] with the params files' texts given, `(name, text)` in order (each already
+/// through [`check_yaml`]); `args.params_files` is not read.
+pub fn load_texts<P: NodeParams>(args: &NodeArgs, texts: &[(String, String)]) -> Result<(P, Map<String, Value>, Sources), NodeError> {
     let mut map = match serde_json::to_value(P::default()) {
         Ok(Value::Object(m)) => m,
         _ => return Err(NodeError::parameter("(defaults)", "parameters must be a struct")),
     };
     let known: Vec<String> = map.keys().cloned().collect();
     let mut sources = Sources::default();
-    for file in &args.params_files {
-        let name = file.display().to_string();
-        let text = std::fs::read_to_string(file).map_err(|e| NodeError::File { file: name.clone(), reason: e.to_string() })?;
-        for (section, k, v) in sections(&text, &name, args)? {
+    for (name, text) in texts {
+        let name = name.clone();
+        for (section, k, v) in sections(text, &name, args)? {
             if k == USE_SIM_TIME {
                 // Every ROS 2 node has it; the runner reads it from the overrides and files.
                 continue;
@@ -377,7 +383,127 @@ fn to_json(v: &serde_yaml_ng::Value) -> Result<Value, String> {
     serde_json::to_value(v).map_err(|e| e.to_string())
 }
 
-/// The `ros__parameters` entries that apply to the node, in file order: (section, name, value).
+/// The largest params or launch file read, bytes: a graph's files are a few kB, and the YAML
+/// parser's time grows faster than the size on pathological input, so a huge file is refused
+/// before it is read.
+pub const MAX_YAML_BYTES: u64 = 1 << 20;
+/// The deepest nesting accepted in a params or launch file (flow brackets, block sequences
+/// and indentation levels alike): theirs is 3 or 4.
+pub const MAX_YAML_DEPTH: usize = 32;
+
+/// The text of a params or launch file, checked before any parsing: at most
+/// [`MAX_YAML_BYTES`], UTF-8 (else the line and column of the first bad byte), nested at
+/// most [`MAX_YAML_DEPTH`] deep, no alias. Errors name the file.
+pub fn read_yaml(path: &std::path::Path) -> Result<String, NodeError> {
+    use std::io::Read;
+    let file = path.display().to_string();
+    let err = |reason: String| NodeError::File { file: file.clone(), reason };
+    let f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
+    let mut bytes = Vec::new();
+    f.take(MAX_YAML_BYTES + 1).read_to_end(&mut bytes).map_err(|e| err(e.to_string()))?;
+    check_yaml(bytes, &file)
+}
+
+/// [`read_yaml`]'s checks on a file's bytes: its text, or an error naming `file`.
+pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
+    let err = |reason: String| NodeError::File { file: file.to_string(), reason };
+    if bytes.len() as u64 > MAX_YAML_BYTES {
+        return Err(err(format!("larger than {MAX_YAML_BYTES} bytes, the most a params or launch file may be")));
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let before = &e.as_bytes()[..at];
+        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+        let start = before.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
+        let column = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
+        err(format!("line {line} column {column}: byte {at} is not UTF-8 text"))
+    })?;
+    check_yaml_depth(&text).map_err(|r| match r {
+        Refused::Deep(line, column, depth) => err(format!("line {line} column {column}: nested {depth} deep, more than the {MAX_YAML_DEPTH} a params or launch file may be")),
+        Refused::Alias(line, column) => err(format!("line {line} column {column}: a YAML alias (`*name`); params and launch files take none (nor does ROS 2's own params parser)")),
+    })?;
+    Ok(text)
+}
+
+/// Why [`check_yaml_depth`] refused a text.
+enum Refused {
+    /// Nested deeper than [`MAX_YAML_DEPTH`]: line, column, depth.
+    Deep(usize, usize, usize),
+    /// An alias (`*name`): line, column.
+    Alias(usize, usize),
+}
+
+/// An upper bound on the nesting of YAML `text`, checked line by line in linear time: open
+/// flow brackets outside quotes, plus block sequence dashes and indentation steps; and no
+/// alias. `Err` with the line and column where it is first refused.
+fn check_yaml_depth(text: &str) -> Result<(), Refused> {
+    let mut flow = 0usize;
+    let mut indents: Vec<usize> = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let content = line.trim_start_matches(' ');
+        let indent = line.len() - content.len();
+        if flow == 0 && !content.is_empty() && !content.starts_with('#') {
+            while indents.last().is_some_and(|&i| i >= indent) {
+                indents.pop();
+            }
+            indents.push(indent);
+        }
+        let mut block = indents.len();
+        let mut rest = content;
+        while let Some(after) = rest.strip_prefix("- ").or_else(|| rest.strip_prefix("? ")) {
+            block += 1;
+            rest = after.trim_start_matches(' ');
+        }
+        if block > MAX_YAML_DEPTH {
+            return Err(Refused::Deep(n + 1, indent + 1, block));
+        }
+        let mut quote: Option<char> = None;
+        for (c, ch) in line.char_indices() {
+            match (quote, ch) {
+                (None, '#') if c == 0 || line[..c].ends_with(' ') => break,
+                (None, '\'' | '"') => quote = Some(ch),
+                (Some(q), _) if ch == q => quote = None,
+                (None, '[' | '{') => {
+                    flow += 1;
+                    if flow + block > MAX_YAML_DEPTH {
+                        return Err(Refused::Deep(n + 1, line[..c].chars().count() + 1, flow + block));
+                    }
+                }
+                (None, ']' | '}') => flow = flow.saturating_sub(1),
+                // An alias: a plain token starting with `*`. Aliases can expand a few hundred
+                // bytes into millions of nodes (seconds of parsing), and ROS 2's own params
+                // parser takes none, so none is taken here.
+                (None, '*') if (c == 0 || matches!(line.as_bytes()[c - 1], b' ' | b'[' | b'{' | b',' | b'\t')) && line[c + 1..].starts_with(|x: char| !x.is_whitespace()) => {
+                    return Err(Refused::Alias(n + 1, line[..c].chars().count() + 1));
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Edit distance of two short names (a misspelt section name is within 2 of the node's).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let next = (diagonal + usize::from(ca != cb)).min(row[j] + 1).min(row[j + 1] + 1);
+            diagonal = row[j + 1];
+            row[j + 1] = next;
+        }
+    }
+    row[b.len()]
+}
+
+/// The `ros__parameters` entries that apply to the node, in file order: (section, name,
+/// value). A file with no
+/// section for the node but one whose name is a near miss of its name (`/oilfilm/estimatr`
+/// for `/oilfilm/estimator`) is an error: it would leave the node on its defaults without a
+/// word. (Other nodes' sections are normal: one file often serves a whole graph.)
 fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, String, Value)>, NodeError> {
     let err = |reason: String| NodeError::File { file: file.to_string(), reason };
     let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(text).map_err(|e| err(e.to_string()))?;
@@ -386,11 +512,17 @@ fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, Stri
     };
     let fq = args.fully_qualified_name();
     let mut out = Vec::new();
+    let (mut applies, mut near_misses) = (false, Vec::new());
     for (key, body) in top {
         let Some(key) = key.as_str() else { return Err(err("node names must be strings".into())) };
         if !(key == "/**" || key == args.name || key == fq || key == fq.trim_start_matches('/')) {
+            let bare = key.trim_start_matches('/');
+            if bare.len() >= 3 && (edit_distance(bare, fq.trim_start_matches('/')) <= 2 || edit_distance(bare, &args.name) <= 2) {
+                near_misses.push(key.to_string());
+            }
             continue;
         }
+        applies = true;
         let params = body.get("ros__parameters").ok_or_else(|| err(format!("`{key}` has no `ros__parameters`")))?;
         let serde_yaml_ng::Value::Mapping(params) = params else {
             return Err(err(format!("`{key}.ros__parameters` must be a mapping")));
@@ -399,6 +531,9 @@ fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, Stri
             let Some(k) = k.as_str() else { return Err(err(format!("`{key}`: parameter names must be strings"))) };
             out.push((key.to_string(), k.to_string(), to_json(v).map_err(|e| err(format!("`{k}`: {e}")))?));
         }
+    }
+    if let (false, Some(key)) = (applies, near_misses.first()) {
+        return Err(err(format!("no section for node `{fq}`, but `{key}`: a misspelling? (a section applies as `/**`, `{}` or `{fq}`)", args.name)));
     }
     Ok(out)
 }
@@ -495,6 +630,59 @@ mod tests {
         let a = parse_args("x", args(&["--ros-args", "-r", "__node:=est2", "-r", "__ns:=rig2"])).unwrap();
         assert_eq!(a.fully_qualified_name(), "/rig2/est2");
         // Passed: nothing to look at (a failing run keeps the file).
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A misspelt node section, a huge file and deep nesting are refused, each fast and
+    /// naming the file; other nodes' sections are not an error.
+    #[test]
+    fn misspelt_sections_huge_files_and_deep_nesting_are_refused() {
+        let dir = std::env::temp_dir().join(format!("oilfilm-params-guard-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("g.yaml");
+        let node = parse_args("estimator", args(&["--ros-args", "--params-file", file.to_str().unwrap()])).unwrap();
+        std::fs::write(&file, "/oilfilm/estimatr:\n  ros__parameters:\n    window: 1000\n").unwrap();
+        let e = load::<EstimatorParams>(&node).unwrap_err().to_string();
+        assert!(e.contains("g.yaml") && e.contains("`/oilfilm/estimatr`") && e.contains("misspelling"), "{e}");
+        // The node's own section beside a sibling's near-miss name, and other nodes' sections.
+        std::fs::write(&file, "/oilfilm/estimator:\n  ros__parameters:\n    window: 1000\n/oilfilm/estimator2:\n  ros__parameters:\n    window: 2000\n/oilfilm/daq:\n  ros__parameters:\n    source: sim\n").unwrap();
+        assert_eq!(load::<EstimatorParams>(&node).unwrap().0.window, 1000);
+        std::fs::write(&file, "/oilfilm/daq:\n  ros__parameters:\n    source: sim\n").unwrap();
+        assert_eq!(load::<EstimatorParams>(&node).unwrap().0.window, EstimatorParams::default().window);
+
+        // Deep nesting, flow and block: refused by the linear pre-check, with a position.
+        for (text, words) in [
+            (format!("estimator:\n  ros__parameters:\n    window: {}1{}\n", "[".repeat(100_000), "]".repeat(100_000)), "line 3 column"),
+            (format!("estimator:\n  ros__parameters:\n    w: {}\n", "{a: ".repeat(60_000)), "line 3 column"),
+            (format!("{}x\n", "- ".repeat(100_000)), "line 1 column 1"),
+            ((0..200).map(|d| format!("{}k{d}:\n", " ".repeat(d))).collect::<String>(), "nested 33 deep"),
+        ] {
+            std::fs::write(&file, &text).unwrap();
+            let start = std::time::Instant::now();
+            let e = load::<EstimatorParams>(&node).unwrap_err().to_string();
+            assert!(e.contains("g.yaml") && e.contains("deep") && e.contains(words), "{e}");
+            // Linear: well under a second even unoptimised (the parser itself took 21 s).
+            assert!(start.elapsed() < std::time::Duration::from_secs(5), "{:?}", start.elapsed());
+        }
+        let big = format!("estimator:\n  ros__parameters:\n    window: 1000\n#{}\n", "x".repeat(MAX_YAML_BYTES as usize));
+        std::fs::write(&file, big).unwrap();
+        let e = load::<EstimatorParams>(&node).unwrap_err().to_string();
+        assert!(e.contains("g.yaml") && e.contains("larger than 1048576 bytes"), "{e}");
+        std::fs::write(&file, b"estimator:\n  ros__parameters:\n    model: k\xffc\n").unwrap();
+        let e = load::<EstimatorParams>(&node).unwrap_err().to_string();
+        assert!(e.contains("line 3 column 13") && e.contains("not UTF-8"), "{e}");
+        // A window of 1e12 samples (it once aborted the process allocating 727 GB): refused
+        // with its range before anything is allocated.
+        let huge = parse_args("estimator", args(&["--ros-args", "-p", "window:=1000000000000"])).unwrap();
+        let e = load::<EstimatorParams>(&huge).unwrap().0.config(5000.0).unwrap_err().to_string();
+        assert!(e.contains("window") && e.contains("2 to 10000000 samples") && e.contains("1000000000000"), "{e}");
+        // An alias bomb: refused before the parser expands it.
+        std::fs::write(&file, "a: &a [x, x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a]\nestimator:\n  ros__parameters:\n    window: 1000\n").unwrap();
+        let e = load::<EstimatorParams>(&node).unwrap_err().to_string();
+        assert!(e.contains("g.yaml") && e.contains("line 2 column 8") && e.contains("alias"), "{e}");
+        // A real file passes the pre-check.
+        let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch_configs/params/sim_rig.yaml");
+        read_yaml(&shipped).unwrap();
         let _ = std::fs::remove_dir_all(&dir);
     }
 
