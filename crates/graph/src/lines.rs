@@ -6,7 +6,7 @@
 use std::cell::Cell;
 use std::io::{BufRead, BufReader, ErrorKind};
 use std::net::{TcpStream, ToSocketAddrs};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -86,12 +86,97 @@ fn sleep_unless(d: Duration, stop: &dyn Fn() -> bool) {
     }
 }
 
-/// Logs the bad row of `out` (a warning `source:line:column: reason`) and hands `out` on.
-fn deliver(out: Produced, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
+/// Warnings of one kind at most once per interval, with a count of those held back: a
+/// stream of garbage gives a warning a second, not one a line.
+#[derive(Debug)]
+pub struct WarnLimiter {
+    every: Duration,
+    last: Option<Instant>,
+    held: u64,
+}
+
+impl WarnLimiter {
+    pub fn new(every: Duration) -> Self {
+        Self { every, last: None, held: 0 }
+    }
+
+    /// `Some(held back since the last one shown)` when a warning at `now` is to be shown;
+    /// `None` (and counted) when it is held back.
+    pub fn admit(&mut self, now: Instant) -> Option<u64> {
+        match self.last {
+            Some(last) if now.saturating_duration_since(last) < self.every => {
+                self.held += 1;
+                None
+            }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.held))
+            }
+        }
+    }
+
+    /// The warnings held back since the last one shown (and forgets them): for a summary.
+    pub fn take_held(&mut self) -> u64 {
+        std::mem::take(&mut self.held)
+    }
+}
+
+/// Logs the bad row of `out` (a warning `source:line:column: reason`, at most one a second
+/// with the count of those held back) and hands `out` on.
+fn deliver(out: Produced, warnings: &mut WarnLimiter, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
     if let Some(e) = &out.bad_row {
-        tracing::warn!(node = "daq", "{e}");
+        match warnings.admit(Instant::now()) {
+            Some(0) => tracing::warn!(node = "daq", "{e}"),
+            Some(held) => tracing::warn!(node = "daq", "{e} (and {held} more bad row(s) not shown since the last warning)"),
+            None => {}
+        }
     }
     emit(out)
+}
+
+/// Logs how many bad-row warnings `warnings` held back at the end of `name`'s stream.
+fn flush_warnings(name: &str, warnings: &mut WarnLimiter) {
+    let held = warnings.take_held();
+    if held > 0 {
+        tracing::warn!(node = "daq", "{name}: {held} more bad row(s) not shown (warnings are limited to one a second)");
+    }
+}
+
+/// Frames the reading thread may hold for the node's turns. A TCP source floods it only when
+/// the acquisition sends faster than the node publishes: the frames beyond it are dropped and
+/// counted (the count is on every rig status after, and warned about once a second) rather
+/// than held in memory; a file replay waits for room instead.
+pub const QUEUE_FRAMES: usize = 64;
+
+/// A frame queue's sending end for a source that must not wait (TCP): a full queue drops the
+/// frames of `out` and adds them to `dropped`. Output without frames is not queued.
+pub struct DroppingSender {
+    tx: mpsc::SyncSender<Produced>,
+    dropped: Arc<AtomicU64>,
+    warnings: WarnLimiter,
+}
+
+impl DroppingSender {
+    pub fn new(tx: mpsc::SyncSender<Produced>, dropped: Arc<AtomicU64>) -> Self {
+        Self { tx, dropped, warnings: WarnLimiter::new(Duration::from_secs(1)) }
+    }
+
+    pub fn send(&mut self, out: Produced) -> Result<(), NodeError> {
+        if out.frames.is_empty() {
+            return Ok(());
+        }
+        match self.tx.try_send(out) {
+            Ok(()) => Ok(()),
+            Err(mpsc::TrySendError::Full(out)) => {
+                let total = self.dropped.fetch_add(out.frames.len() as u64, Ordering::SeqCst) + out.frames.len() as u64;
+                if self.warnings.admit(Instant::now()).is_some() {
+                    tracing::warn!(node = "daq", "the input arrives faster than the node publishes: {total} frame(s) dropped so far (queue of {QUEUE_FRAMES} frames full)");
+                }
+                Ok(())
+            }
+            Err(mpsc::TrySendError::Disconnected(_)) => Err(NodeError::Closed("the DAQ node stopped taking frames".into())),
+        }
+    }
 }
 
 /// Pacing of an ASCII replay.
@@ -113,6 +198,7 @@ pub fn run_ascii_source(stream: impl BufRead, core: &mut ReplayCore, pace: &Repl
     let origin: Cell<Option<Stamp>> = Cell::new(None);
     let done = Cell::new(false);
     let stop_or_done = || stop() || done.get();
+    let warnings = std::cell::RefCell::new(WarnLimiter::new(Duration::from_secs(1)));
     // Waits until the last frame of `out` is due, emits it, and notes the end of the duration.
     let paced = |out: Produced, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>| -> Result<(), NodeError> {
         if let Some((frame, status)) = out.frames.last() {
@@ -127,7 +213,7 @@ pub fn run_ascii_source(stream: impl BufRead, core: &mut ReplayCore, pace: &Repl
                 done.set(true);
             }
         }
-        deliver(out, emit)
+        deliver(out, &mut warnings.borrow_mut(), emit)
     };
     let mut last_line = 0;
     let end = read_lines(stream, &stop_or_done, &mut |number, line| {
@@ -146,7 +232,9 @@ pub fn run_ascii_source(stream: impl BufRead, core: &mut ReplayCore, pace: &Repl
                 paced(out, emit)?;
             }
             let out = core.end_of_stream(last_line.max(1))?;
-            paced(out, emit)
+            paced(out, emit)?;
+            flush_warnings(core.source_name(), &mut warnings.borrow_mut());
+            Ok(())
         }
     }
 }
@@ -198,11 +286,13 @@ pub fn run_tcp_source(address: &str, core: &mut ReplayCore, backoff: &Backoff, s
             tracing::warn!(node = "daq", "{name}: cannot set a read timeout ({e}): stopping may wait for the next line");
         }
         let mut last_line = 0;
+        let mut warnings = WarnLimiter::new(Duration::from_secs(1));
         let end = read_lines(BufReader::new(stream), stop, &mut |number, line| {
             last_line = number;
             let out = core.push_line(number, line)?;
-            deliver(out, emit)
+            deliver(out, &mut warnings, emit)
         });
+        flush_warnings(&name, &mut warnings);
         let refused = matches!(end, Err(NodeError::BadRecord { .. }));
         match end {
             Ok(LinesEnd::Stopped) => {}
@@ -237,6 +327,8 @@ pub fn run_tcp_source(address: &str, core: &mut ReplayCore, backoff: &Backoff, s
 /// The reading thread of a [`LineDaq`].
 struct Reader {
     frames: mpsc::Receiver<Produced>,
+    /// Frames a TCP source dropped because the queue was full.
+    dropped: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
     thread: std::thread::JoinHandle<Result<ReplayCore, NodeError>>,
 }
@@ -306,7 +398,9 @@ impl LineDaq {
 
     /// Starts the reading thread.
     fn start(&mut self, (mut core, source): (ReplayCore, Source)) -> Result<(), NodeError> {
-        let (tx, frames) = mpsc::channel();
+        let (tx, frames) = mpsc::sync_channel(QUEUE_FRAMES);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let mut dropping = DroppingSender::new(tx.clone(), Arc::clone(&dropped));
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = Arc::clone(&stop);
         let pace = ReplayPace { rate_factor: self.params.rate_factor, duration_s: self.params.duration_s };
@@ -314,19 +408,27 @@ impl LineDaq {
             .name("daq-lines".into())
             .spawn(move || {
                 let stopped = || stopped.load(Ordering::SeqCst);
-                let mut emit = |out: Produced| tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into()));
                 match source {
-                    Source::Ascii(file) => run_ascii_source(BufReader::new(file), &mut core, &pace, &stopped, &mut emit)?,
-                    Source::Foreign(mut source) => run_foreign_source(&mut source, &pace, &stopped, &mut emit)?,
+                    // A file waits for room in the queue: nothing of it is dropped.
+                    Source::Ascii(file) => {
+                        let mut emit = |out: Produced| if out.frames.is_empty() { Ok(()) } else { tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into())) };
+                        run_ascii_source(BufReader::new(file), &mut core, &pace, &stopped, &mut emit)?
+                    }
+                    // A foreign file, likewise.
+                    Source::Foreign(mut source) => {
+                        let mut emit = |out: Produced| if out.frames.is_empty() { Ok(()) } else { tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into())) };
+                        run_foreign_source(&mut source, &pace, &stopped, &mut emit)?
+                    }
                     Source::Tcp(address) => {
+                        drop(tx);
                         let backoff = Backoff { initial: Duration::from_millis(100), max: Duration::from_secs(5) };
-                        run_tcp_source(&address, &mut core, &backoff, &stopped, &mut emit)?
+                        run_tcp_source(&address, &mut core, &backoff, &stopped, &mut |out| dropping.send(out))?
                     }
                 }
                 Ok(core)
             })
             .map_err(|e| NodeError::Io { what: "the DAQ's reading thread".into(), source: e })?;
-        self.reader = Some(Reader { frames, stop, thread });
+        self.reader = Some(Reader { frames, dropped, stop, thread });
         Ok(())
     }
 
@@ -336,7 +438,11 @@ impl LineDaq {
         loop {
             match reader.frames.try_recv() {
                 Ok(out) => {
-                    for (frame, status) in out.frames {
+                    let dropped = reader.dropped.load(Ordering::SeqCst);
+                    for (frame, mut status) in out.frames {
+                        if dropped > 0 {
+                            status.message.push_str(&format!("; {dropped} frame(s) dropped: the input came faster than the node published (queue of {QUEUE_FRAMES} frames)"));
+                        }
                         ports.frames.publish(frame)?;
                         ports.status.publish(status)?;
                         turn.handled += 2;

@@ -401,3 +401,46 @@ fn daq_params_accept_the_ascii_and_tcp_sources_with_what_they_need() {
         }
     }
 }
+
+/// A flood of bad lines gives one warning a second with the count held back, not one a line.
+#[test]
+fn bad_row_warnings_are_limited_to_one_a_second_with_a_count() {
+    use oilfilm_graph::lines::WarnLimiter;
+    let mut w = WarnLimiter::new(Duration::from_secs(1));
+    let t0 = Instant::now();
+    // 4000 bad lines in 2.5 s (1 MiB of garbage at about the rate a socket delivers it).
+    let shown: Vec<(u64, u64)> = (0..4000u64)
+        .filter_map(|k| {
+            let at = t0 + Duration::from_micros(k * 625);
+            w.admit(at).map(|held| (k, held))
+        })
+        .collect();
+    assert_eq!(shown.iter().map(|&(k, _)| k).collect::<Vec<_>>(), [0, 1600, 3200], "one at the start, then one a second");
+    assert_eq!(shown.iter().map(|&(_, h)| h).collect::<Vec<_>>(), [0, 1599, 1599], "each says how many it stands for");
+    assert_eq!(w.take_held(), 799, "the rest, for the end-of-stream summary");
+    assert_eq!(w.take_held(), 0);
+}
+
+/// A TCP source faster than the node: the queue holds at most its stated number of outputs
+/// and the rest are dropped and counted, not held in memory; output without frames is not
+/// queued at all.
+#[test]
+fn a_flooded_queue_drops_and_counts_frames_instead_of_growing() {
+    use oilfilm_graph::lines::{DroppingSender, QUEUE_FRAMES};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::Arc;
+    let (tx, rx) = std::sync::mpsc::sync_channel(QUEUE_FRAMES);
+    let dropped = Arc::new(AtomicU64::new(0));
+    let mut sender = DroppingSender::new(tx, Arc::clone(&dropped));
+    let one = || Produced { frames: vec![(DaqFrame::default(), RigStatus::default())], bad_row: None };
+    for _ in 0..100 * QUEUE_FRAMES {
+        sender.send(one()).unwrap();
+        sender.send(Produced { frames: Vec::new(), bad_row: None }).unwrap();
+    }
+    assert_eq!(rx.try_iter().count(), QUEUE_FRAMES, "the queue holds its limit");
+    assert_eq!(dropped.load(Ordering::SeqCst), 99 * QUEUE_FRAMES as u64, "every other frame is counted as dropped");
+    sender.send(one()).unwrap();
+    assert_eq!(rx.try_iter().count(), 1, "room again once the node takes frames");
+    drop(rx);
+    assert!(sender.send(one()).is_err(), "a stopped node ends the reading");
+}
