@@ -144,6 +144,16 @@ pub struct BagRecord {
     pub ignored: Vec<String>,
     /// What a partial read could not deliver (empty after a strict read).
     pub shortfalls: Vec<Shortfall>,
+    /// What was read: DAQ frames, their scans, rig status messages.
+    pub read: BagRead,
+}
+
+/// How much of a bag a command analysed (in its JSON as `bag_read`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct BagRead {
+    pub daq_frames: usize,
+    pub scans: usize,
+    pub rig_status: usize,
 }
 
 /// [`BagRecord`] of the bag at `dir`: its DAQ frames in order, which must be consecutive (a
@@ -184,5 +194,6 @@ pub fn record_of_bag(dir: &std::path::Path, options: ReadOptions) -> Result<BagR
     };
     let offsets_s = kept.iter().map(|&(k, _)| first.channel_offsets_s.get(k).copied().unwrap_or(f64::NAN)).collect();
     let speed_rpm = status.iter().map(|s| s.speed_rad_s * 30.0 / std::f64::consts::PI).find(|&v| v > 0.0);
-    Ok(BagRecord { raw, offsets_s, speed_rpm, ignored, shortfalls })
+    let read = BagRead { daq_frames: frames.len(), scans: raw.columns.first().map_or(0, Vec::len), rig_status: status.len() };
+    Ok(BagRecord { raw, offsets_s, speed_rpm, ignored, shortfalls, read })
 }

@@ -51,6 +51,8 @@ struct Loaded {
     speed_source: SpeedSource,
     /// What a partial read of a bag could not deliver.
     shortfalls: Vec<oilfilm_bag::Shortfall>,
+    /// For a bag: how much of it was read.
+    bag_read: Option<oilfilm::bags::BagRead>,
 }
 
 fn load_ascii(args: &DiagnoseArgs) -> Result<(Loaded, RigConfig, String)> {
@@ -68,7 +70,7 @@ fn load_ascii(args: &DiagnoseArgs) -> Result<(Loaded, RigConfig, String)> {
         (None, Some(v)) => (v, SpeedSource::Record),
         (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    Ok((Loaded { raw, calibration, speed_rpm, speed_source, shortfalls: Vec::new() }, rig, input.rig_source))
+    Ok((Loaded { raw, calibration, speed_rpm, speed_source, shortfalls: Vec::new(), bag_read: None }, rig, input.rig_source))
 }
 
 /// The rig as the diagnosis reads it: its nominal description, injected effects cleared.
@@ -94,7 +96,7 @@ fn load_bag(args: &DiagnoseArgs, rig: &RigConfig) -> Result<Loaded> {
         (None, Some(v)) => (v, SpeedSource::Record),
         (None, None) => (rig.operating.speed_rpm, SpeedSource::RigFile),
     };
-    Ok(Loaded { raw: b.raw, calibration, speed_rpm, speed_source, shortfalls: b.shortfalls })
+    Ok(Loaded { raw: b.raw, calibration, speed_rpm, speed_source, shortfalls: b.shortfalls, bag_read: Some(b.read) })
 }
 
 pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
@@ -128,6 +130,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
     let mut value = serde_json::to_value(&d)?;
     if args.input.is_dir() {
         if let Some(map) = value.as_object_mut() {
+            map.insert("bag_read".into(), serde_json::to_value(loaded.bag_read)?);
             map.insert("complete".into(), serde_json::Value::Bool(loaded.shortfalls.is_empty()));
             map.insert("shortfalls".into(), serde_json::to_value(&loaded.shortfalls)?);
         }

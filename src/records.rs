@@ -246,8 +246,14 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
     }
     anyhow::ensure!(!args.replay, "--replay applies to bags and --map records (the node graph re-run); {} is a file", args.file.display());
     let is_bag = args.file.is_dir();
+    let max = oilfilm_identification::estimator::MAX_WINDOW_SAMPLES;
+    for (flag, v) in [("--window", args.window), ("--hop", args.hop)] {
+        if let Some(v) = v.filter(|v| !(1..=max).contains(v) || (flag == "--window" && *v < 2)) {
+            bail!("{flag} {v}: must be {} to {max} samples", if flag == "--window" { 2 } else { 1 });
+        }
+    }
     anyhow::ensure!(is_bag || !args.allow_partial, "--allow-partial applies to bags; a record file is read whole or refused at its first bad line");
-    let mut shortfalls = Vec::new();
+    let (mut shortfalls, mut bag_read) = (Vec::new(), None);
     let name = args.file.display().to_string();
     // The record, its schedule, the speed it states and its rig: from a bag's DAQ frames and
     // rig status (the rig file), or from an ASCII record (the rig its header names, else the
@@ -265,6 +271,7 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
         let rig = args.source.load()?;
         let b = oilfilm::bags::record_of_bag(&args.file, ReadOptions { allow_partial: args.allow_partial })?;
         shortfalls = b.shortfalls;
+        bag_read = Some(b.read);
         if !b.ignored.is_empty() {
             eprintln!("{name}: channels not used by the conditioning left out: {}", b.ignored.join(", "));
         }
@@ -323,6 +330,7 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
                 map.insert("correction".into(), serde_json::to_value(c)?);
             }
             if is_bag {
+                map.insert("bag_read".into(), serde_json::to_value(bag_read)?);
                 map.insert("complete".into(), serde_json::Value::Bool(shortfalls.is_empty()));
                 map.insert("shortfalls".into(), serde_json::to_value(&shortfalls)?);
             }

@@ -71,10 +71,12 @@ fn a_single_sine_record_is_refused_by_the_command_too() {
     let out = oilfilm(&["simulate", "--seconds", "2", "--excitation", "sine", "--amplitude-n", "300", "-o", record.to_str().unwrap()]);
     assert!(out.status.success());
     let out = oilfilm(&["identify", record.to_str().unwrap()]);
-    assert!(out.status.success(), "a refusal is an answer, not a crash");
+    // A refusal is an answer (printed, with its reason), but not what was asked: exit 3.
+    assert_eq!(out.status.code(), Some(3), "a refused record exits 3: {}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     println!("{text}");
     assert!(text.contains("REFUSED") && text.contains("37.0 Hz"), "refusal with its reason");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refused:"), "stderr says why the exit is not 0");
     let _ = std::fs::remove_file(&record);
 }
 
@@ -92,6 +94,16 @@ fn bad_input_names_file_line_and_column_and_exits_non_zero() {
     println!("{err}");
     assert!(!out.status.success());
     assert!(err.contains(&format!("{}:8:21", bad.display())) && err.contains("temperature"), "{err}");
+
+    // A byte that is not UTF-8: the line and column it is at, not only "invalid UTF-8".
+    let mut bytes = std::fs::read(&bad).unwrap();
+    let at = bytes.windows(5).position(|w| w == b"9 nan").unwrap() + 2;
+    bytes[at] = 0xff;
+    std::fs::write(&bad, &bytes).unwrap();
+    let out = oilfilm(&["identify", bad.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("{}:8:21: byte 0xff is not UTF-8", bad.display())), "{err}");
 
     let out = oilfilm(&["identify", "/nonexistent/record.txt"]);
     assert!(!out.status.success());
@@ -358,4 +370,43 @@ fn identify_without_avx_or_fma_gives_the_same_estimates() {
     let d = json_difference::largest_difference(&baseline, &widest, "identification").unwrap_or_else(|e| panic!("OILFILM_SIMD=scalar: {e}"));
     println!("{solved} windows; OILFILM_SIMD=scalar against this CPU's widest set: largest relative difference {d:.1e}");
     assert!(d <= 1e-12, "{d:e}");
+}
+
+/// A bag whose directory holds an `.mcap` file metadata.yaml does not list (a recorder killed
+/// after its split): a strict read is an error naming the file, exit 4, for `identify` and
+/// `diagnose` alike; `--allow-partial` analyses what is listed and says what was left out, in
+/// the output and the JSON, and the two commands analyse the very same samples.
+#[test]
+fn a_bag_that_differs_from_its_metadata_exits_4_unless_partial_is_allowed() {
+    let reference = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/bags/sim_rig_multisine"));
+    let dir = scratch("unlisted-bag");
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in ["metadata.yaml", "sim_rig_multisine_0.mcap"] {
+        std::fs::copy(reference.join(f), dir.join(f)).unwrap();
+    }
+    std::fs::copy(reference.join("sim_rig_multisine_0.mcap"), dir.join("sim_rig_multisine_1.mcap")).unwrap();
+    let bag = dir.to_str().unwrap();
+    for command in ["identify", "diagnose"] {
+        let out = oilfilm(&[command, bag, "--json", "--no-report"][..if command == "identify" { 3 } else { 4 }]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(4), "{command}: a strict read of a bag that differs from its metadata.yaml: {err}");
+        assert!(err.contains("sim_rig_multisine_1.mcap") && err.contains("--allow-partial"), "{command}: names the file and the way on: {err}");
+        assert!(out.stdout.is_empty(), "{command}: no result from a strict read that failed");
+    }
+    let out = oilfilm(&["identify", bag, "--json", "--allow-partial"]);
+    assert_eq!(out.status.code(), Some(0), "identify --allow-partial: {}", String::from_utf8_lossy(&out.stderr));
+    let id: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(id["complete"], false);
+    let said = id["shortfalls"].as_array().expect("shortfalls");
+    assert!(said.iter().any(|s| s["kind"] == "unlisted_file" && s["path"].as_str().unwrap_or("").ends_with("sim_rig_multisine_1.mcap")), "{said:?}");
+    let out = oilfilm(&["diagnose", bag, "--json", "--no-report", "--allow-partial"]);
+    assert_eq!(out.status.code(), Some(0), "diagnose --allow-partial: {}", String::from_utf8_lossy(&out.stderr));
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(d["complete"], false);
+    assert_eq!(&d["shortfalls"], &id["shortfalls"], "both commands say the same shortfalls");
+    assert!(id["bag_read"]["daq_frames"].as_u64().expect("frames read") > 0, "{}", id["bag_read"]);
+    assert_eq!(d["bag_read"], id["bag_read"], "identify and diagnose analyse the same frames and scans");
+    let out = oilfilm(&["identify", bag, "--allow-partial"]);
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("PARTIAL:"), "the table output says it first");
+    let _ = std::fs::remove_dir_all(&dir);
 }
