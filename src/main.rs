@@ -212,7 +212,7 @@ fn main() -> std::process::ExitCode {
         Command::Identify(args) => records::run_identify(&args),
         Command::Import(args) => import::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
-        Command::Campaign(args) => done(args.source.load().map_err(anyhow::Error::from).and_then(|rig| campaign::run(&rig, &args.out, args.quick, args.json))),
+        Command::Campaign(args) => done(args.source.load().and_then(|rig| campaign::run(&rig, &args.out, args.quick, args.json))),
     };
     match result {
         Ok(Outcome::Done) => std::process::ExitCode::SUCCESS,

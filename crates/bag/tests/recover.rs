@@ -34,8 +34,11 @@ fn counted(msgs: impl IntoIterator<Item = Key>) -> BTreeMap<Key, usize> {
     out
 }
 
+/// Each chunk's (start, length) in its file and the messages it holds.
+type Chunks = Vec<((u64, u64), Vec<Key>)>;
+
 /// Each chunk of `bytes` (start, length) and its messages, as the mcap crate reads them.
-fn chunks_of(bytes: &[u8]) -> Vec<((u64, u64), Vec<Key>)> {
+fn chunks_of(bytes: &[u8]) -> Chunks {
     let summary = mcap::Summary::read(bytes).unwrap().unwrap();
     summary
         .chunk_indexes
@@ -52,7 +55,7 @@ fn read_back(dir: &Path) -> BTreeMap<Key, usize> {
 }
 
 /// A bag of one file in many small chunks; its bytes and chunks.
-fn sound(dir: &Path, compression: Compression) -> (Vec<u8>, Vec<((u64, u64), Vec<Key>)>) {
+fn sound(dir: &Path, compression: Compression) -> (Vec<u8>, Chunks) {
     let options = WriterOptions { compression, chunk_size: 24 << 10, ..WriterOptions::default() };
     sim_rig::write_bag(dir, published(), options).unwrap().close().unwrap();
     let file = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|x| x == "mcap")).unwrap();
@@ -64,7 +67,7 @@ fn sound(dir: &Path, compression: Compression) -> (Vec<u8>, Vec<((u64, u64), Vec
 
 #[test]
 fn one_flipped_bit_in_one_chunk_loses_that_chunk_alone() {
-    let mut rng = ChaCha8Rng::seed_from_u64(0x25_b17f_11b);
+    let mut rng = ChaCha8Rng::seed_from_u64(0x0002_5b17_f11b);
     let mut lost_a_chunk = 0;
     let mut cases = 0;
     for (compression, name) in [(Compression::Zstd, "zstd"), (Compression::Lz4, "lz4"), (Compression::None, "none")] {
@@ -148,7 +151,7 @@ fn a_damaged_chunk_before_the_cut_of_a_killed_writer_costs_that_chunk_and_the_cu
 fn a_bag_being_recorded_is_refused_and_a_killed_writers_lock_is_cleared() {
     let dir = scratch::Scratch::new("oilfilm-bag-recover", "live");
     let msgs = published();
-    let mut w = sim_rig::write_bag(&dir, &msgs[..msgs.len() / 2], WriterOptions { chunk_size: 16 << 10, ..WriterOptions::default() }).unwrap();
+    let w = sim_rig::write_bag(&dir, &msgs[..msgs.len() / 2], WriterOptions { chunk_size: 16 << 10, ..WriterOptions::default() }).unwrap();
     let lock = dir.join(LOCK_FILE);
     let text = std::fs::read_to_string(&lock).unwrap();
     assert!(text.contains(&format!("pid {}", std::process::id())), "{text}");
