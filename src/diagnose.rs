@@ -106,7 +106,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
         let source = args.source.path().map_or("built-in zhou2004".to_string(), |p| format!("{} (--rig)", p.display()));
         let f = crate::foreign_input::load_raw(&args.input, map, &rig)?;
         let (speed_rpm, speed_source) = crate::foreign_input::speed_source(args.speed_rpm, f.speed_rpm, &rig);
-        (Loaded { raw: f.raw, calibration: f.calibration, speed_rpm, speed_source }, rig, source)
+        (Loaded { raw: f.raw, calibration: f.calibration, speed_rpm, speed_source, shortfalls: Vec::new(), bag_read: None }, rig, source)
     } else if args.input.is_dir() {
         let rig = nominal(args.source.load()?);
         let source = args.source.path().map_or("built-in zhou2004".to_string(), |p| format!("{} (--rig)", p.display()));

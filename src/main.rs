@@ -210,7 +210,7 @@ fn main() -> std::process::ExitCode {
         Command::Coefficients(args) => done(run_coefficients(&args)),
         Command::Simulate(args) => done(records::run_simulate(&args)),
         Command::Identify(args) => records::run_identify(&args),
-        Command::Import(args) => import::run(&args),
+        Command::Import(args) => done(import::run(&args)),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Campaign(args) => done(args.source.load().and_then(|rig| campaign::run(&rig, &args.out, args.quick, args.json))),
     };
