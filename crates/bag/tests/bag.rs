@@ -2,10 +2,8 @@
 //! back equal, splitting, recovery of a file cut mid-chunk, and clear errors (no panics)
 //! for foreign, truncated and corrupted files.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
-#[path = "../../../tests/support/scratch.rs"]
-mod scratch;
+use crate::sim_rig;
+use crate::scratch;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;

@@ -4,10 +4,8 @@
 //! each difference. Both readers (`read_topics`, the summary-driven one, and `messages`,
 //! the record-by-record one) read the same messages and find the same differences.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
-#[path = "../../../tests/support/scratch.rs"]
-mod scratch;
+use crate::sim_rig;
+use crate::scratch;
 
 use std::path::Path;
 use std::sync::OnceLock;

@@ -3,10 +3,8 @@
 //! the next chunk; a damaged chunk before a cut (a killed writer) loses that chunk and the
 //! cut one; a bag whose writer is alive is refused, and a killed writer's lock is cleared.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
-#[path = "../../../tests/support/scratch.rs"]
-mod scratch;
+use crate::sim_rig;
+use crate::scratch;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -3,8 +3,7 @@
 //! [`TOLERANCE`] of the simulated film's own linear coefficients; and the bag is exactly what
 //! its command in bags/README.md records today.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
+use crate::sim_rig;
 
 use std::path::PathBuf;
 

@@ -4,8 +4,7 @@
 //! binaries run) and give the very estimate bytes the live estimator published, which the
 //! bag also holds.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
+use crate::sim_rig;
 
 use oilfilm_bag::{Bag, OilfilmMessage, WriterOptions};
 use oilfilm_msgs::RosMessage;

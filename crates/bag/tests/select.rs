@@ -4,8 +4,7 @@
 //! and files it cannot use the summary of (a recovered-then-cut file falls back to the full
 //! reader's error).
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
+use crate::sim_rig;
 
 use std::path::PathBuf;
 use std::sync::OnceLock;

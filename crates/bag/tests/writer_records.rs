@@ -4,10 +4,8 @@
 //! (statistics, schemas, channels, chunk indexes, summary offsets) against what the file
 //! holds, and each chunk's message indexes against its messages.
 
-#[path = "../examples/common/sim_rig.rs"]
-mod sim_rig;
-#[path = "../../../tests/support/scratch.rs"]
-mod scratch;
+use crate::sim_rig;
+use crate::scratch;
 
 use std::collections::BTreeMap;
 use std::path::Path;

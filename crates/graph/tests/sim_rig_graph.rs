@@ -12,7 +12,7 @@ use oilfilm_graph::runner::bag::reanalyse;
 use oilfilm_graph::runner::memory::{run_sim_rig, Recording};
 use oilfilm_physics::config::RigConfig;
 
-mod common;
+use crate::common;
 use common::{params, rig_at_40_db};
 
 fn bytes(e: &[CoefficientEstimate]) -> Vec<Vec<u8>> {

@@ -1,0 +1,12 @@
+//! Every integration test of `oilfilm-graph` in one binary: one link and one optimised
+//! build of the shared generics instead of one per file (the suite's build time).
+
+mod common;
+mod daq_sources;
+mod exciter_limits;
+mod exciter_transitions;
+mod foreign_source;
+mod graph_equals_batch;
+mod launch_files;
+mod sim_rig_graph;
+mod yaml_fuzz;
