@@ -39,7 +39,11 @@ pub fn read_bag_inputs(dir: &std::path::Path, threads: usize) -> Result<(Vec<oil
 /// [`read_bag_inputs`] with `options`, and what a partial read could not deliver: the one
 /// reading of a bag's inputs that `identify` and `diagnose` share (one reader, one set of
 /// checks, so the same messages).
-pub fn read_bag_inputs_with(dir: &std::path::Path, threads: usize, options: ReadOptions) -> Result<(Vec<oilfilm_msgs::DaqFrame>, Vec<oilfilm_msgs::RigStatus>, Vec<Shortfall>)> {
+pub fn read_bag_inputs_with(
+    dir: &std::path::Path,
+    threads: usize,
+    options: ReadOptions,
+) -> Result<(Vec<oilfilm_msgs::DaqFrame>, Vec<oilfilm_msgs::RigStatus>, Vec<Shortfall>)> {
     let bag = oilfilm_bag::Bag::open(dir)?;
     let (mut frames, mut status) = (Vec::new(), Vec::new());
     let ((), shortfalls) = bag.read_topics_with(options, &is_input, &decode_input, threads, |inputs| {
@@ -171,7 +175,11 @@ pub fn record_of_bag(dir: &std::path::Path, options: ReadOptions) -> Result<BagR
     let mut columns = vec![Vec::new(); kept.len()];
     let (mut next_scan, mut decoded) = (first.first_scan, Vec::new());
     for (i, f) in frames.iter().enumerate() {
-        if f.channel_names != first.channel_names || f.units != first.units || f.sample_rate_hz != first.sample_rate_hz || f.channel_offsets_s != first.channel_offsets_s {
+        if f.channel_names != first.channel_names
+            || f.units != first.units
+            || f.sample_rate_hz != first.sample_rate_hz
+            || f.channel_offsets_s != first.channel_offsets_s
+        {
             bail!("{name}: DAQ frame {i} (sequence {}) changes the channel layout, schedule, units or rate of frame 0", f.sequence);
         }
         if f.first_scan != next_scan {

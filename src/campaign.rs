@@ -19,14 +19,7 @@ pub fn run(rig: &RigConfig, out: &Path, quick: bool, json: bool) -> Result<()> {
     let mut last_shown = String::new();
     let mut progress = |p: Progress| {
         // One line on stderr, rewritten in place, at most once per 10 % of a record.
-        let line = format!(
-            "[{}/{}] {} study: {} ({:.0} %)",
-            p.record + 1,
-            p.records,
-            p.study,
-            p.label,
-            (p.fraction * 10.0).floor() * 10.0
-        );
+        let line = format!("[{}/{}] {} study: {} ({:.0} %)", p.record + 1, p.records, p.study, p.label, (p.fraction * 10.0).floor() * 10.0);
         if line != last_shown {
             eprint!("\r\x1b[2K{line}");
             let _ = std::io::stderr().flush();
@@ -89,8 +82,14 @@ fn print_summary(c: &Campaign, wall_s: f64) {
         print_record_rows(p, true);
     }
     println!();
-    println!("(|id-mod| = mean |identified - model| over the points, rel. = the same relative to |model|: large where the model is near 0, as Kxy at high F_Y)");
-    println!("quadratic fits KD(F_Y) = c0 + c1 F_Y + c2 F_Y^2 over F_Y {:.2}-{:.2}, and the film model over the same range:", ls.trends.first().map_or(f64::NAN, |t| t.fy_range[0]), ls.trends.first().map_or(f64::NAN, |t| t.fy_range[1]));
+    println!(
+        "(|id-mod| = mean |identified - model| over the points, rel. = the same relative to |model|: large where the model is near 0, as Kxy at high F_Y)"
+    );
+    println!(
+        "quadratic fits KD(F_Y) = c0 + c1 F_Y + c2 F_Y^2 over F_Y {:.2}-{:.2}, and the film model over the same range:",
+        ls.trends.first().map_or(f64::NAN, |t| t.fy_range[0]),
+        ls.trends.first().map_or(f64::NAN, |t| t.fy_range[1])
+    );
     println!(
         "{:<5} {:>9} {:>9} {:>9} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>8}",
         "", "c0", "c1", "c2", "R^2", "fit(min)", "fit(max)", "model min", "model max", "|id-mod|", "rel.", "trend"
@@ -169,7 +168,11 @@ fn print_summary(c: &Campaign, wall_s: f64) {
     println!();
     println!("== Findings (the paper's claims checked on the simulation) ==");
     println!("direct coefficients (Kxx, Kyy, Dxx, Dyy) grow with F_Y: {}", f.direct_coefficients_grow_with_fy);
-    println!("magnitude grows with F_Y: {}; does not: {}", f.growing_in_magnitude.join(", "), if f.not_growing_in_magnitude.is_empty() { "none".into() } else { f.not_growing_in_magnitude.join(", ") });
+    println!(
+        "magnitude grows with F_Y: {}; does not: {}",
+        f.growing_in_magnitude.join(", "),
+        if f.not_growing_in_magnitude.is_empty() { "none".into() } else { f.not_growing_in_magnitude.join(", ") }
+    );
     println!("RV grows with d (mean |RV| monotone at both F_Y): {}", f.rv_grows_with_d);
     println!("RV larger at high F_Y at the common d = {:.3} (beyond two standard errors): {}", f.common_d, f.rv_faster_at_high_fy);
     println!("most sensitive coefficient at d = {:.3}: {} (RV {:+.1} % at {})", f.common_d, f.most_sensitive, 100.0 * f.most_sensitive_rv, f.most_sensitive_at);

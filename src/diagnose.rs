@@ -116,7 +116,9 @@ pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
     };
     let options = DiagnosisOptions::default();
     // Conditioned once: the diagnosis and the report share the prepared record.
-    let (d, prepared) = match evidence::prepare(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options.prepare).with_context(|| format!("diagnosing {name}"))? {
+    let (d, prepared) = match evidence::prepare(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options.prepare)
+        .with_context(|| format!("diagnosing {name}"))?
+    {
         Ok(p) => {
             let mut d = diagnose_prepared(&p, &rig, &options).with_context(|| format!("diagnosing {name}"))?;
             if loaded.speed_source == SpeedSource::RigFile {
@@ -125,7 +127,10 @@ pub fn run(args: &DiagnoseArgs) -> Result<crate::Outcome> {
             (d, Some(p))
         }
         // Too short or too poorly excited: the library's verdict says why.
-        Err(_) => (diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options).with_context(|| format!("diagnosing {name}"))?, None),
+        Err(_) => (
+            diagnose(&loaded.raw, &loaded.calibration, &rig, loaded.speed_rpm, loaded.speed_source, &options).with_context(|| format!("diagnosing {name}"))?,
+            None,
+        ),
     };
     let mut value = serde_json::to_value(&d)?;
     if args.input.is_dir() {
@@ -180,7 +185,8 @@ fn print_diagnosis(name: &str, rig_source: &str, d: &Diagnosis) {
     if !d.steps.is_empty() {
         println!("forward selection (each candidate judged on held-out blocks against the model of its step):");
         for (i, st) in d.steps.iter().enumerate() {
-            let tried: Vec<String> = st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
+            let tried: Vec<String> =
+                st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
             println!(
                 "  step {}: {} (NRMSE {:.4}) -> {}; tried {}",
                 i + 1,
@@ -202,7 +208,12 @@ fn print_diagnosis(name: &str, rig_source: &str, d: &Diagnosis) {
         );
     }
     for st in &d.structure {
-        println!("structure {}: {:+.2} % on held-out blocks{}", st.name.name(), 100.0 * st.score.unwrap_or(f64::NAN), if st.remains { " -- REMAINS" } else { "" });
+        println!(
+            "structure {}: {:+.2} % on held-out blocks{}",
+            st.name.name(),
+            100.0 * st.score.unwrap_or(f64::NAN),
+            if st.remains { " -- REMAINS" } else { "" }
+        );
         if st.remains {
             println!("  {}", st.description);
         }

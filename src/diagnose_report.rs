@@ -68,7 +68,6 @@ fn variable_slug(v: TrendVariable) -> &'static str {
     }
 }
 
-
 fn header<'a>(root: &Area<'a>, title: &str, sub: &str) -> Result<Area<'a>> {
     root.fill(&WHITE)?;
     let (top, body) = root.split_vertically(62);
@@ -119,8 +118,16 @@ fn lines_figure(show: &Show, record: &str, path: &Path) -> Result<()> {
             .x_label_area_size(44)
             .y_label_area_size(70)
             .build_cartesian_2d(x0..x1, 0.0..y1)?;
-        chart.configure_mesh().x_desc("excitation line (Hz)").y_desc(format!("{} amplitude (um)", axis.axis)).label_style((FONT, 13)).light_line_style(GRID).draw()?;
-        let pts = |f: &dyn Fn(&oilfilm_diagnosis::show::LineComparison) -> Option<f64>| -> Vec<(f64, f64, bool)> { ls.iter().filter_map(|l| f(l).map(|v| (l.frequency_hz, um(v), l.excited))).collect() };
+        chart
+            .configure_mesh()
+            .x_desc("excitation line (Hz)")
+            .y_desc(format!("{} amplitude (um)", axis.axis))
+            .label_style((FONT, 13))
+            .light_line_style(GRID)
+            .draw()?;
+        let pts = |f: &dyn Fn(&oilfilm_diagnosis::show::LineComparison) -> Option<f64>| -> Vec<(f64, f64, bool)> {
+            ls.iter().filter_map(|l| f(l).map(|v| (l.frequency_hz, um(v), l.excited))).collect()
+        };
         let measured = pts(&|l| Some(l.measured_amplitude_m));
         chart
             .draw_series(measured.iter().map(|&(f, v, e)| Circle::new((f, v), 6, if e { MEASURED.filled() } else { MEASURED.stroke_width(1) })))?
@@ -237,7 +244,14 @@ fn coefficients(show: &Show, record: &str, path: &Path) -> Result<()> {
             .x_label_area_size(40)
             .y_label_area_size(80)
             .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart.configure_mesh().x_desc("window mid-time (s)").y_desc(unit).label_style((FONT, 12)).light_line_style(GRID).y_label_formatter(&|v| format!("{v:.3e}")).draw()?;
+        chart
+            .configure_mesh()
+            .x_desc("window mid-time (s)")
+            .y_desc(unit)
+            .label_style((FONT, 12))
+            .light_line_style(GRID)
+            .y_label_formatter(&|v| format!("{v:.3e}"))
+            .draw()?;
         chart
             .draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.3)), BLACK.stroke_width(2)))?
             .label("film model")
@@ -350,7 +364,14 @@ fn markdown(record: &str, s: &Show, diagnosis: Option<&Diagnosis>, figures: &[St
     let _ = writeln!(m, "| bellows f3 | {:.1} N mean; f3 - m g = {:.1} N |", o.bellows_mean_n, o.bellows_load_n);
     let _ = writeln!(m, "| Sommerfeld S / load parameter F_Y | {:.4} / {:.4} |", o.sommerfeld, o.load_parameter);
     let _ = writeln!(m, "| journal position, measured | ({:.2}, {:.2}) um |", 1e6 * o.measured_position_m[0], 1e6 * o.measured_position_m[1]);
-    let _ = writeln!(m, "| journal position, film model | ({:.2}, {:.2}) um, eccentricity {:.3}, attitude {:.1} deg |", 1e6 * o.model_position_m[0], 1e6 * o.model_position_m[1], o.model_eccentricity, o.model_attitude_deg);
+    let _ = writeln!(
+        m,
+        "| journal position, film model | ({:.2}, {:.2}) um, eccentricity {:.3}, attitude {:.1} deg |",
+        1e6 * o.model_position_m[0],
+        1e6 * o.model_position_m[1],
+        o.model_eccentricity,
+        o.model_attitude_deg
+    );
     let lines: Vec<String> = s.excitation_lines_hz.iter().map(|f| format!("{f:.2}")).collect();
     let _ = writeln!(m, "| excitation lines (applied force) | {} Hz |\n", if lines.is_empty() { "none".to_string() } else { lines.join(", ") });
 
@@ -410,7 +431,12 @@ fn markdown(record: &str, s: &Show, diagnosis: Option<&Diagnosis>, figures: &[St
         let _ = writeln!(m, "No window was identified: {why}\n");
     } else {
         let n = c.windows.len() as f64;
-        let _ = writeln!(m, "{} window(s) accepted, {} refused. Means over the accepted windows; the model is evaluated at each window's own operating point.\n", c.windows.len(), c.refused.len());
+        let _ = writeln!(
+            m,
+            "{} window(s) accepted, {} refused. Means over the accepted windows; the model is evaluated at each window's own operating point.\n",
+            c.windows.len(),
+            c.refused.len()
+        );
         let _ = writeln!(m, "| coefficient | identified | mean SE | film model | identified - model |\n|---|---|---|---|---|");
         for (k, name) in COEFFICIENT_NAMES.iter().enumerate() {
             let mean = |f: &dyn Fn(&oilfilm_diagnosis::show::WindowComparison) -> f64| c.windows.iter().map(f).sum::<f64>() / n;
@@ -450,7 +476,8 @@ fn markdown(record: &str, s: &Show, diagnosis: Option<&Diagnosis>, figures: &[St
         let _ = writeln!(m, "| coefficient | {} |", vars.iter().map(|v| v.label()).collect::<Vec<_>>().join(" | "));
         let _ = writeln!(m, "|---|{}", "---|".repeat(vars.len()));
         for name in COEFFICIENT_NAMES {
-            let cells: Vec<String> = vars.iter().map(|v| s.trends.iter().find(|t| t.variable == *v && t.coefficient == name).map_or("-".into(), trend_cell)).collect();
+            let cells: Vec<String> =
+                vars.iter().map(|v| s.trends.iter().find(|t| t.variable == *v && t.coefficient == name).map_or("-".into(), trend_cell)).collect();
             let _ = writeln!(m, "| {name} | {} |", cells.join(" | "));
         }
     }
@@ -538,7 +565,13 @@ fn disagreements(s: &Show) -> Vec<String> {
     let mut sig: Vec<&Trend> = s.trends.iter().filter(|t| t.is_notable()).collect();
     sig.sort_by(|a, b| b.t_statistic.abs().total_cmp(&a.t_statistic.abs()));
     for t in sig.iter().take(8) {
-        out.push(format!("{} trends with {}: {:+.2} % across the record's range (t = {:.1})", t.coefficient, t.variable.label(), 100.0 * t.relative_change_over_range, t.t_statistic));
+        out.push(format!(
+            "{} trends with {}: {:+.2} % across the record's range (t = {:.1})",
+            t.coefficient,
+            t.variable.label(),
+            100.0 * t.relative_change_over_range,
+            t.t_statistic
+        ));
     }
     for c in &s.residual.components {
         if c.kind != ComponentKind::Broadband && c.db_above_floor.iter().any(|d| *d > 10.0) {
@@ -550,7 +583,9 @@ fn disagreements(s: &Show) -> Vec<String> {
 
 fn fmt_value(v: &serde_json::Value) -> String {
     match v {
-        serde_json::Value::Number(n) => n.as_f64().map_or(n.to_string(), |x| if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e5) { format!("{x:.4e}") } else { format!("{x:.4}") }),
+        serde_json::Value::Number(n) => {
+            n.as_f64().map_or(n.to_string(), |x| if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e5) { format!("{x:.4e}") } else { format!("{x:.4}") })
+        }
         serde_json::Value::String(s) => s.clone(),
         serde_json::Value::Null => "-".into(),
         serde_json::Value::Object(o) => o.iter().map(|(k, v)| format!("{k} = {}", fmt_value(v))).collect::<Vec<_>>().join(", "),
@@ -565,7 +600,11 @@ fn matrix(mtx: &nalgebra::Matrix2<f64>) -> String {
 /// The opening of the report: the verdict, the model update and the figure at the lines, then
 /// how the verdict was reached.
 fn verdict_section(m: &mut String, d: &Diagnosis, figures: &[String]) {
-    let also = if d.also.is_empty() { String::new() } else { format!(" (also in the model: {})", d.also.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", ")) };
+    let also = if d.also.is_empty() {
+        String::new()
+    } else {
+        format!(" (also in the model: {})", d.also.iter().map(|c| format!("`{c}`")).collect::<Vec<_>>().join(", "))
+    };
     let _ = writeln!(m, "## Verdict: `{}`{also}\n", d.cause);
     let _ = writeln!(m, "{}\n", d.reason);
     if !d.parameters.is_empty() {
@@ -601,7 +640,14 @@ fn verdict_section(m: &mut String, d: &Diagnosis, figures: &[String]) {
         let _ = writeln!(m, "| identified K, C | {} | {} |\n", matrix(&u.identified_stiffness_n_m), matrix(&u.identified_damping_n_s_m));
         let _ = writeln!(m, "Theories fitted to the identified coefficients (relative mismatch of K and C):\n");
         for t in &u.theories {
-            let _ = writeln!(m, "- {}: {:.2} % at clearance {:.2} um, viscosity {:.5} Pa s", t.theory, 100.0 * t.coefficient_mismatch, 1e6 * t.clearance_m, t.viscosity_pa_s);
+            let _ = writeln!(
+                m,
+                "- {}: {:.2} % at clearance {:.2} um, viscosity {:.5} Pa s",
+                t.theory,
+                100.0 * t.coefficient_mismatch,
+                1e6 * t.clearance_m,
+                t.viscosity_pa_s
+            );
         }
         let _ = writeln!(m);
     }
@@ -623,8 +669,17 @@ fn verdict_section(m: &mut String, d: &Diagnosis, figures: &[String]) {
     let _ = writeln!(m, "Forward selection: each step adds the catalog effect that predicts held-out blocks best on top of the model so far, if it earns its parameters (`*`).\n");
     let _ = writeln!(m, "| step | model | held-out NRMSE | candidates (held-out gain) | added |\n|---|---|---|---|---|");
     for (i, st) in d.steps.iter().enumerate() {
-        let tried: Vec<String> = st.tried.iter().map(|c| format!("{} {:+.2} %{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
-        let _ = writeln!(m, "| {} | {} | {:.4} | {} | {} |", i + 1, st.model, st.heldout_nrmse, tried.join(", "), st.chosen.map_or("-".to_string(), |c| c.to_string()));
+        let tried: Vec<String> =
+            st.tried.iter().map(|c| format!("{} {:+.2} %{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
+        let _ = writeln!(
+            m,
+            "| {} | {} | {:.4} | {} | {} |",
+            i + 1,
+            st.model,
+            st.heldout_nrmse,
+            tried.join(", "),
+            st.chosen.map_or("-".to_string(), |c| c.to_string())
+        );
     }
     let _ = writeln!(m);
     for c in d.candidates.iter().filter(|c| c.score.is_none()) {
@@ -643,7 +698,13 @@ fn verdict_section(m: &mut String, d: &Diagnosis, figures: &[String]) {
     }
     let _ = writeln!(m, "**Does structure remain?** General extensions tried on top of the chosen model:\n");
     for st in &d.structure {
-        let _ = writeln!(m, "- {}: {:+.2} % on held-out blocks{}", st.name.name(), 100.0 * st.score.unwrap_or(f64::NAN), if st.remains { format!(" -- **remains**: {}", st.description) } else { String::new() });
+        let _ = writeln!(
+            m,
+            "- {}: {:+.2} % on held-out blocks{}",
+            st.name.name(),
+            100.0 * st.score.unwrap_or(f64::NAN),
+            if st.remains { format!(" -- **remains**: {}", st.description) } else { String::new() }
+        );
     }
     if !d.aliases.is_empty() {
         let _ = writeln!(m, "\n**Look-alikes:**\n");

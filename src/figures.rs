@@ -121,17 +121,21 @@ fn coefficients_vs_fy(c: &Campaign, path: &Path, first: usize, what: &str) -> Re
     let mut speeds: Vec<f64> = study.points.iter().map(|p| p.spec.speed_rpm).collect();
     speeds.sort_by(f64::total_cmp);
     speeds.dedup();
-    let fy_max = study.points.iter().map(|p| p.load_parameter).chain(study.model_curve.iter().map(|m| m.load_parameter)).filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let fy_max =
+        study.points.iter().map(|p| p.load_parameter).chain(study.model_curve.iter().map(|m| m.load_parameter)).filter(|v| v.is_finite()).fold(0.0, f64::max);
     for (panel, k) in panels.iter().zip(first..first + 4) {
         let name = COEFFICIENT_NAMES[k];
         let trend = &study.trends[k];
-        let pts: Vec<(f64, f64, f64)> = study.points.iter().filter_map(|p| p.identified.map(|i| (p.load_parameter, i.as_array()[k], p.spec.speed_rpm))).collect();
+        let pts: Vec<(f64, f64, f64)> =
+            study.points.iter().filter_map(|p| p.identified.map(|i| (p.load_parameter, i.as_array()[k], p.spec.speed_rpm))).collect();
         let model: Vec<(f64, f64)> = study.model_curve.iter().map(|m| (m.load_parameter, m.zhou.as_array()[k])).collect();
         let x_hi = fy_max * 1.05;
-        let fit: Vec<(f64, f64)> = (0..=100).map(|i| {
-            let x = trend.fy_range[0] + (trend.fy_range[1] - trend.fy_range[0]) * i as f64 / 100.0;
-            (x, trend.fit.eval(x))
-        }).collect();
+        let fit: Vec<(f64, f64)> = (0..=100)
+            .map(|i| {
+                let x = trend.fy_range[0] + (trend.fy_range[1] - trend.fy_range[0]) * i as f64 / 100.0;
+                (x, trend.fit.eval(x))
+            })
+            .collect();
         let (y0, y1) = padded(pts.iter().map(|p| p.1).chain(model.iter().map(|p| p.1)).chain(fit.iter().map(|p| p.1)));
         let mut chart = ChartBuilder::on(panel)
             .caption(definition(name), (FONT, 18))
@@ -193,10 +197,12 @@ fn coefficients_vs_d(c: &Campaign, path: &Path, first: usize, what: &str, d_max:
             let name = COEFFICIENT_NAMES[k];
             let f = &sweep.fits[k].fit;
             let pts: Vec<(f64, f64)> = sweep.steps.iter().filter_map(|s| s.identified.map(|i| (s.amplitude_d, i.as_array()[k]))).collect();
-            let curve: Vec<(f64, f64)> = (0..=100).map(|i| {
-                let d = sweep.max_d * i as f64 / 100.0;
-                (d, f.eval(d))
-            }).collect();
+            let curve: Vec<(f64, f64)> = (0..=100)
+                .map(|i| {
+                    let d = sweep.max_d * i as f64 / 100.0;
+                    (d, f.eval(d))
+                })
+                .collect();
             let model = sweep.model.zhou.as_array()[k];
             let (y0, y1) = padded(pts.iter().map(|p| p.1).chain(curve.iter().map(|p| p.1)).chain([model]));
             let mut chart = ChartBuilder::on(panel)
@@ -312,11 +318,8 @@ fn relative_variation(c: &Campaign, sweep: &AmplitudeSweep, fig: u32, path: &Pat
                 .draw_series(LineSeries::new(curve, color.stroke_width(2)))?
                 .label(format!("{name}: RV {rv_end:+.1} % at d = {:.3}", sweep.max_d))
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2)));
-            let pts: Vec<(f64, f64)> = sweep
-                .steps
-                .iter()
-                .filter_map(|s| s.identified.map(|v| (s.amplitude_d, 100.0 * (v.as_array()[k] - fit.d0) / fit.d0)))
-                .collect();
+            let pts: Vec<(f64, f64)> =
+                sweep.steps.iter().filter_map(|s| s.identified.map(|v| (s.amplitude_d, 100.0 * (v.as_array()[k] - fit.d0) / fit.d0))).collect();
             chart.draw_series(pts.into_iter().map(move |p| Circle::new(p, 4, color.filled())))?;
         }
         chart

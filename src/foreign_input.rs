@@ -38,7 +38,12 @@ pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<crate::Outcome> 
     // keeps the last speed. One number: one status says it. A speed channel: the statuses of
     // the whole record, from a first pass over it.
     let status = match source.stated_speed_rpm() {
-        Some(rpm) => vec![RigStatus { header: Header::default(), speed_rad_s: rpm * std::f64::consts::PI / 30.0, state: RigStatus::STATE_RUNNING, ..RigStatus::default() }],
+        Some(rpm) => vec![RigStatus {
+            header: Header::default(),
+            speed_rad_s: rpm * std::f64::consts::PI / 30.0,
+            state: RigStatus::STATE_RUNNING,
+            ..RigStatus::default()
+        }],
         None => {
             let mut first = ForeignSource::with_map(&args.file, &map, &rig, &daq)?;
             let mut status = Vec::new();
@@ -56,7 +61,8 @@ pub fn identify(args: &IdentifyArgs, map_path: &Path) -> Result<crate::Outcome> 
             None
         }
     });
-    let out = oilfilm_graph::runner::bag::reanalyse_overlapped(&rig, &conditioner, &estimator, status, frames).with_context(|| format!("re-analysing {name}"))?;
+    let out =
+        oilfilm_graph::runner::bag::reanalyse_overlapped(&rig, &conditioner, &estimator, status, frames).with_context(|| format!("re-analysing {name}"))?;
     if let Some(e) = failed.into_inner() {
         return Err(e);
     }
@@ -132,8 +138,15 @@ pub fn load_raw(file: &Path, map_path: &Path, rig: &RigConfig) -> Result<Loaded>
         RecordSpeed::Channel { .. } if scans > 0 => Some(speed_sum / scans as f64),
         _ => None,
     };
-    let raw = RawRecord { sample_rate_hz: rec.sample_rate_hz, start_time_s: rec.start_time_s, channels: rec.channels.clone(), units: if rec.volts { RawUnits::Volts } else { RawUnits::Si }, columns };
-    let calibration = pipeline::calibration_for(rig, &raw, &rec.offsets_s).with_context(|| format!("{}: the rig's calibration on the map's schedule", file.display()))?;
+    let raw = RawRecord {
+        sample_rate_hz: rec.sample_rate_hz,
+        start_time_s: rec.start_time_s,
+        channels: rec.channels.clone(),
+        units: if rec.volts { RawUnits::Volts } else { RawUnits::Si },
+        columns,
+    };
+    let calibration =
+        pipeline::calibration_for(rig, &raw, &rec.offsets_s).with_context(|| format!("{}: the rig's calibration on the map's schedule", file.display()))?;
     Ok(Loaded { raw, calibration, offsets_s: rec.offsets_s.clone(), speed_rpm })
 }
 

@@ -92,7 +92,9 @@ pub fn correct(
     };
     let mut note = match d.cause {
         Cause::None => "the linear film is adequate; the coefficients are the small-amplitude ones (the film's own nonlinearity separated)".to_string(),
-        Cause::Unexplained => format!("an effect outside the catalog remains ({}); the coefficients are the closest catalog model's and may still be biased", d.reason),
+        Cause::Unexplained => {
+            format!("an effect outside the catalog remains ({}); the coefficients are the closest catalog model's and may still be biased", d.reason)
+        }
         Cause::InsufficientData => format!("the record cannot be judged: {}", d.reason),
         c if c.is_measurement_effect() => format!("{c} corrected in the data ({}); the coefficients are the corrected record's", fmt_parameters(&d)),
         c => format!("{c} separated from the film ({}); the coefficients are the film's own", fmt_parameters(&d)),
@@ -152,7 +154,12 @@ fn matrix(m: &Matrix2<f64>) -> String {
 /// The text form, after the windows.
 pub fn print(c: &Correction) {
     println!();
-    println!("corrected identification ({}): the diagnosis names `{}`{}", c.why, c.cause, if c.also.is_empty() { String::new() } else { format!(" (also {})", c.also.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")) });
+    println!(
+        "corrected identification ({}): the diagnosis names `{}`{}",
+        c.why,
+        c.cause,
+        if c.also.is_empty() { String::new() } else { format!(" (also {})", c.also.iter().map(|a| a.name()).collect::<Vec<_>>().join(", ")) }
+    );
     println!("  {}", c.note);
     if c.stiffness_n_m.iter().all(|v| v.is_finite()) {
         println!("  K = {} N/m (SE {})", matrix(&c.stiffness_n_m), matrix(&c.stiffness_se));

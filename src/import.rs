@@ -106,7 +106,8 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         None => None,
     };
     std::fs::create_dir_all(&staging).with_context(|| format!("cannot create {}", staging.display()))?;
-    let recorder = RecorderParams { output: partial.display().to_string(), compression: args.compression.clone(), status_period_s: 0.0, ..RecorderParams::default() };
+    let recorder =
+        RecorderParams { output: partial.display().to_string(), compression: args.compression.clone(), status_period_s: 0.0, ..RecorderParams::default() };
     let writer = oilfilm_bag::BagWriter::create(&partial, recorder.writer_options()?)?;
     let topics = select_topics(oilfilm_graph::topics::NAMESPACE, &["daq/frames".into(), "rig/status".into()])?;
     let mut sink = Sink { core: RecorderCore::new(writer, topics)?, written: Written { frames: 0, status: 0, scans: 0, first: None, last_status: None } };

@@ -264,7 +264,8 @@ pub fn estimate_line(e: &CoefficientEstimate) -> String {
         return format!("#{} samples {}..{} ({span:.1} s): REFUSED: {}", e.sequence, e.window_start_sample, e.window_end_sample, e.refusal_reason);
     }
     let rel = |v: f64, se: f64| if v != 0.0 { (se / v).abs() } else { f64::INFINITY };
-    let worst = [0, 3].iter().flat_map(|&k| [rel(e.stiffness_n_m[k], e.stiffness_se_n_m[k]), rel(e.damping_n_s_m[k], e.damping_se_n_s_m[k])]).fold(0.0, f64::max);
+    let worst =
+        [0, 3].iter().flat_map(|&k| [rel(e.stiffness_n_m[k], e.stiffness_se_n_m[k]), rel(e.damping_n_s_m[k], e.damping_se_n_s_m[k])]).fold(0.0, f64::max);
     format!(
         "#{} samples {}..{} ({span:.1} s)  K {} N/m  C {} N s/m  direct se <= {:.1} %  F_Y {:.3}",
         e.sequence,

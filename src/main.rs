@@ -3,18 +3,18 @@
 //! Thin by design: it parses arguments, reads files, calls the core and prints. All physics
 //! lives in `oilfilm-physics`.
 
-mod launch;
-mod records;
-mod record;
-mod campaign;
-mod figures;
-mod report;
 mod ascii_input;
+mod campaign;
 mod diagnose;
 mod diagnose_report;
-mod identify_corrected;
+mod figures;
 mod foreign_input;
+mod identify_corrected;
 mod import;
+mod launch;
+mod record;
+mod records;
+mod report;
 
 use std::path::PathBuf;
 

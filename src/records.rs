@@ -10,13 +10,15 @@ use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
-use oilfilm_physics::effects::{ChannelDelay, FilmRelaxation, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift};
+use oilfilm_physics::effects::{
+    ChannelDelay, FilmRelaxation, FluidInertia, HousingMassMismatch, ProbeSaturation, SupportFriction, SynchronousRunout, ThermalDrift,
+};
 
 use std::io::Write;
 
 use oilfilm::bags::{merge_shortfalls, print_shortfalls, reader_threads_beside_analysis, reanalyse_bag_with};
-use oilfilm_bag::{ReadOptions, Shortfall};
 pub use oilfilm::progress::Progress;
+use oilfilm_bag::{ReadOptions, Shortfall};
 
 use crate::{Outcome, RigSource};
 
@@ -321,7 +323,8 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
     let correction = if args.no_correct {
         None
     } else {
-        crate::identify_corrected::correct(&raw, &calibration, &rig, speed_rpm, source, &config, &id, args.correct).with_context(|| format!("correcting {name}"))?
+        crate::identify_corrected::correct(&raw, &calibration, &rig, speed_rpm, source, &config, &id, args.correct)
+            .with_context(|| format!("correcting {name}"))?
     };
     if args.json {
         let mut value = serde_json::to_value(&id)?;
@@ -360,7 +363,11 @@ pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
 /// The pipeline settings node parameters give (a params file's or those a bag recorded): the
 /// conditioner's chain settings (its low-pass as set, not adapted to the excitation) and the
 /// estimator's window settings.
-fn params_config(conditioner: &oilfilm_graph::conditioner::ConditionerParams, estimator: &oilfilm_graph::estimator::EstimatorParams, sample_rate_hz: f64) -> Result<PipelineConfig> {
+fn params_config(
+    conditioner: &oilfilm_graph::conditioner::ConditionerParams,
+    estimator: &oilfilm_graph::estimator::EstimatorParams,
+    sample_rate_hz: f64,
+) -> Result<PipelineConfig> {
     Ok(PipelineConfig { conditioning: conditioner.conditioning()?, estimator: estimator.config(sample_rate_hz)?, adaptive_lowpass: false })
 }
 
@@ -378,7 +385,9 @@ pub(crate) enum ParamsFrom {
 /// The conditioner's and estimator's parameters: from `--params`; without it, for a bag that
 /// recorded them, the ones its nodes ran with (said on stderr, with a warning when they
 /// changed during the recording); else the nodes' defaults.
-pub(crate) fn node_params(args: &IdentifyArgs) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams, ParamsFrom)> {
+pub(crate) fn node_params(
+    args: &IdentifyArgs,
+) -> Result<(oilfilm_graph::conditioner::ConditionerParams, oilfilm_graph::estimator::EstimatorParams, ParamsFrom)> {
     use oilfilm_graph::conditioner::ConditionerParams;
     use oilfilm_graph::estimator::EstimatorParams;
     use oilfilm_graph::params::{self, NodeArgs};
@@ -440,7 +449,14 @@ fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
             w.t_start_s, w.t_end_s, o.speed_rpm, o.temperature_c, o.viscosity_pa_s, o.load_n, o.sommerfeld, o.load_parameter, o.amplitude_d
         );
         let e = &w.estimate;
-        println!("  condition {:.2}, rank {}, residual rms [{:.3}, {:.3}] N, lines {:?} Hz", e.condition_number, e.rank, e.residual_rms_n[0], e.residual_rms_n[1], e.frequencies_hz.iter().map(|f| (f * 100.0).round() / 100.0).collect::<Vec<_>>());
+        println!(
+            "  condition {:.2}, rank {}, residual rms [{:.3}, {:.3}] N, lines {:?} Hz",
+            e.condition_number,
+            e.rank,
+            e.residual_rms_n[0],
+            e.residual_rms_n[1],
+            e.frequencies_hz.iter().map(|f| (f * 100.0).round() / 100.0).collect::<Vec<_>>()
+        );
         match &e.result {
             Err(r) => match drift {
                 Some(d) => println!("  REFUSED: {d} (the estimator: {r})"),
@@ -454,11 +470,27 @@ fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
                     let zd = w.zhou.as_ref().map_or(f64::NAN, |z| z.damping[(i, j)]);
                     println!(
                         "  {:<6} {:>14.5e} {:>12.3e} {:>9.4} | {:>14.5e} {:>12.3e} {:>9.4}",
-                        names[k], c.stiffness_n_m[(i, j)], c.stiffness_se[(i, j)], zk, c.damping_n_s_m[(i, j)], c.damping_se[(i, j)], zd
+                        names[k],
+                        c.stiffness_n_m[(i, j)],
+                        c.stiffness_se[(i, j)],
+                        zk,
+                        c.damping_n_s_m[(i, j)],
+                        c.damping_se[(i, j)],
+                        zd
                     );
                 }
                 if let (Some(m), Some(s)) = (&c.added_mass_kg, &c.added_mass_se) {
-                    println!("  added mass M [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])", m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)], s[(0, 0)], s[(0, 1)], s[(1, 0)], s[(1, 1)]);
+                    println!(
+                        "  added mass M [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])",
+                        m[(0, 0)],
+                        m[(0, 1)],
+                        m[(1, 0)],
+                        m[(1, 1)],
+                        s[(0, 0)],
+                        s[(0, 1)],
+                        s[(1, 0)],
+                        s[(1, 1)]
+                    );
                 }
             }
         }
@@ -472,7 +504,15 @@ fn print_identification(name: &str, id: &Identification, drift: Option<&str>) {
             println!();
             println!(
                 "frequency-domain cross-check at {} lines: K [{:.4e} {:.4e}; {:.4e} {:.4e}], C [{:.4e} {:.4e}; {:.4e} {:.4e}]",
-                f.lines.len(), k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)], d[(0, 0)], d[(0, 1)], d[(1, 0)], d[(1, 1)]
+                f.lines.len(),
+                k[(0, 0)],
+                k[(0, 1)],
+                k[(1, 0)],
+                k[(1, 1)],
+                d[(0, 0)],
+                d[(0, 1)],
+                d[(1, 0)],
+                d[(1, 1)]
             );
         } else if let Err(r) = &f.result {
             println!("frequency-domain cross-check refused: {r}");
@@ -593,9 +633,5 @@ fn replay_and_print(
         }
         println!("{} estimate(s), {solved} solved", out.estimates.len());
     }
-    Ok(if solved == 0 {
-        Outcome::Refused(format!("{name}: {} estimate(s), none solved", out.estimates.len()))
-    } else {
-        Outcome::Done
-    })
+    Ok(if solved == 0 { Outcome::Refused(format!("{name}: {} estimate(s), none solved", out.estimates.len())) } else { Outcome::Done })
 }

@@ -4,13 +4,13 @@ use std::time::Instant;
 
 use anyhow::Result;
 use nalgebra::{Matrix2, Vector2};
+use oilfilm_identification::excitation::ExcitationPlan;
+use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
+use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::dimensionless;
 use oilfilm_physics::film::Running;
 use oilfilm_physics::operating_point::{self, EquilibriumOptions};
-use oilfilm_identification::excitation::ExcitationPlan;
-use oilfilm_identification::pipeline::{self, PipelineConfig, SpeedSource};
-use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::simulation::SimulatedRig;
 use serde::Serialize;
 
@@ -206,10 +206,7 @@ pub fn print_record(r: &RecordReport) {
     for c in &r.channels {
         println!("{:<12} {:>5} {:>13.5e} {:>13.5e} {:>13.5e} {:>13.5e}", c.channel, c.unit, c.mean, c.rms_about_mean, c.min, c.max);
     }
-    println!(
-        "simulated {:.2} s in {:.3} s wall: {:.1}x real time (rig set-up {:.3} s)",
-        r.seconds, r.simulation_wall_s, r.real_time_factor, r.setup_s
-    );
+    println!("simulated {:.2} s in {:.3} s wall: {:.1}x real time (rig set-up {:.3} s)", r.seconds, r.simulation_wall_s, r.real_time_factor, r.setup_s);
 }
 
 /// The simulated record identified by the pipeline, against the film model's coefficients.
@@ -253,7 +250,10 @@ pub fn identify_record(config: &RigConfig, rec: &SimulatedRecord) -> Result<Iden
 
 pub fn print_identified(r: &IdentifiedReport) {
     println!();
-    println!("identified from the record ({} window(s), low-pass {:.1} Hz, {:.1} ms) against the simulated film's own coefficients:", r.windows, r.lowpass_cutoff_hz, r.identify_ms);
+    println!(
+        "identified from the record ({} window(s), low-pass {:.1} Hz, {:.1} ms) against the simulated film's own coefficients:",
+        r.windows, r.lowpass_cutoff_hz, r.identify_ms
+    );
     if let Some(reason) = &r.refusal {
         println!("  REFUSED: {reason}");
         return;
@@ -261,7 +261,10 @@ pub fn print_identified(r: &IdentifiedReport) {
     let (Some(k), Some(c), Some(sk), Some(sc)) = (&r.identified_stiffness_n_m, &r.identified_damping_n_s_m, &r.stiffness_se, &r.damping_se) else {
         return;
     };
-    println!("  {:<4} {:>13} {:>11} {:>13} {:>8} | {:>13} {:>11} {:>13} {:>8}", "", "K identified", "SE", "K film", "diff", "C identified", "SE", "C film", "diff");
+    println!(
+        "  {:<4} {:>13} {:>11} {:>13} {:>8} | {:>13} {:>11} {:>13} {:>8}",
+        "", "K identified", "SE", "K film", "diff", "C identified", "SE", "C film", "diff"
+    );
     for (n, (i, j)) in ["xx", "xy", "yx", "yy"].iter().zip([(0, 0), (0, 1), (1, 0), (1, 1)]) {
         let (ki, kf) = (k.0[i][j], r.model_stiffness_n_m.0[i][j]);
         let (ci, cf) = (c.0[i][j], r.model_damping_n_s_m.0[i][j]);

@@ -2,10 +2,10 @@
 //! `identify`, whose JSON must carry coefficients close to the film model's; bad input gives
 //! an error that names the file, line and column, and a non-zero exit.
 
-#[path = "support/scratch.rs"]
-mod support;
 #[path = "support/json_difference.rs"]
 mod json_difference;
+#[path = "support/scratch.rs"]
+mod support;
 
 use std::process::{Command, Output};
 
@@ -144,7 +144,8 @@ fn identify_a_bag_gives_the_live_estimates() {
     let dir = scratch("graph-bag");
     let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
     let spec = |t: &topics::Topic| {
-        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()
+        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)])
+            .unwrap()
     };
     let (frames, status) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap());
     let ns = |h: &oilfilm_msgs::Header| (h.stamp.sec as u64) * 1_000_000_000 + h.stamp.nanosec as u64;
@@ -162,7 +163,9 @@ fn identify_a_bag_gives_the_live_estimates() {
     let (frames, status) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap());
     let events = w.add_topic(spec(&topics::PARAMETER_EVENTS)).unwrap();
     let t0 = ns(&live.frames[0].header);
-    for (node, params) in [("/oilfilm/conditioner", serde_json::to_value(&p.conditioner).unwrap()), ("/oilfilm/estimator", serde_json::to_value(&p.estimator).unwrap())] {
+    for (node, params) in
+        [("/oilfilm/conditioner", serde_json::to_value(&p.conditioner).unwrap()), ("/oilfilm/estimator", serde_json::to_value(&p.estimator).unwrap())]
+    {
         let event = oilfilm_graph::params::declaration_event(node, params.as_object().unwrap(), false, oilfilm_graph::stamp::Stamp(t0 as i64 - 1_000_000));
         w.write_message(events, t0 - 1_000_000, &event).unwrap();
     }
@@ -174,7 +177,11 @@ fn identify_a_bag_gives_the_live_estimates() {
     }
     w.close().unwrap();
     let params = scratch("graph-bag-params.yaml");
-    std::fs::write(&params, "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n").unwrap();
+    std::fs::write(
+        &params,
+        "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n",
+    )
+    .unwrap();
 
     let out = oilfilm(&["identify", dir.to_str().unwrap(), "--replay", "--params", params.to_str().unwrap(), "--json"]);
     assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
@@ -213,7 +220,11 @@ fn identify_a_bag_gives_the_live_estimates() {
     // for bit, and the batch path takes the recorded low-pass and window.
     let out = oilfilm(&["identify", with_params.to_str().unwrap(), "--replay", "--json"]);
     assert!(out.status.success(), "identify BAG --replay failed: {}", String::from_utf8_lossy(&out.stderr));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("the estimator's parameters are the ones /oilfilm/estimator ran with"), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("the estimator's parameters are the ones /oilfilm/estimator ran with"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     let got = doc["estimates"].as_array().expect("estimates");
     assert_eq!(got.len(), live.estimates.len());
@@ -240,7 +251,16 @@ fn identify_a_bag_gives_the_live_estimates() {
 fn diagnose_names_a_hidden_runout_prints_the_contract_and_writes_a_report() {
     let record = scratch("runout.txt");
     let out = oilfilm(&[
-        "simulate", "--seconds", "8", "--excitation", "multisine", "--amplitude-n", "60", "--inject", "synchronous_runout=2e-7", "-o",
+        "simulate",
+        "--seconds",
+        "8",
+        "--excitation",
+        "multisine",
+        "--amplitude-n",
+        "60",
+        "--inject",
+        "synchronous_runout=2e-7",
+        "-o",
         record.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "simulate failed: {}", String::from_utf8_lossy(&out.stderr));
@@ -308,9 +328,11 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
     let dir = scratch("causal-graph-bag");
     let mut w = BagWriter::create(&dir, WriterOptions::default()).unwrap();
     let spec = |t: &topics::Topic| {
-        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)]).unwrap()
+        TopicSpec::ours(&topics::qualified(topics::NAMESPACE, t), t.type_name, vec![QosProfile::keep_last(t.qos.depth as u32, true, t.qos.transient_local)])
+            .unwrap()
     };
-    let (frames, status, conditioned) = (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap(), w.add_topic(spec(&topics::CONDITIONED)).unwrap());
+    let (frames, status, conditioned) =
+        (w.add_topic(spec(&topics::DAQ_FRAMES)).unwrap(), w.add_topic(spec(&topics::RIG_STATUS)).unwrap(), w.add_topic(spec(&topics::CONDITIONED)).unwrap());
     let ns = |h: &oilfilm_msgs::Header| (h.stamp.sec as u64) * 1_000_000_000 + h.stamp.nanosec as u64;
     for s in &live.status[..1] {
         w.write_message(status, ns(&s.header), s).unwrap();
@@ -323,13 +345,15 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
     }
     w.close().unwrap();
     let params = scratch("causal-graph-bag-params.yaml");
-    let body = "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n";
+    let body =
+        "/oilfilm/conditioner:\n  ros__parameters:\n    lowpass_cutoff_hz: 55.5\n/oilfilm/estimator:\n  ros__parameters:\n    window: 25000\n    hop: 25000\n";
     let estimates = |params_text: &str| {
         std::fs::write(&params, params_text).unwrap();
         let out = oilfilm(&["identify", dir.to_str().unwrap(), "--replay", "--params", params.to_str().unwrap(), "--json"]);
         assert!(out.status.success(), "identify BAG failed: {}", String::from_utf8_lossy(&out.stderr));
         let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
-        let k: Vec<Vec<f64>> = doc["estimates"].as_array().unwrap().iter().map(|g| g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()).collect();
+        let k: Vec<Vec<f64>> =
+            doc["estimates"].as_array().unwrap().iter().map(|g| g["stiffness_n_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()).collect();
         (k, String::from_utf8_lossy(&out.stderr).into_owned())
     };
     let live_k: Vec<Vec<f64>> = live.estimates.iter().map(|e| e.stiffness_n_m.to_vec()).collect();
@@ -343,7 +367,6 @@ fn identify_a_causal_bag_follows_the_recorded_chain() {
     assert_ne!(k, live_k);
     assert!(stderr.contains("warning") && stderr.contains("`causal` chain"), "{stderr}");
 }
-
 
 /// `oilfilm identify` with the baseline instruction set (`OILFILM_SIMD=scalar`: no AVX, no
 /// fused multiply-add, `rustfft`'s scalar transforms: what a CPU without AVX2 and FMA runs)

@@ -68,10 +68,18 @@ fn files(test: &str) -> Files {
     let col = |k: usize| record.columns[k].as_slice();
 
     let tdms = d.join("record.tdms");
-    let chans: Vec<TdmsChannel> = CHANNELS.iter().enumerate().map(|(k, (_, g, n))| TdmsChannel { group: g, name: n, values: col(k), properties: vec![("wf_increment", 1.0 / 5000.0)] }).collect();
+    let chans: Vec<TdmsChannel> = CHANNELS
+        .iter()
+        .enumerate()
+        .map(|(k, (_, g, n))| TdmsChannel { group: g, name: n, values: col(k), properties: vec![("wf_increment", 1.0 / 5000.0)] })
+        .collect();
     fixtures::tdms(&tdms, &chans, TdmsLayout { segments: 7, interleaved: true, big_endian: false }).unwrap();
     let tdms_map = d.join("tdms.map.toml");
-    std::fs::write(&tdms_map, map_text("sample_rate_from = \"wf_increment\"", |k| format!("from = \"{}/{}\"", CHANNELS[k].1, CHANNELS[k].2), "format = \"tdms\"")).unwrap();
+    std::fs::write(
+        &tdms_map,
+        map_text("sample_rate_from = \"wf_increment\"", |k| format!("from = \"{}/{}\"", CHANNELS[k].1, CHANNELS[k].2), "format = \"tdms\""),
+    )
+    .unwrap();
 
     let mat = d.join("record.mat");
     let cols: Vec<(&str, &[f64])> = CHANNELS.iter().enumerate().map(|(k, (rig, _, _))| (*rig, col(k))).collect();
@@ -151,7 +159,12 @@ fn broken_files_and_maps_are_refused_and_nothing_is_written() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("cut.tdms") && err.contains("segment 6 at byte") && err.contains("truncated"), "{err}");
     assert!(!bag.exists(), "no bag");
-    let left: Vec<_> = std::fs::read_dir(&f.dir).unwrap().filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| n.contains("importing")).collect();
+    let left: Vec<_> = std::fs::read_dir(&f.dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("importing"))
+        .collect();
     assert!(left.is_empty(), "no staging directory left: {left:?}");
     // A CSV whose rows turn ragged half-way: refused after frames were made, still nothing.
     let (csv, csv_map) = &f.foreign[2];
@@ -164,14 +177,21 @@ fn broken_files_and_maps_are_refused_and_nothing_is_written() {
     let bag = f.dir.join("ragged-bag");
     let out = oilfilm(&["import", s(&ragged), "--map", s(csv_map), "-o", s(&bag)]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("ragged.csv") && err.contains("11 fields, the header has 10") && err.contains("nothing was written"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("ragged.csv") && err.contains("11 fields, the header has 10") && err.contains("nothing was written"),
+        "{err}"
+    );
     assert!(!bag.exists());
     // A map naming a channel the file lacks, and one naming a file channel twice: refused
     // before anything is read, the map's key and the file's channel named, no bag.
     let map_text = std::fs::read_to_string(map).unwrap();
     for (name, text, words) in [
         ("missing", map_text.replace("Forces/Exciter 2", "Forces/Exciter 3"), vec!["record.tdms", "`Forces/Exciter 3` (f2)", "no such channel"]),
-        ("twice", map_text.replace("Forces/Exciter 2", "Forces/Exciter 1"), vec!["twice.map.toml", "channel[7].from", "`Forces/Exciter 1` is mapped twice", "channel[6] (f1)"]),
+        (
+            "twice",
+            map_text.replace("Forces/Exciter 2", "Forces/Exciter 1"),
+            vec!["twice.map.toml", "channel[7].from", "`Forces/Exciter 1` is mapped twice", "channel[6] (f1)"],
+        ),
     ] {
         let bad_map = f.dir.join(format!("{name}.map.toml"));
         std::fs::write(&bad_map, text).unwrap();

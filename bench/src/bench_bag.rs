@@ -28,10 +28,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use oilfilm_bag::{BagWriter, Compression, QosProfile, TopicSpec, WriterOptions};
-use oilfilm_msgs::RosMessage;
 use oilfilm_graph::runner::bag::reanalyse;
 use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams, Recording};
 use oilfilm_graph::topics::{self, Topic};
+use oilfilm_msgs::RosMessage;
 use oilfilm_physics::config::RigConfig;
 
 const TARGET_RECORD_MB_S: f64 = 300.0;
@@ -195,7 +195,9 @@ pub fn run(seconds: f64, zstd_sweep: bool) -> Result<()> {
     let scans_per_frame = rec.frames.first().map_or(0.0, |f| f64::from(f.scan_count));
     for r in &rows {
         let target = match (r.what.as_str(), r.compression) {
-            (w, Compression::Zstd) if w.starts_with("DAQ frames") && r.workers == WriterOptions::DEFAULT_COMPRESSION_THREADS => format!(">= {TARGET_RECORD_MB_S:.0} MB/s: {}", if r.mb_s >= TARGET_RECORD_MB_S { "met" } else { "NOT met" }),
+            (w, Compression::Zstd) if w.starts_with("DAQ frames") && r.workers == WriterOptions::DEFAULT_COMPRESSION_THREADS => {
+                format!(">= {TARGET_RECORD_MB_S:.0} MB/s: {}", if r.mb_s >= TARGET_RECORD_MB_S { "met" } else { "NOT met" })
+            }
             _ => "-".into(),
         };
         let scans = if r.what.starts_with("DAQ frames") { format!("{:.1}", r.msgs_s * scans_per_frame / 1e6) } else { "-".into() };
@@ -290,7 +292,8 @@ fn causal_row(tmp: &Path, rig: &RigConfig, seconds: f64) -> Result<ReanalysisRow
         let inputs = oilfilm::bags::read_bag_inputs(&dir, oilfilm::bags::reader_threads())?;
         row.read_s = row.read_s.min(started.elapsed().as_secs_f64());
         drop(inputs);
-        let ((out, _, _), timing) = timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
+        let ((out, _, _), timing) =
+            timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
         row.keep_if_faster(timing);
         row.equal_to_live &= out.estimates == rec.estimates;
     }
@@ -423,7 +426,13 @@ fn volts_frames(rec: &Recording) -> Result<Vec<Encoded>> {
     let mut frames = Vec::with_capacity(rec.frames.len());
     for f in &rec.frames {
         let values = f.samples(&mut buf).map_err(anyhow::Error::msg)?.to_vec();
-        frames.push(oilfilm_msgs::DaqFrame { units: oilfilm_msgs::DaqFrame::UNITS_VOLTS, values, volts_per_count: Vec::new(), counts: Vec::new(), ..f.clone() });
+        frames.push(oilfilm_msgs::DaqFrame {
+            units: oilfilm_msgs::DaqFrame::UNITS_VOLTS,
+            values,
+            volts_per_count: Vec::new(),
+            counts: Vec::new(),
+            ..f.clone()
+        });
     }
     let mut out = Vec::new();
     encode(&mut out, &topics::DAQ_FRAMES, &frames, |m| &m.header);
@@ -432,12 +441,18 @@ fn volts_frames(rec: &Recording) -> Result<Vec<Encoded>> {
 
 /// `msgs` `times` times in a row, each copy's log times `span_ns` after the previous one's.
 fn repeated(msgs: &[Encoded], times: u64, span_ns: u64) -> Vec<Encoded> {
-    (0..times)
-        .flat_map(|k| msgs.iter().map(move |m| Encoded { topic: m.topic, log_time: m.log_time + k * span_ns, data: m.data.clone() }))
-        .collect()
+    (0..times).flat_map(|k| msgs.iter().map(move |m| Encoded { topic: m.topic, log_time: m.log_time + k * span_ns, data: m.data.clone() })).collect()
 }
 
-fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, daq: &DaqRecords, all: &[Encoded], zstd_sweep: bool) -> Result<(Vec<RecordRow>, Reanalysis)> {
+fn measure(
+    tmp: &Path,
+    rig: &RigConfig,
+    params: &GraphParams,
+    rec: &Recording,
+    daq: &DaqRecords,
+    all: &[Encoded],
+    zstd_sweep: bool,
+) -> Result<(Vec<RecordRow>, Reanalysis)> {
     let mut rows = Vec::new();
     let with = |compression| WriterOptions { compression, ..WriterOptions::default() };
     if zstd_sweep {
@@ -503,7 +518,8 @@ fn measure(tmp: &Path, rig: &RigConfig, params: &GraphParams, rec: &Recording, d
                 all_messages_s = all_messages_s.min(started.elapsed().as_secs_f64());
             }
             drop((frames, status));
-            let ((out, _, _), timing) = timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
+            let ((out, _, _), timing) =
+                timed(|| oilfilm::bags::reanalyse_bag(&dir, rig, &params.conditioner, &params.estimator, oilfilm::bags::reader_threads_beside_analysis()))?;
             row.keep_if_faster(timing);
             row.equal_to_live &= out.estimates == rec.estimates;
         }

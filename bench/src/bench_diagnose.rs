@@ -86,7 +86,10 @@ fn outside_cases(dir: &Path) -> Result<Vec<PathBuf>> {
 
 pub fn run(repeats: usize, seconds: f64, records: Option<&Path>) -> Result<()> {
     let out = std::env::temp_dir().join(format!("oilfilm-bench-diagnose-{}", std::process::id()));
-    println!("oilfilm bench diagnose: median of {} run(s) per record; seconds per stage; one thread; target {TARGET_S} s per record with the report", repeats.max(1));
+    println!(
+        "oilfilm bench diagnose: median of {} run(s) per record; seconds per stage; one thread; target {TARGET_S} s per record with the report",
+        repeats.max(1)
+    );
     println!("{:<30} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8}  named", "record", "prepare", "verdict", "show", "report", "total", "target");
     let base = RigConfig::zhou2004()?;
     let cases: [(&str, Effects); 3] = [
@@ -112,7 +115,9 @@ pub fn run(repeats: usize, seconds: f64, records: Option<&Path>) -> Result<()> {
             for case in &cases {
                 let input = crate::ascii_input::load(&case.join("record.txt.gz"), None)?;
                 let raw = simulate::raw_from_ascii(&input.record)?;
-                let offsets: Vec<f64> = (0..input.record.header.channels.len()).map(|p| input.record.header.channel_offset_s(p).ok_or_else(|| anyhow::anyhow!("{}: no offset for channel {p}", case.display()))).collect::<Result<_>>()?;
+                let offsets: Vec<f64> = (0..input.record.header.channels.len())
+                    .map(|p| input.record.header.channel_offset_s(p).ok_or_else(|| anyhow::anyhow!("{}: no offset for channel {p}", case.display())))
+                    .collect::<Result<_>>()?;
                 let calibration = pipeline::calibration_for(&input.rig, &raw, &offsets)?;
                 let speed = input.record.header.speed_rpm.unwrap_or(input.rig.operating.speed_rpm);
                 let runs = (0..repeats.max(1)).map(|_| time_one(&raw, &calibration, &input.rig, speed, &out)).collect::<Result<Vec<_>>>()?;
@@ -121,7 +126,13 @@ pub fn run(repeats: usize, seconds: f64, records: Option<&Path>) -> Result<()> {
             let worst = all.iter().map(Times::total).fold(0.0, f64::max);
             let met = all.iter().filter(|t| t.total() <= TARGET_S).count();
             row(&format!("outside records ({}), median", all.len()), &all);
-            println!("{:<30} {:>53.3} {:>8}  {met} of {} within {TARGET_S} s", "outside records, slowest", worst, if worst <= TARGET_S { "met" } else { "MISSED" }, all.len());
+            println!(
+                "{:<30} {:>53.3} {:>8}  {met} of {} within {TARGET_S} s",
+                "outside records, slowest",
+                worst,
+                if worst <= TARGET_S { "met" } else { "MISSED" },
+                all.len()
+            );
         }
         _ => println!("(no outside records in {}: pass --records DIR)", dir.display()),
     }

@@ -19,17 +19,17 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use oilfilm_graph::conditioner::{Chain, ConditionerParams};
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::{Publish, Receive};
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_graph::topics;
 use oilfilm_identification::conditioning::{self, RawRecord, RawUnits};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::calibration_for;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame};
-use oilfilm_graph::conditioner::{Chain, ConditionerParams};
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_graph::params::NodeArgs;
-use oilfilm_graph::ports::{Publish, Receive};
-use oilfilm_graph::stamp::Stamp;
-use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
 
@@ -51,19 +51,73 @@ struct Case {
 const CUTOFF_HZ: f64 = 55.5;
 
 const CASES: [Case; 6] = [
-    Case { label: "5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
+    Case {
+        label: "5 kHz x 10 ch",
+        rate_hz: 5_000.0,
+        channels: 10,
+        daq_block: 500,
+        conditioner_block: 1_000,
+        window: 25_000,
+        signal_band_hz: CUTOFF_HZ,
+        chain: Chain::ZeroPhase,
+    },
     // Standard errors from every sample: the cost after a 200 000-sample window's end is
     // five 262 144-point FFTs.
-    Case { label: "100 kHz x 16 ch, SE from every sample", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: 0.0, chain: Chain::ZeroPhase },
+    Case {
+        label: "100 kHz x 16 ch, SE from every sample",
+        rate_hz: 100_000.0,
+        channels: 16,
+        daq_block: 1_000,
+        conditioner_block: 10_000,
+        window: 200_000,
+        signal_band_hz: 0.0,
+        chain: Chain::ZeroPhase,
+    },
     // Standard errors from every 10th sample (the signals are band-limited to 55.5 Hz).
-    Case { label: "100 kHz x 16 ch", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 10_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
+    Case {
+        label: "100 kHz x 16 ch",
+        rate_hz: 100_000.0,
+        channels: 16,
+        daq_block: 1_000,
+        conditioner_block: 10_000,
+        window: 200_000,
+        signal_band_hz: CUTOFF_HZ,
+        chain: Chain::ZeroPhase,
+    },
     // The same with the conditioner's blocks five times shorter: its edge (12 091 scans each side
     // at 100 kHz) dominates a block's compute either way (2.0 against 2.5 ms), so shorter blocks
     // cost CPU but cut the ConditionedFrame from 650 to 130 kB, and frame->conditioned with it.
-    Case { label: "100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::ZeroPhase },
+    Case {
+        label: "100 kHz x 16 ch, 2 000-scan blocks",
+        rate_hz: 100_000.0,
+        channels: 16,
+        daq_block: 1_000,
+        conditioner_block: 2_000,
+        window: 200_000,
+        signal_band_hz: CUTOFF_HZ,
+        chain: Chain::ZeroPhase,
+    },
     // The causal chain (ADR 0014): a sample is out 11 scans after its own (L + 2M = 1 + 10 on these schedules), no edge.
-    Case { label: "causal: 5 kHz x 10 ch", rate_hz: 5_000.0, channels: 10, daq_block: 500, conditioner_block: 1_000, window: 25_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
-    Case { label: "causal: 100 kHz x 16 ch, 2 000-scan blocks", rate_hz: 100_000.0, channels: 16, daq_block: 1_000, conditioner_block: 2_000, window: 200_000, signal_band_hz: CUTOFF_HZ, chain: Chain::Causal },
+    Case {
+        label: "causal: 5 kHz x 10 ch",
+        rate_hz: 5_000.0,
+        channels: 10,
+        daq_block: 500,
+        conditioner_block: 1_000,
+        window: 25_000,
+        signal_band_hz: CUTOFF_HZ,
+        chain: Chain::Causal,
+    },
+    Case {
+        label: "causal: 100 kHz x 16 ch, 2 000-scan blocks",
+        rate_hz: 100_000.0,
+        channels: 16,
+        daq_block: 1_000,
+        conditioner_block: 2_000,
+        window: 200_000,
+        signal_band_hz: CUTOFF_HZ,
+        chain: Chain::Causal,
+    },
 ];
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -123,9 +177,15 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
 
     // The conditioner's edge (zero-phase: the scans past a block it waits for; causal: the
     // scans past a sample) and its first sample, as it will compute them.
-    let cp = ConditionerParams { lowpass_cutoff_hz: CUTOFF_HZ, block_scans: case.conditioner_block as i64, chain: case.chain.name().into(), ..ConditionerParams::default() };
+    let cp = ConditionerParams {
+        lowpass_cutoff_hz: CUTOFF_HZ,
+        block_scans: case.conditioner_block as i64,
+        chain: case.chain.name().into(),
+        ..ConditionerParams::default()
+    };
     let kept: Vec<ChannelId> = order.clone();
-    let probe = RawRecord { sample_rate_hz: case.rate_hz, start_time_s: 0.0, channels: kept.clone(), units: RawUnits::Volts, columns: vec![Vec::new(); kept.len()] };
+    let probe =
+        RawRecord { sample_rate_hz: case.rate_hz, start_time_s: 0.0, channels: kept.clone(), units: RawUnits::Volts, columns: vec![Vec::new(); kept.len()] };
     let calibration = calibration_for(&rig, &probe, &offsets[..kept.len()])?;
     let (edge, s0) = match case.chain {
         Chain::ZeroPhase => {
@@ -154,8 +214,27 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
         }
         Command::new(bin_dir.join(exe)).args(&args).env("RUST_LOG", "warn").spawn().with_context(|| format!("starting {exe}"))
     };
-    let mut conditioner = spawn("oilfilm-conditioner", "conditioner", &[rig_arg.clone(), format!("lowpass_cutoff_hz:={CUTOFF_HZ}"), format!("block_scans:={}", case.conditioner_block), format!("chain:={}", case.chain.name())])?;
-    let mut estimator = spawn("oilfilm-estimator", "estimator", &[rig_arg, format!("window:={}", case.window), format!("hop:={}", case.window), "speed_rpm:=1500.0".into(), format!("signal_band_hz:={:?}", case.signal_band_hz)])?;
+    let mut conditioner = spawn(
+        "oilfilm-conditioner",
+        "conditioner",
+        &[
+            rig_arg.clone(),
+            format!("lowpass_cutoff_hz:={CUTOFF_HZ}"),
+            format!("block_scans:={}", case.conditioner_block),
+            format!("chain:={}", case.chain.name()),
+        ],
+    )?;
+    let mut estimator = spawn(
+        "oilfilm-estimator",
+        "estimator",
+        &[
+            rig_arg,
+            format!("window:={}", case.window),
+            format!("hop:={}", case.window),
+            "speed_rpm:=1500.0".into(),
+            format!("signal_band_hz:={:?}", case.signal_band_hz),
+        ],
+    )?;
 
     let me = NodeArgs { name: "bench_nodes".into(), namespace: topics::NAMESPACE.into(), ..Default::default() };
     let mut ros = RosNode::new(&me)?;
@@ -172,7 +251,11 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     let mut estimates: Vec<(CoefficientEstimate, Instant)> = Vec::new();
     let start = Instant::now();
     let mut next = 0;
-    let drain = |cond_in: &mut dyn Receive<ConditionedFrame>, est_in: &mut dyn Receive<CoefficientEstimate>, c: &mut Vec<(ConditionedFrame, Instant)>, e: &mut Vec<(CoefficientEstimate, Instant)>| -> Result<usize> {
+    let drain = |cond_in: &mut dyn Receive<ConditionedFrame>,
+                 est_in: &mut dyn Receive<CoefficientEstimate>,
+                 c: &mut Vec<(ConditionedFrame, Instant)>,
+                 e: &mut Vec<(CoefficientEstimate, Instant)>|
+     -> Result<usize> {
         let mut n = 0;
         while let Some(m) = cond_in.receive()? {
             c.push((m, Instant::now()));

@@ -134,7 +134,10 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     let paper = compare_methods(&rig)?;
 
     let lean = t_cond + t_ls;
-    println!("oilfilm-bench pipeline: {scans} scans x {} channels ({seconds} s at 5 kHz, two-tone), {n_windows} window(s) of {window}; one core", raw.channels.len());
+    println!(
+        "oilfilm-bench pipeline: {scans} scans x {} channels ({seconds} s at 5 kHz, two-tone), {n_windows} window(s) of {window}; one core",
+        raw.channels.len()
+    );
     println!();
     println!("| stage | oilfilm | M scans/s | M channel-samples/s |");
     println!("|---|---|---|---|");
@@ -159,7 +162,12 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
             println!("| conditioning | {:.1} ms | {:.2} ms | {:.1}x |", p.conditioning_s * 1e3, t_cond * 1e3, p.conditioning_s / t_cond);
             println!("| conditioning + least squares (whole pipeline) | {:.1} ms | {:.2} ms | {:.1}x |", p.pipeline_s * 1e3, lean * 1e3, p.pipeline_s / lean);
             println!("| the same, oilfilm block by block | {:.1} ms | {:.2} ms | {:.1}x |", p.pipeline_s * 1e3, t_blocks * 1e3, p.pipeline_s / t_blocks);
-            println!("| least squares, one {window} x 4 window, 2 right-hand sides | {:.3} ms (numpy.linalg.lstsq) | {:.3} ms | {:.1}x |", p.lstsq_window_s * 1e3, t_one_window * 1e3, p.lstsq_window_s / t_one_window);
+            println!(
+                "| least squares, one {window} x 4 window, 2 right-hand sides | {:.3} ms (numpy.linalg.lstsq) | {:.3} ms | {:.1}x |",
+                p.lstsq_window_s * 1e3,
+                t_one_window * 1e3,
+                p.lstsq_window_s / t_one_window
+            );
             println!("(sanity: kxx of the first window, Python {:.4e} N/m)", p.kxx);
         }
         Err(e) => println!("Python column skipped: {e:#} (run `bash tests/python/setup-venv.sh` to make .venv)"),
@@ -284,7 +292,9 @@ fn compare_methods(rig: &RigConfig) -> Result<Vec<MethodRow>> {
         let (kt, ct) = (rec.truth.coefficients.stiffness_n_m, rec.truth.coefficients.damping_n_s_m);
         let w = id.windows.first().context("no window")?;
         let (result, k_err, c_err) = match &w.estimate.result {
-            Ok(c) => ("answered".to_string(), format!("{:.1} %", 100.0 * max_rel(&c.stiffness_n_m, &kt)), format!("{:.1} %", 100.0 * max_rel(&c.damping_n_s_m, &ct))),
+            Ok(c) => {
+                ("answered".to_string(), format!("{:.1} %", 100.0 * max_rel(&c.stiffness_n_m, &kt)), format!("{:.1} %", 100.0 * max_rel(&c.damping_n_s_m, &ct)))
+            }
             Err(r) => {
                 let text = r.to_string();
                 let short: String = text.chars().take(60).collect();

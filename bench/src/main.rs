@@ -265,7 +265,11 @@ fn physics(repeats: usize, seconds: f64, ross_python: Option<&Path>) -> Result<(
                     ((k[(a, b)] - r.stiffness[a][b]) / r.stiffness[a][b]).abs().max(((c[(a, b)] - r.damping[a][b]) / r.damping[a][b]).abs())
                 })
                 .fold(0.0, f64::max);
-            println!("| ... ROSS's eccentricity; largest relative difference of the 8 coefficients from ours | {:.4}; {:.1} % |", r.eccentricity, 100.0 * worst);
+            println!(
+                "| ... ROSS's eccentricity; largest relative difference of the 8 coefficients from ours | {:.4}; {:.1} % |",
+                r.eccentricity,
+                100.0 * worst
+            );
         }
         Err(e) => println!("| speed-up over ROSS | not measured ({e}; `bash bench/ross/setup-venv.sh` makes .venv-ross) |"),
     }

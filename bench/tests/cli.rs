@@ -21,7 +21,8 @@ fn bench_pipeline_runs_and_its_blocks_agree_with_the_whole_record() {
     }
     assert!(text.contains("Python column skipped: no Python interpreter at /nonexistent/python"), "{text}");
     let line = text.lines().find(|l| l.starts_with("(block by block against the whole record")).unwrap_or_else(|| panic!("no comparison line in:\n{text}"));
-    let rel: f64 = line.rsplit("relative difference ").next().and_then(|v| v.trim_end_matches(')').parse().ok()).unwrap_or_else(|| panic!("unreadable: {line}"));
+    let rel: f64 =
+        line.rsplit("relative difference ").next().and_then(|v| v.trim_end_matches(')').parse().ok()).unwrap_or_else(|| panic!("unreadable: {line}"));
     assert!(rel < 1e-6, "{line}");
     let kxx: Vec<f64> = line.split_whitespace().filter_map(|w| w.parse().ok()).collect();
     assert!(kxx.len() >= 2 && kxx[0] > 1e7 && kxx[1] > 1e7, "two film stiffnesses of the Zhou point expected: {line}");

@@ -8,16 +8,16 @@
 
 use std::time::Instant;
 
-use oilfilm_identification::excitation::ExcitationPlan;
-use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::conditioner::{ConditionerCore, ConditionerParams};
-use oilfilm_identification::estimator::spectrum::LineSearch;
+use oilfilm_graph::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_graph::stamp::Stamp;
 use oilfilm_identification::estimator::solve::ScaledFactor;
+use oilfilm_identification::estimator::spectrum::LineSearch;
 use oilfilm_identification::estimator::window::SummaryBuilder;
 use oilfilm_identification::estimator::{estimate_window_fed, se_decimation, uncertainty, Signals, Solver, WindowFeed};
+use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{window_report_fed, ReportFeed};
-use oilfilm_graph::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 
 fn main() -> anyhow::Result<()> {
@@ -37,7 +37,11 @@ fn main() -> anyhow::Result<()> {
             let t0 = Instant::now();
             let out = core.push(f)?;
             let dt = t0.elapsed().as_secs_f64() * 1e3;
-            if out.is_empty() { push_idle.push(dt) } else { push_out.push(dt) }
+            if out.is_empty() {
+                push_idle.push(dt)
+            } else {
+                push_out.push(dt)
+            }
             for c in &out {
                 let t0 = Instant::now();
                 let v = ros2_client::dds::rustdds::cdr_encoding::to_vec::<_, byteorder::LittleEndian>(c)?;
@@ -45,7 +49,10 @@ fn main() -> anyhow::Result<()> {
                 bytes = v.len();
             }
         }
-        let med = |v: &mut Vec<f64>| { v.sort_by(f64::total_cmp); v.get(v.len() / 2).copied().unwrap_or(f64::NAN) };
+        let med = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        };
         let max = |v: &Vec<f64>| v.iter().copied().fold(f64::NAN, f64::max);
         println!(
             "block {block:>6}: edge {:?} scans; push producing a block median {:.2} ms (max {:.2}), other pushes {:.3} ms; CDR serialisation {:.2} ms (max {:.2}) for {bytes} bytes",
@@ -92,7 +99,8 @@ fn main() -> anyhow::Result<()> {
     // After the last sample: the feeds (fed while the window's first 198 000 samples arrived)
     // take the last 2 000-scan block, then the estimate and the report.
     let (mut t_feed, mut t_est, mut t_rep) = (Vec::new(), Vec::new(), Vec::new());
-    let head = |k: usize| Signals { x_m: &x[..k], y_m: &y[..k], vx_m_s: &vx[..k], vy_m_s: &vy[..k], ax_m_s2: None, ay_m_s2: None, fx_n: &fx[..k], fy_n: &fy[..k] };
+    let head =
+        |k: usize| Signals { x_m: &x[..k], y_m: &y[..k], vx_m_s: &vx[..k], vy_m_s: &vy[..k], ax_m_s2: None, ay_m_s2: None, fx_n: &fx[..k], fy_n: &fy[..k] };
     let last = w - 2_000;
     for _ in 0..5 {
         let mut wf = WindowFeed::new(&cfg);
@@ -140,7 +148,13 @@ fn main() -> anyhow::Result<()> {
     for v in [&mut t_feed, &mut t_est, &mut t_rep, &mut t_fin, &mut t_qr, &mut t_se] {
         v.sort_by(f64::total_cmp);
     }
-    println!("  after the last 2 000-scan block (medians of 5): feeds take the block {:.2} ms, estimate_window_fed {:.2} ms, window_report_fed {:.2} ms", t_feed[2], t_est[2], t_rep[2]);
-    println!("  stages: line search finish (last segment) {:.2} ms, last QR chunks + solve {:.2} ms, decimated spectral SE {:.2} ms", t_fin[2], t_qr[2], t_se[2]);
+    println!(
+        "  after the last 2 000-scan block (medians of 5): feeds take the block {:.2} ms, estimate_window_fed {:.2} ms, window_report_fed {:.2} ms",
+        t_feed[2], t_est[2], t_rep[2]
+    );
+    println!(
+        "  stages: line search finish (last segment) {:.2} ms, last QR chunks + solve {:.2} ms, decimated spectral SE {:.2} ms",
+        t_fin[2], t_qr[2], t_se[2]
+    );
     Ok(())
 }

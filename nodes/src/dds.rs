@@ -19,8 +19,8 @@ use std::mem::ManuallyDrop;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile,
     qos::{Durability, History, Reliability, WhenFull},
+    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile,
 };
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -59,7 +59,11 @@ pub fn qos_of(topic: &Topic) -> QosProfile {
 /// Our QoS table's entry in ros2-client's terms.
 pub fn qos_from(q: oilfilm_graph::topics::TopicQos) -> QosProfile {
     QosProfile {
-        reliability: if q.reliable { Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) } } else { Reliability::BestEffort },
+        reliability: if q.reliable {
+            Reliability::Reliable { when_full: WhenFull::Wait(std::time::Duration::from_millis(500)) }
+        } else {
+            Reliability::BestEffort
+        },
         durability: if q.transient_local { Durability::TransientLocal } else { Durability::Volatile },
         history: History::KeepLast { depth: q.depth.max(1) as usize },
         ..QosProfile::publisher_default()
@@ -93,9 +97,7 @@ pub fn to_parameter(v: &Value) -> ParameterValue {
         Value::Number(n) if n.is_i64() => ParameterValue::Integer(n.as_i64().unwrap_or_default()),
         Value::Number(n) => ParameterValue::Double(n.as_f64().unwrap_or(f64::NAN)),
         Value::String(s) => ParameterValue::String(s.clone()),
-        Value::Array(a) if a.iter().all(Value::is_string) => {
-            ParameterValue::StringArray(a.iter().filter_map(|s| s.as_str().map(str::to_string)).collect())
-        }
+        Value::Array(a) if a.iter().all(Value::is_string) => ParameterValue::StringArray(a.iter().filter_map(|s| s.as_str().map(str::to_string)).collect()),
         Value::Array(a) if a.iter().all(|x| x.is_i64()) => ParameterValue::IntegerArray(a.iter().filter_map(Value::as_i64).collect()),
         Value::Array(a) => ParameterValue::DoubleArray(a.iter().filter_map(Value::as_f64).collect()),
         Value::Null | Value::Object(_) => ParameterValue::NotSet,
@@ -194,9 +196,7 @@ fn schedule_scale() -> f64 {
 
 /// The `ros_discovery_info` topic (rmw_dds_common's `ParticipantEntitiesInfo`, the QoS
 /// ros2-client's own writer has) in `participant`.
-pub fn ros_discovery_topic(
-    participant: &ros2_client::dds::rustdds::DomainParticipant,
-) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
+pub fn ros_discovery_topic(participant: &ros2_client::dds::rustdds::DomainParticipant) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
     use ros2_client::builtin_topics::ros_discovery;
     participant
         .create_topic(
@@ -284,8 +284,12 @@ impl RosNode {
         let node_name = NodeName::new(&args.namespace, &args.name).map_err(|e| mw("node name", format!("{e:?}")))?;
         let mut node = context.clone().new_node(node_name.clone(), options).map_err(|e| mw("node", e))?;
         // rcl's rosout QoS: reliable, transient-local, keep-last 1000, 10 s lifespan.
-        let rosout_qos = QosProfile { lifespan: Some(std::time::Duration::from_secs(10)), ..qos_from(oilfilm_graph::topics::TopicQos { reliable: true, depth: 1000, transient_local: true }) };
-        let rosout = Arc::new(node.create_publisher::<ros2_client::Log>(&context.get_rosout_topic(), Some(rosout_qos)).map_err(|e| mw("/rosout publisher", e))?);
+        let rosout_qos = QosProfile {
+            lifespan: Some(std::time::Duration::from_secs(10)),
+            ..qos_from(oilfilm_graph::topics::TopicQos { reliable: true, depth: 1000, transient_local: true })
+        };
+        let rosout =
+            Arc::new(node.create_publisher::<ros2_client::Log>(&context.get_rosout_topic(), Some(rosout_qos)).map_err(|e| mw("/rosout publisher", e))?);
         let fully_qualified = node_name.fully_qualified_name();
         crate::logging::attach(Arc::clone(&rosout), crate::logging::logger_name(&fully_qualified));
         let extra = Arc::new(Mutex::new(ExtraEntities::default()));
@@ -304,7 +308,13 @@ impl RosNode {
     }
 
     /// Starts the parameter services for `specs` with their `values`, and `use_sim_time`.
-    pub fn declare_parameters(&mut self, specs: Vec<oilfilm_graph::params::Spec>, values: Map<String, Value>, use_sim_time: bool, sim_time: SimTime) -> Result<(), NodeError> {
+    pub fn declare_parameters(
+        &mut self,
+        specs: Vec<oilfilm_graph::params::Spec>,
+        values: Map<String, Value>,
+        use_sim_time: bool,
+        sim_time: SimTime,
+    ) -> Result<(), NodeError> {
         let now = Stamp::now();
         let server = ParameterServer::new(&mut self.node, &self.context, &self.fully_qualified, specs, values, use_sim_time, sim_time, now)?;
         self.parameters = Some(server);
@@ -380,9 +390,7 @@ impl RosNode {
     fn topic_named(&mut self, full: &str, type_name: &str, qos: &QosProfile) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
         let (ns, base) = full.rsplit_once('/').unwrap_or(("/", full));
         let name = Name::new(if ns.is_empty() { "/" } else { ns }, base).map_err(|e| mw(format!("topic name {full}"), format!("{e:?}")))?;
-        let (pkg, ty) = type_name
-            .split_once("/msg/")
-            .ok_or_else(|| mw(format!("topic {full}"), format!("type `{type_name}` is not pkg/msg/Type")))?;
+        let (pkg, ty) = type_name.split_once("/msg/").ok_or_else(|| mw(format!("topic {full}"), format!("type `{type_name}` is not pkg/msg/Type")))?;
         self.node.create_topic(&name, MessageTypeName::new(pkg, ty), qos).map_err(|e| mw(format!("topic {full}"), e))
     }
 
@@ -411,9 +419,8 @@ impl RosNode {
             .domain_participant()
             .create_subscriber(&ros2_client::dds::rustdds::QosPolicies::builder().build())
             .map_err(|e| mw(format!("subscriber {full}"), e))?;
-        let reader = subscriber
-            .create_simple_datareader_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
-            .map_err(|e| mw(format!("raw subscription {full}"), e))?;
+        let reader =
+            subscriber.create_simple_datareader_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into())).map_err(|e| mw(format!("raw subscription {full}"), e))?;
         self.extra.lock().unwrap_or_else(PoisonError::into_inner).readers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&reader)));
         self.announce_now();
         Ok(RawSubscription { reader, topic: full.to_string() })
@@ -427,9 +434,7 @@ impl RosNode {
             .domain_participant()
             .create_publisher(&ros2_client::dds::rustdds::QosPolicies::builder().build())
             .map_err(|e| mw(format!("publisher {full}"), e))?;
-        let writer = publisher
-            .create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into()))
-            .map_err(|e| mw(format!("raw publisher {full}"), e))?;
+        let writer = publisher.create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into())).map_err(|e| mw(format!("raw publisher {full}"), e))?;
         self.extra.lock().unwrap_or_else(PoisonError::into_inner).writers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&writer)));
         self.announce_now();
         Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, first_ack: false })
@@ -593,10 +598,7 @@ impl dds_no_key::SerializerAdapter<RawCdr> for RawAdapter {
     fn to_bytes(value: &RawCdr) -> Result<Bytes, RawError> {
         match value.0.split_first_chunk::<4>() {
             Some((header, body)) if header[..2] == oilfilm_msgs::cdr::ENCAPSULATION_CDR_LE[..2] => Ok(Bytes::copy_from_slice(body)),
-            _ => Err(RawError(format!(
-                "a message of {} bytes does not start with the little-endian CDR header 00 01 00 00",
-                value.0.len()
-            ))),
+            _ => Err(RawError(format!("a message of {} bytes does not start with the little-endian CDR header 00 01 00 00", value.0.len()))),
         }
     }
 }
@@ -649,17 +651,13 @@ impl RawPublisher {
     /// Waits (at most `max`) until every matched reliable reader acknowledged what was
     /// written; false on timeout.
     pub fn wait_for_acknowledgments(&self, max: std::time::Duration) -> Result<bool, NodeError> {
-        self.writer
-            .wait_for_acknowledgments(max)
-            .map_err(|e| mw(format!("acknowledgments on {}", self.topic), format!("{e:?}")))
+        self.writer.wait_for_acknowledgments(max).map_err(|e| mw(format!("acknowledgments on {}", self.topic), format!("{e:?}")))
     }
 }
 
 impl Publish<RawCdr> for RawPublisher {
     fn publish(&mut self, message: RawCdr) -> Result<(), NodeError> {
-        self.writer
-            .write(message, Some(ros2_client::dds::rustdds::Timestamp::now()))
-            .map_err(|e| mw(format!("publish on {}", self.topic), format!("{e:?}")))
+        self.writer.write(message, Some(ros2_client::dds::rustdds::Timestamp::now())).map_err(|e| mw(format!("publish on {}", self.topic), format!("{e:?}")))
     }
 
     fn readers(&mut self) -> Option<usize> {
@@ -723,8 +721,7 @@ impl Connect for RosNode {
 pub fn shutdown_flag() -> Result<Arc<std::sync::atomic::AtomicBool>, NodeError> {
     let flag = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let f = Arc::clone(&flag);
-    ctrlc::set_handler(move || f.store(true, std::sync::atomic::Ordering::SeqCst))
-        .map_err(|e| mw("signal handler", e))?;
+    ctrlc::set_handler(move || f.store(true, std::sync::atomic::Ordering::SeqCst)).map_err(|e| mw("signal handler", e))?;
     Ok(flag)
 }
 

@@ -116,7 +116,16 @@ impl ParameterServer {
     /// their values `values`, and `use_sim_time`; announces the declared parameters on
     /// `/parameter_events`.
     #[allow(clippy::too_many_arguments)]
-    pub fn new(node: &mut Node, context: &ros2_client::Context, fqn: &str, specs: Vec<Spec>, values: Map<String, Value>, use_sim_time: bool, sim_time: SimTime, now: Stamp) -> Result<Self, NodeError> {
+    pub fn new(
+        node: &mut Node,
+        context: &ros2_client::Context,
+        fqn: &str,
+        specs: Vec<Spec>,
+        values: Map<String, Value>,
+        use_sim_time: bool,
+        sim_time: SimTime,
+        now: Stamp,
+    ) -> Result<Self, NodeError> {
         let servers = Servers {
             get: server(node, fqn, "get_parameters", "GetParameters")?,
             types: server(node, fqn, "get_parameter_types", "GetParameterTypes")?,
@@ -165,10 +174,8 @@ impl ParameterServer {
     }
 
     fn announce(&self, now: Stamp, names: &[String], new: bool) {
-        let params: Vec<raw::Parameter> = names
-            .iter()
-            .filter_map(|n| self.value(n).map(|v| raw::Parameter { name: n.clone(), value: to_parameter(&v).into() }))
-            .collect();
+        let params: Vec<raw::Parameter> =
+            names.iter().filter_map(|n| self.value(n).map(|v| raw::Parameter { name: n.clone(), value: to_parameter(&v).into() })).collect();
         let (new_parameters, changed_parameters) = if new { (params, Vec::new()) } else { (Vec::new(), params) };
         let event = raw::ParameterEvent {
             stamp: ros2_client::builtin_interfaces::Time::from_nanos(now.0),

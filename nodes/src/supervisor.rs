@@ -107,4 +107,3 @@ impl Drop for Supervisor {
         self.stop(Duration::from_secs(3));
     }
 }
-

@@ -9,8 +9,8 @@
 
 use std::time::{Duration, Instant};
 
-use oilfilm_nodes::dds::{ros_discovery_topic, RosNode};
 use oilfilm_graph::params::NodeArgs;
+use oilfilm_nodes::dds::{ros_discovery_topic, RosNode};
 use ros2_client::dds::rustdds::{
     policy::{Durability, History},
     DomainParticipant, QosPolicyBuilder,
@@ -31,11 +31,7 @@ fn a_late_volatile_reader_hears_the_node_announced_again() {
 
     let participant = DomainParticipant::new(domain).expect("a second participant");
     let topic = ros_discovery_topic(&participant).expect("the ros_discovery_info topic");
-    let qos = QosPolicyBuilder::new()
-        .durability(Durability::Volatile)
-        .reliable(ros2_client::dds::rustdds::Duration::ZERO)
-        .history(History::KeepAll)
-        .build();
+    let qos = QosPolicyBuilder::new().durability(Durability::Volatile).reliable(ros2_client::dds::rustdds::Duration::ZERO).history(History::KeepAll).build();
     let mut reader = participant
         .create_subscriber(&qos)
         .expect("a subscriber")

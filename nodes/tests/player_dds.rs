@@ -9,13 +9,13 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use oilfilm_bag::{Bag, BagWriter, TopicSpec, WriterOptions};
-use oilfilm_msgs::{Clock, DaqFrame, Header, RigStatus, RosMessage};
-use oilfilm_nodes::dds::{qos_from, RosNode};
 use oilfilm_graph::params::NodeArgs;
 use oilfilm_graph::ports::Receive;
 use oilfilm_graph::recorder::bag_qos;
 use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::topics::{self, TopicQos};
+use oilfilm_msgs::{Clock, DaqFrame, Header, RigStatus, RosMessage};
+use oilfilm_nodes::dds::{qos_from, RosNode};
 
 const T0: u64 = 1_700_000_000_000_000_000;
 const FRAMES: u64 = 120;
@@ -121,7 +121,12 @@ fn play(bag: &Path, params: &[&str], clock: &mut dyn Receive<Clock>) -> (Vec<i64
 /// end) arrives with up to 3 more bytes; CDR readers ignore them, and rosbag2 records them
 /// too.
 fn as_received(got: &[u8], sent: &[u8]) -> bool {
-    got == sent || (got.len() > sent.len() && got.len() - sent.len() <= 3 && (got.len() - 4).is_multiple_of(4) && got.starts_with(sent) && got[sent.len()..].iter().all(|&b| b == 0))
+    got == sent
+        || (got.len() > sent.len()
+            && got.len() - sent.len() <= 3
+            && (got.len() - 4).is_multiple_of(4)
+            && got.starts_with(sent)
+            && got[sent.len()..].iter().all(|&b| b == 0))
 }
 
 fn check_recorded(dir: &Path, sent: &[(String, Vec<u8>)]) -> Vec<u64> {

@@ -11,10 +11,10 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use oilfilm_bag::{Bag, BagMessage};
-use oilfilm_msgs::DaqFrame;
 use oilfilm_graph::launch::NodeLaunch;
-use oilfilm_nodes::supervisor::Supervisor;
 use oilfilm_graph::stamp::Stamp;
+use oilfilm_msgs::DaqFrame;
+use oilfilm_nodes::supervisor::Supervisor;
 
 fn bin_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_oilfilm-recorder")).parent().unwrap().to_path_buf()
@@ -22,8 +22,10 @@ fn bin_dir() -> PathBuf {
 
 fn node(name: &str, params: &[&str]) -> NodeLaunch {
     let params_file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch_configs/params/sim_rig.yaml");
-    let mut args: Vec<String> =
-        ["--ros-args", "-r", &format!("__node:={name}"), "-r", "__ns:=/oilfilm", "--params-file", &params_file.display().to_string()].iter().map(|s| s.to_string()).collect();
+    let mut args: Vec<String> = ["--ros-args", "-r", &format!("__node:={name}"), "-r", "__ns:=/oilfilm", "--params-file", &params_file.display().to_string()]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     for p in params {
         args.extend(["-p".to_string(), p.to_string()]);
     }

@@ -12,16 +12,16 @@ use std::time::{Duration, Instant};
 
 use scratch::Scratch;
 
+use oilfilm_graph::exciter::ExciterParams;
+use oilfilm_graph::launch::NodeLaunch;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
+use oilfilm_graph::topics;
 use oilfilm_identification::ascii::{self, Units};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame};
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_graph::exciter::ExciterParams;
-use oilfilm_graph::launch::NodeLaunch;
 use oilfilm_nodes::supervisor::Supervisor;
-use oilfilm_graph::params::NodeArgs;
-use oilfilm_graph::ports::Receive;
-use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
 
 fn bin_dir() -> PathBuf {

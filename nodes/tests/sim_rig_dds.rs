@@ -14,17 +14,17 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use oilfilm_graph::launch::NodeLaunch;
+use oilfilm_graph::params::NodeArgs;
+use oilfilm_graph::ports::Receive;
+use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
+use oilfilm_graph::topics;
 use oilfilm_msgs::cdr::encode;
 use oilfilm_msgs::CoefficientEstimate;
 use oilfilm_nodes::dds::RosNode;
-use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
-use oilfilm_graph::launch::NodeLaunch;
 use oilfilm_nodes::supervisor::Supervisor;
-use oilfilm_graph::params::NodeArgs;
-use oilfilm_graph::ports::Receive;
-use scratch::Scratch;
-use oilfilm_graph::topics;
 use oilfilm_physics::config::RigConfig;
+use scratch::Scratch;
 
 #[path = "../../crates/graph/tests/common/mod.rs"]
 mod common;

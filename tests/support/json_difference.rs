@@ -20,4 +20,3 @@ pub fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, at: &str
         _ => Err(format!("{at}: {a} against {b}")),
     }
 }
-

@@ -26,7 +26,11 @@ fn main() -> anyhow::Result<()> {
     let split_s: Option<f64> = args.next().map(|s| s.parse()).transpose()?;
     let rec = sim_rig::short_run(seconds);
     let msgs = sim_rig::published(&rec);
-    let w = sim_rig::write_bag(&dir, &msgs, oilfilm_bag::WriterOptions { compression, split_duration_ns: split_s.map(|s| (s * 1e9) as u64), ..Default::default() })?;
+    let w = sim_rig::write_bag(
+        &dir,
+        &msgs,
+        oilfilm_bag::WriterOptions { compression, split_duration_ns: split_s.map(|s| (s * 1e9) as u64), ..Default::default() },
+    )?;
     w.close()?;
     let expected: Vec<serde_yaml_ng::Value> = msgs
         .iter()

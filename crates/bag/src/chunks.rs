@@ -122,14 +122,7 @@ impl Codec {
         let mut head = Vec::with_capacity(64);
         records::chunk_head(
             &mut head,
-            &ChunkHeader {
-                start_ns: g.start_ns,
-                end_ns: g.end_ns,
-                uncompressed_size,
-                uncompressed_crc: crc,
-                compression,
-                compressed_size: body.len() as u64,
-            },
+            &ChunkHeader { start_ns: g.start_ns, end_ns: g.end_ns, uncompressed_size, uncompressed_crc: crc, compression, compressed_size: body.len() as u64 },
         );
         // Message indexes by channel (a chunk per topic has one), each in log-time order.
         let mut by_channel: BTreeMap<u16, Vec<(u64, u64)>> = BTreeMap::new();

@@ -159,7 +159,11 @@ impl Bag {
         }
         for (topic, &got) in read {
             if !self.info().topics_with_message_count.iter().any(|t| t.topic_metadata.name == *topic) {
-                found.note(Shortfall::new(&meta, ShortfallKind::Count, format!("topic {topic}: {got} messages were read, metadata.yaml does not list the topic")))?;
+                found.note(Shortfall::new(
+                    &meta,
+                    ShortfallKind::Count,
+                    format!("topic {topic}: {got} messages were read, metadata.yaml does not list the topic"),
+                ))?;
             }
         }
         Ok(())

@@ -32,8 +32,8 @@ pub use integrity::{ReadOptions, Shortfall, ShortfallKind};
 pub use lock::{recording_state, Recording, LOCK_FILE};
 pub use metadata::{Duration, FileInfo, MetadataFile, QosProfile, StartingTime};
 pub use reader::{Bag, BagMessage, OilfilmMessage};
-pub use select::MessageRef;
 pub use recover::{recover, FileRecovery, Recovery};
+pub use select::MessageRef;
 pub use writer::{BagWriter, Compression, TopicId, TopicSpec, WriterOptions};
 
 /// The name of a bag's metadata file.

@@ -239,11 +239,7 @@ impl MetadataFile {
     /// message counts). Compression is inside the MCAP chunks, so format and mode are empty.
     pub fn for_mcap(topics: Vec<TopicWithCount>, files: Vec<FileInfo>, ros_distro: &str) -> Self {
         let start = files.iter().filter(|f| f.message_count > 0).map(|f| f.starting_time.nanoseconds_since_epoch).min();
-        let end = files
-            .iter()
-            .filter(|f| f.message_count > 0)
-            .map(|f| f.starting_time.nanoseconds_since_epoch.saturating_add(f.duration.nanoseconds))
-            .max();
+        let end = files.iter().filter(|f| f.message_count > 0).map(|f| f.starting_time.nanoseconds_since_epoch.saturating_add(f.duration.nanoseconds)).max();
         let (start, duration) = match (start, end) {
             (Some(s), Some(e)) => (s, e.saturating_sub(s)),
             _ => (0, 0),

@@ -164,7 +164,12 @@ impl Bag {
                 found.note(Shortfall::new(
                     &path,
                     ShortfallKind::Count,
-                    format!("metadata.yaml counts {} messages in this file, {} were read ({})", listed.message_count, messages.len(), difference(listed.message_count, messages.len() as u64)),
+                    format!(
+                        "metadata.yaml counts {} messages in this file, {} were read ({})",
+                        listed.message_count,
+                        messages.len(),
+                        difference(listed.message_count, messages.len() as u64)
+                    ),
                 ))?;
             }
             for m in &messages {

@@ -20,8 +20,8 @@ use std::path::{Path, PathBuf};
 use mcap::records::MessageHeader;
 
 use crate::error::{io, mcap_err, BagError, Result};
-use crate::metadata::{parse_qos_text, FileInfo, MetadataFile, TopicMetadata, TopicWithCount};
 use crate::lock::{recording_state, remove_stale, Recording};
+use crate::metadata::{parse_qos_text, FileInfo, MetadataFile, TopicMetadata, TopicWithCount};
 use crate::scan::{scan, Damage, ScanStop, ScannedFile};
 use crate::writer::write_atomically;
 use crate::{Duration, StartingTime, METADATA_FILE};
@@ -155,9 +155,11 @@ fn set_aside(path: &Path) -> Result<PathBuf> {
 fn rewrite(tmp: &Path, s: &ScannedFile, bag: &MetadataFile) -> Result<()> {
     let file = File::create(tmp).map_err(io(tmp))?;
     // A file whose header was lost but whose chunks were read is a rosbag2 file still.
-    let options = mcap::WriteOptions::new()
-        .profile(s.profile.clone().unwrap_or_else(|| "ros2".into()))
-        .library(concat!("oilfilm-bag ", env!("CARGO_PKG_VERSION"), " (recovered)"));
+    let options = mcap::WriteOptions::new().profile(s.profile.clone().unwrap_or_else(|| "ros2".into())).library(concat!(
+        "oilfilm-bag ",
+        env!("CARGO_PKG_VERSION"),
+        " (recovered)"
+    ));
     let mut w = options.create(BufWriter::new(file)).map_err(mcap_err(tmp))?;
     for (&id, schema) in &s.schemas {
         w.add_schema_with_id(id, &schema.name, &schema.encoding, &schema.data).map_err(mcap_err(tmp))?;
@@ -186,8 +188,11 @@ fn add_topics(path: &Path, s: &ScannedFile, topics: &mut Vec<(TopicMetadata, u64
     }
     for (id, c) in &s.channels {
         let type_name = s.schemas.get(&c.schema_id).map(|x| x.name.clone()).unwrap_or_default();
-        let qos = parse_qos_text(c.metadata.get("offered_qos_profiles").map(String::as_str).unwrap_or(""))
-            .map_err(|what| BagError::Format { path: path.to_path_buf(), offset: None, what: format!("channel {}: {what}", c.topic) })?;
+        let qos = parse_qos_text(c.metadata.get("offered_qos_profiles").map(String::as_str).unwrap_or("")).map_err(|what| BagError::Format {
+            path: path.to_path_buf(),
+            offset: None,
+            what: format!("channel {}: {what}", c.topic),
+        })?;
         let n = counts.get(id).copied().unwrap_or(0);
         match topics.iter_mut().find(|(t, _)| t.name == c.topic) {
             Some((_, count)) => *count += n,

@@ -214,7 +214,14 @@ pub fn scan(bytes: &[u8]) -> ScannedFile {
 
 /// One record (the bytes `at..end`): taken into `out`, or an error and, for a chunk whose
 /// header parsed, its time range.
-fn record(bytes: &[u8], at: usize, end: usize, section: &mut Section, summary_start: &mut Option<usize>, out: &mut ScannedFile) -> Result<Step, (String, Option<(u64, u64)>)> {
+fn record(
+    bytes: &[u8],
+    at: usize,
+    end: usize,
+    section: &mut Section,
+    summary_start: &mut Option<usize>,
+    out: &mut ScannedFile,
+) -> Result<Step, (String, Option<(u64, u64)>)> {
     let opcode = bytes[at];
     let body = &bytes[at + 9..end];
     let plain = |what: String| (what, None);
@@ -308,11 +315,15 @@ fn record(bytes: &[u8], at: usize, end: usize, section: &mut Section, summary_st
 fn summary_agrees(file: &ScannedFile, r: Owned) -> Result<(), String> {
     match r {
         Owned::Schema(id, s) => match file.schemas.get(&id) {
-            Some(old) if *old != s => Err(format!("schema {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.name, s.name)),
+            Some(old) if *old != s => {
+                Err(format!("schema {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.name, s.name))
+            }
             _ => Ok(()),
         },
         Owned::Channel(id, c) => match file.channels.get(&id) {
-            Some(old) if *old != c => Err(format!("channel {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.topic, c.topic)),
+            Some(old) if *old != c => {
+                Err(format!("channel {id} differs between the data section (`{}`) and the summary (`{}`): the file is damaged", old.topic, c.topic))
+            }
             _ => Ok(()),
         },
         _ => Ok(()),
@@ -341,7 +352,22 @@ pub(crate) fn resync(bytes: &[u8], from: usize, file: &ScannedFile) -> Option<us
         let body = &bytes[p + 9..end];
         match opcode {
             op::FOOTER => body.len() == 20 && end + MAGIC.len() == n && bytes[end..] == *MAGIC,
-            op::DATA_END => body.len() == 4 && record_end(bytes, end).is_some_and(|_| matches!(bytes[end], op::SCHEMA | op::CHANNEL | op::STATISTICS | op::CHUNK_INDEX | op::METADATA_INDEX | op::ATTACHMENT_INDEX | op::SUMMARY_OFFSET | op::FOOTER)),
+            op::DATA_END => {
+                body.len() == 4
+                    && record_end(bytes, end).is_some_and(|_| {
+                        matches!(
+                            bytes[end],
+                            op::SCHEMA
+                                | op::CHANNEL
+                                | op::STATISTICS
+                                | op::CHUNK_INDEX
+                                | op::METADATA_INDEX
+                                | op::ATTACHMENT_INDEX
+                                | op::SUMMARY_OFFSET
+                                | op::FOOTER
+                        )
+                    })
+            }
             op::CHUNK => match mcap::parse_record(op::CHUNK, body) {
                 // The CRC proves the records; without one they must parse.
                 Ok(Record::Chunk { header, data }) if header.uncompressed_crc != 0 => decompress_chunk(&header, &data).is_ok(),
@@ -370,14 +396,10 @@ enum Owned {
 impl From<Record<'_>> for Owned {
     fn from(r: Record<'_>) -> Self {
         match r {
-            Record::Schema { header, data } => Owned::Schema(
-                header.id,
-                SchemaRecord { name: header.name, encoding: header.encoding, data: data.into_owned() },
-            ),
-            Record::Channel(c) => Owned::Channel(
-                c.id,
-                ChannelRecord { topic: c.topic, schema_id: c.schema_id, message_encoding: c.message_encoding, metadata: c.metadata },
-            ),
+            Record::Schema { header, data } => Owned::Schema(header.id, SchemaRecord { name: header.name, encoding: header.encoding, data: data.into_owned() }),
+            Record::Channel(c) => {
+                Owned::Channel(c.id, ChannelRecord { topic: c.topic, schema_id: c.schema_id, message_encoding: c.message_encoding, metadata: c.metadata })
+            }
             Record::Message { header, data } => Owned::Message(RawMessage {
                 channel_id: header.channel_id,
                 sequence: header.sequence,
@@ -508,7 +530,12 @@ pub(crate) fn decompress_chunk_reusing<'a>(
 }
 
 /// A compressed chunk's records into `out`, checked.
-fn decompress_into(header: &mcap::records::ChunkHeader, data: &[u8], out: &mut Vec<u8>, zstd: &mut Option<zstd::bulk::Decompressor<'static>>) -> Result<(), String> {
+fn decompress_into(
+    header: &mcap::records::ChunkHeader,
+    data: &[u8],
+    out: &mut Vec<u8>,
+    zstd: &mut Option<zstd::bulk::Decompressor<'static>>,
+) -> Result<(), String> {
     /// Up to this size a zstd chunk is decompressed in one call into a buffer of at least the
     /// header's size (not touched beyond what the frame fills); a larger claim streams into
     /// a growing buffer instead of being trusted for an allocation.

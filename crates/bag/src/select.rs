@@ -213,7 +213,11 @@ impl Bag {
                                     job.index.message_end_time,
                                     strip_path(&e, path)
                                 );
-                                Ok(ChunkRead { values: Vec::new(), counts: BTreeMap::new(), skipped: Some(Shortfall::new(path, ShortfallKind::DamagedChunk, what)) })
+                                Ok(ChunkRead {
+                                    values: Vec::new(),
+                                    counts: BTreeMap::new(),
+                                    skipped: Some(Shortfall::new(path, ShortfallKind::DamagedChunk, what)),
+                                })
                             }
                             Err(ChunkFail::Damaged(e) | ChunkFail::Fatal(e)) => Err(e),
                         };
@@ -281,7 +285,12 @@ impl Bag {
 
 /// The summary of one file and the chunks to read, or the full reader's result (a partial
 /// read: whatever the file's undamaged records hold, its damage noted).
-fn plan_file<T>(path: &Path, wanted: &dyn Fn(&str, &str) -> bool, decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync), found: &mut Shortfalls) -> Result<Plan<T>> {
+fn plan_file<T>(
+    path: &Path,
+    wanted: &dyn Fn(&str, &str) -> bool,
+    decode: &(dyn Fn(&MessageRef) -> Result<T> + Sync),
+    found: &mut Shortfalls,
+) -> Result<Plan<T>> {
     if let Some(plan) = indexed_plan(path, wanted, found)? {
         return Ok(plan);
     }
@@ -581,7 +590,11 @@ impl<T> Stream<'_, T> {
                 // Every worker ended without sending this job: another job failed first and
                 // stopped them (its error is pending), or one panicked.
                 Err(_) => {
-                    let first_error = self.pending.values_mut().find(|r| r.is_err()).map(|r| std::mem::replace(r, Ok(ChunkRead { values: Vec::new(), counts: BTreeMap::new(), skipped: None })));
+                    let first_error = self
+                        .pending
+                        .values_mut()
+                        .find(|r| r.is_err())
+                        .map(|r| std::mem::replace(r, Ok(ChunkRead { values: Vec::new(), counts: BTreeMap::new(), skipped: None })));
                     return match first_error {
                         Some(Err(e)) => Err(e),
                         _ => Err(BagError::Usage { path: self.dir.to_path_buf(), what: "a bag reader thread stopped before its chunk".into() }),

@@ -27,9 +27,9 @@ use oilfilm_msgs::RosMessage;
 
 use crate::chunks::{FileSink, Gathered, Pipeline};
 use crate::error::{io, BagError, Result};
-use crate::records::{self, ChunkIndex};
-use crate::metadata::{qos_to_channel_metadata, FileInfo, MetadataFile, QosProfile, TopicMetadata, TopicWithCount};
 use crate::lock::RecordingLock;
+use crate::metadata::{qos_to_channel_metadata, FileInfo, MetadataFile, QosProfile, TopicMetadata, TopicWithCount};
+use crate::records::{self, ChunkIndex};
 use crate::{Duration as NsDuration, StartingTime, METADATA_FILE};
 
 /// Compression of the MCAP chunks.
@@ -361,10 +361,7 @@ impl BagWriter {
         match self.topics.get(topic.0) {
             Some(t) if t.type_name == M::TYPE_NAME => {}
             Some(t) => {
-                return Err(BagError::Usage {
-                    path: self.dir.clone(),
-                    what: format!("a {} written to {}, a {} topic", M::TYPE_NAME, t.name, t.type_name),
-                })
+                return Err(BagError::Usage { path: self.dir.clone(), what: format!("a {} written to {}, a {} topic", M::TYPE_NAME, t.name, t.type_name) })
             }
             None => return Err(BagError::Usage { path: self.dir.clone(), what: format!("no topic with id {}", topic.0) }),
         }

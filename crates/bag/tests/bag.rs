@@ -2,8 +2,8 @@
 //! back equal, splitting, recovery of a file cut mid-chunk, and clear errors (no panics)
 //! for foreign, truncated and corrupted files.
 
-use crate::sim_rig;
 use crate::scratch;
+use crate::sim_rig;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;

@@ -63,7 +63,14 @@ fn sound_bag(dir: &Path, compression: Compression, split_ns: Option<u64>) {
     for i in 0..24u64 {
         let t = t0 + i * 10_000_000;
         w.write_message(frames, t, &frame(i, t)).unwrap();
-        let s = RigStatus { header: header(t), speed_rad_s: 157.08, static_load_n: 5000.0, bearing_temperature_degc: 29.0, state: RigStatus::STATE_EXCITING, message: String::new() };
+        let s = RigStatus {
+            header: header(t),
+            speed_rad_s: 157.08,
+            static_load_n: 5000.0,
+            bearing_temperature_degc: 29.0,
+            state: RigStatus::STATE_EXCITING,
+            message: String::new(),
+        };
         w.write_message(status, t, &s).unwrap();
     }
     w.close().unwrap();
@@ -75,7 +82,8 @@ fn odd_bag(dir: &Path, rng: &mut ChaCha8Rng) -> &'static str {
     let mut w = BagWriter::create(dir, WriterOptions::default()).unwrap();
     let qos = vec![QosProfile::keep_last(10, true, false)];
     if rng.random_bool(0.5) {
-        let spec = TopicSpec { name: "/point".into(), type_name: "geometry_msgs/msg/Point".into(), schema_text: "float64 x\nfloat64 y\nfloat64 z\n".into(), qos };
+        let spec =
+            TopicSpec { name: "/point".into(), type_name: "geometry_msgs/msg/Point".into(), schema_text: "float64 x\nfloat64 y\nfloat64 z\n".into(), qos };
         let id = w.add_topic(spec).unwrap();
         let mut cdr = vec![0, 1, 0, 0];
         cdr.extend_from_slice(&[0u8; 24]);

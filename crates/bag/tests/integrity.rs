@@ -4,8 +4,8 @@
 //! each difference. Both readers (`read_topics`, the summary-driven one, and `messages`,
 //! the record-by-record one) read the same messages and find the same differences.
 
-use crate::sim_rig;
 use crate::scratch;
+use crate::sim_rig;
 
 use std::path::Path;
 use std::sync::OnceLock;
@@ -71,7 +71,13 @@ fn a_file_metadata_yaml_does_not_list_is_an_error_naming_it_or_left_out_and_said
     info.files.pop();
     let kept = Bag::open(&dir).unwrap().files()[..info.relative_file_paths.len()].to_vec();
     for t in &mut info.topics_with_message_count {
-        t.message_count = kept.iter().map(|f| oilfilm_bag::reader::messages_of_file(f, &std::fs::read(f).unwrap()).unwrap().iter().filter(|m| *m.topic == t.topic_metadata.name).count() as u64).sum();
+        t.message_count = kept
+            .iter()
+            .map(|f| {
+                oilfilm_bag::reader::messages_of_file(f, &std::fs::read(f).unwrap()).unwrap().iter().filter(|m| *m.topic == t.topic_metadata.name).count()
+                    as u64
+            })
+            .sum();
     }
     std::fs::write(&meta_path, meta.to_yaml()).unwrap();
 
@@ -82,7 +88,13 @@ fn a_file_metadata_yaml_does_not_list_is_an_error_naming_it_or_left_out_and_said
     let (got, short) = read_of(&dir, ReadOptions::PARTIAL, &every).unwrap();
     assert_eq!(short.len(), 1, "{short:?}");
     assert_eq!((short[0].kind, short[0].path.file_name().unwrap().to_string_lossy().into_owned()), (ShortfallKind::UnlistedFile, last.clone()));
-    assert!(got.len() < all.len() && all.starts_with(&got), "the listed files' messages, in order: {} of {}, first difference at {:?}", got.len(), all.len(), got.iter().zip(&all).position(|(a, b)| a != b));
+    assert!(
+        got.len() < all.len() && all.starts_with(&got),
+        "the listed files' messages, in order: {} of {}, first difference at {:?}",
+        got.len(),
+        all.len(),
+        got.iter().zip(&all).position(|(a, b)| a != b)
+    );
     let (whole, short_whole) = Bag::open(&dir).unwrap().messages_with(ReadOptions::PARTIAL).unwrap();
     assert_eq!(short_whole, short);
     assert_eq!(whole.into_iter().map(|m| (m.topic.to_string(), m.log_time, m.data)).collect::<Vec<_>>(), got);
@@ -127,7 +139,8 @@ fn a_damaged_chunk_is_an_error_naming_its_offset_or_skipped_with_the_counts_said
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     let frames_id = summary.channels.values().find(|c| c.topic == FRAMES).unwrap().id;
     let ci = summary.chunk_indexes.iter().find(|c| c.message_index_offsets.contains_key(&frames_id)).unwrap().clone();
-    let in_chunk: Vec<Key> = summary.stream_chunk(&bytes, &ci).unwrap().map(|m| m.unwrap()).map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned())).collect();
+    let in_chunk: Vec<Key> =
+        summary.stream_chunk(&bytes, &ci).unwrap().map(|m| m.unwrap()).map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned())).collect();
     let mut bad = bytes.clone();
     bad[(ci.chunk_start_offset + ci.chunk_length - 20) as usize] ^= 0x04;
     std::fs::write(&file, &bad).unwrap();

@@ -3,14 +3,14 @@
 //! the next chunk; a damaged chunk before a cut (a killed writer) loses that chunk and the
 //! cut one; a bag whose writer is alive is refused, and a killed writer's lock is cleared.
 
-use crate::sim_rig;
 use crate::scratch;
+use crate::sim_rig;
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::OnceLock;
 
-use oilfilm_bag::{recover, recording_state, Bag, Compression, Recording, WriterOptions, LOCK_FILE};
+use oilfilm_bag::{recording_state, recover, Bag, Compression, Recording, WriterOptions, LOCK_FILE};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sim_rig::Published;
@@ -42,7 +42,8 @@ fn chunks_of(bytes: &[u8]) -> Chunks {
         .chunk_indexes
         .iter()
         .map(|c| {
-            let msgs = summary.stream_chunk(bytes, c).unwrap().map(|m| m.unwrap()).map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned())).collect();
+            let msgs =
+                summary.stream_chunk(bytes, c).unwrap().map(|m| m.unwrap()).map(|m| (m.channel.topic.clone(), m.log_time, m.data.into_owned())).collect();
             ((c.chunk_start_offset, c.chunk_length), msgs)
         })
         .collect()

@@ -100,11 +100,45 @@ fn reference_bag_identifies_the_films_coefficients_in_every_window() {
 /// seen, `crates/identification/tests/same_bits_on_every_isa.rs`).
 fn assert_estimates_agree(a: &oilfilm_msgs::CoefficientEstimate, b: &oilfilm_msgs::CoefficientEstimate, i: usize) {
     let numbers = |e: &oilfilm_msgs::CoefficientEstimate| -> Vec<f64> {
-        let arrays = [e.stiffness_n_m, e.damping_n_s_m, e.stiffness_se_n_m, e.damping_se_n_s_m, e.stiffness_lund, e.damping_lund, e.stiffness_zhou, e.damping_zhou];
-        let scalars = [e.condition_number, e.speed_rad_s, e.bearing_temperature_degc, e.viscosity_pa_s, e.load_n, e.sommerfeld_number, e.load_parameter_fy, e.amplitude_d];
-        arrays.iter().flatten().chain(&e.added_mass_kg).chain(&e.added_mass_se_kg).chain(&e.residual_rms_n).chain(&e.excitation_frequencies_hz).chain(&e.static_force_n).chain(&e.journal_position_m).chain(&scalars).copied().collect()
+        let arrays =
+            [e.stiffness_n_m, e.damping_n_s_m, e.stiffness_se_n_m, e.damping_se_n_s_m, e.stiffness_lund, e.damping_lund, e.stiffness_zhou, e.damping_zhou];
+        let scalars = [
+            e.condition_number,
+            e.speed_rad_s,
+            e.bearing_temperature_degc,
+            e.viscosity_pa_s,
+            e.load_n,
+            e.sommerfeld_number,
+            e.load_parameter_fy,
+            e.amplitude_d,
+        ];
+        arrays
+            .iter()
+            .flatten()
+            .chain(&e.added_mass_kg)
+            .chain(&e.added_mass_se_kg)
+            .chain(&e.residual_rms_n)
+            .chain(&e.excitation_frequencies_hz)
+            .chain(&e.static_force_n)
+            .chain(&e.journal_position_m)
+            .chain(&scalars)
+            .copied()
+            .collect()
     };
-    let rest = |e: &oilfilm_msgs::CoefficientEstimate| (e.sequence, e.window_start_sample, e.window_end_sample, e.model, e.solved, e.refusal_reason.clone(), e.rank, e.flags.clone(), e.excitation_frequencies_hz.len(), e.added_mass_kg.len());
+    let rest = |e: &oilfilm_msgs::CoefficientEstimate| {
+        (
+            e.sequence,
+            e.window_start_sample,
+            e.window_end_sample,
+            e.model,
+            e.solved,
+            e.refusal_reason.clone(),
+            e.rank,
+            e.flags.clone(),
+            e.excitation_frequencies_hz.len(),
+            e.added_mass_kg.len(),
+        )
+    };
     assert_eq!(rest(a), rest(b), "estimate message {i}");
     for (x, y) in numbers(a).into_iter().zip(numbers(b)) {
         let d = if x == y || (x.is_nan() && y.is_nan()) { 0.0 } else { (x - y).abs() / x.abs().max(y.abs()) };
@@ -138,7 +172,11 @@ fn a_bag_recorded_before_counts_reads_and_gives_the_same_estimates() {
     assert_eq!(new_frames.len(), 60);
     let (mut a, mut b) = (Vec::new(), Vec::new());
     for (o, n) in old_frames.iter().zip(&new_frames) {
-        assert_eq!((o.units, o.counts.len(), o.volts_per_count.len()), (oilfilm_msgs::DaqFrame::UNITS_VOLTS, 0, 0), "an old frame: volts, the appended fields empty");
+        assert_eq!(
+            (o.units, o.counts.len(), o.volts_per_count.len()),
+            (oilfilm_msgs::DaqFrame::UNITS_VOLTS, 0, 0),
+            "an old frame: volts, the appended fields empty"
+        );
         assert_eq!((n.units, n.values.len()), (oilfilm_msgs::DaqFrame::UNITS_COUNTS, 0), "today's DAQ node sends counts");
         assert_eq!(o.samples(&mut a).unwrap(), n.samples(&mut b).unwrap(), "frame {}: the same samples", o.sequence);
     }

@@ -7,9 +7,9 @@
 use crate::sim_rig;
 
 use oilfilm_bag::{Bag, OilfilmMessage, WriterOptions};
-use oilfilm_msgs::RosMessage;
 use oilfilm_graph::runner::bag::{reanalyse, reanalyse_overlapped, reanalyse_stream, Input};
 use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams};
+use oilfilm_msgs::RosMessage;
 use oilfilm_physics::config::RigConfig;
 
 #[test]
@@ -59,7 +59,9 @@ fn estimates_from_a_bag_equal_the_live_ones_bit_for_bit() {
         let status: Vec<oilfilm_msgs::RigStatus> = bag.read_topics(&is_status, &|m| m.decode(), threads, |s| s.collect()).unwrap();
         assert!(!status.is_empty());
         let overlapped = bag
-            .read_topics(&is_frame, &|m| m.decode::<oilfilm_msgs::DaqFrame>(), threads, |frames| reanalyse_overlapped(&rig, &p.conditioner, &p.estimator, status, frames))
+            .read_topics(&is_frame, &|m| m.decode::<oilfilm_msgs::DaqFrame>(), threads, |frames| {
+                reanalyse_overlapped(&rig, &p.conditioner, &p.estimator, status, frames)
+            })
             .unwrap()
             .unwrap();
         assert_eq!(bytes(&overlapped.estimates), bytes(&live.estimates), "overlapped re-analysis ({threads} threads) differs from live");

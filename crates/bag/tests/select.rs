@@ -58,7 +58,8 @@ fn read_topics_equals_messages_filtered_on_every_kind_of_bag() {
         }
         let all = bag.messages().unwrap();
         assert_eq!(all.len(), want.len());
-        for (name, wanted) in [("inputs", &inputs as &(dyn Fn(&str, &str) -> bool + Sync)), ("status", &status_only), ("all", &everything), ("none", &nothing)] {
+        for (name, wanted) in [("inputs", &inputs as &(dyn Fn(&str, &str) -> bool + Sync)), ("status", &status_only), ("all", &everything), ("none", &nothing)]
+        {
             let exp = expected(&all, wanted);
             for threads in [1, 2, 4] {
                 let got = selected(&bag, wanted, threads).unwrap();

@@ -4,8 +4,8 @@
 //! (statistics, schemas, channels, chunk indexes, summary offsets) against what the file
 //! holds, and each chunk's message indexes against its messages.
 
-use crate::sim_rig;
 use crate::scratch;
+use crate::sim_rig;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -672,7 +672,11 @@ impl<'a> Context<'a> {
                     ([s0, s1, s2, s3], vec![(fx, 0.5, 0), (fv, 0.5, 1), (fa, 0.5, 2), (ft, sign, 0)])
                 }
                 ChannelId::FrameX | ChannelId::FrameY => {
-                    let (h, ha, fh, fha, ff) = if ch == ChannelId::FrameX { (&c.housing_x_m, &c.housing_ax_m_s2, HX, HAX, FX) } else { (&c.housing_y_m, &c.housing_ay_m_s2, HY, HAY, FY) };
+                    let (h, ha, fh, fha, ff) = if ch == ChannelId::FrameX {
+                        (&c.housing_x_m, &c.housing_ax_m_s2, HX, HAX, FX)
+                    } else {
+                        (&c.housing_y_m, &c.housing_ay_m_s2, HY, HAY, FY)
+                    };
                     let s1 = d(h);
                     let s3 = d(ha);
                     ([h.clone(), s1, ha.clone(), s3], vec![(fh, 1.0, 0), (fha, 1.0, 2), (ff, -m, 2)])
@@ -896,7 +900,11 @@ impl<'a> Context<'a> {
         }
         for (j, &i) in p.picks.iter().enumerate() {
             if frame {
-                let (h, ha, f) = if axis == 0 { (&mut series.housing_x_m, &mut series.housing_ax_m_s2, 0) } else { (&mut series.housing_y_m, &mut series.housing_ay_m_s2, 1) };
+                let (h, ha, f) = if axis == 0 {
+                    (&mut series.housing_x_m, &mut series.housing_ax_m_s2, 0)
+                } else {
+                    (&mut series.housing_y_m, &mut series.housing_ay_m_s2, 1)
+                };
                 h[j] += delta[i];
                 ha[j] += d2[i];
                 if f == 0 {
@@ -975,11 +983,8 @@ impl<'a> Context<'a> {
                 Part::Generic(Generic::FrequencyDependence) => {
                     // k 0..3: -(axis k/2) acceleration component k%2; 4..7: jerk.
                     let (axis, comp) = ((k % 4) / 2, k % 2);
-                    let src: Vec<f64> = if k < 4 {
-                        view.excited_acceleration[comp].iter().map(|a| -a).collect()
-                    } else {
-                        view.jerk[comp].iter().map(|a| -a * 1e-3).collect()
-                    };
+                    let src: Vec<f64> =
+                        if k < 4 { view.excited_acceleration[comp].iter().map(|a| -a).collect() } else { view.jerk[comp].iter().map(|a| -a * 1e-3).collect() };
                     p.set_axis_column(&mut m, col, axis, &src);
                 }
                 _ => {}
@@ -1233,7 +1238,8 @@ impl<'a> Context<'a> {
                         params.insert("temperature_rise_c".into(), json!(d.rise_c));
                         ses.insert("viscosity_temperature_slope_per_c".into(), se);
                         if beta.is_nan() || beta >= 0.0 {
-                            physical = Err(format!("the coefficients change with temperature as if the viscosity rose with it (slope {beta:.4}/C): no oil does that"));
+                            physical =
+                                Err(format!("the coefficients change with temperature as if the viscosity rose with it (slope {beta:.4}/C): no oil does that"));
                         }
                     }
                 }

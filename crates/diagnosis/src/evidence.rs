@@ -159,10 +159,7 @@ impl Series {
 
     /// The journal's absolute displacement `J = r + X` (bearing plus frame probes), x then y.
     pub fn journal_m(&self) -> [Vec<f64>; 2] {
-        [
-            self.x_m.iter().zip(&self.housing_x_m).map(|(a, b)| a + b).collect(),
-            self.y_m.iter().zip(&self.housing_y_m).map(|(a, b)| a + b).collect(),
-        ]
+        [self.x_m.iter().zip(&self.housing_x_m).map(|(a, b)| a + b).collect(), self.y_m.iter().zip(&self.housing_y_m).map(|(a, b)| a + b).collect()]
     }
 }
 
@@ -303,7 +300,13 @@ pub fn velocity_noise_ratio(c: &Conditioned, top_hz: f64, band_hz: f64, configur
 
 /// The judging band's cutoff for a record whose highest excitation line is `top_hz`, and
 /// its post-filter (`None`: the configured band is already at most that).
-pub fn judging_band(top_hz: Option<f64>, factor: f64, configured_hz: f64, order: usize, sample_rate_hz: f64) -> Result<(f64, Option<Butterworth>), DiagnosisError> {
+pub fn judging_band(
+    top_hz: Option<f64>,
+    factor: f64,
+    configured_hz: f64,
+    order: usize,
+    sample_rate_hz: f64,
+) -> Result<(f64, Option<Butterworth>), DiagnosisError> {
     let Some(top) = top_hz else {
         return Ok((configured_hz, None));
     };

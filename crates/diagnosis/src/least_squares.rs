@@ -60,18 +60,13 @@ pub fn solve(design: &DMatrix<f64>, target: &DVector<f64>, use_row: &[bool], wha
     let mut qtb = b.clone();
     qr.q_tr_mul(&mut qtb);
     let qtb = qtb.rows(0, cols).into_owned();
-    let scaled = r
-        .solve_upper_triangular(&qtb)
-        .ok_or_else(|| DiagnosisError::bad_input(what, "triangular solve failed"))?;
+    let scaled = r.solve_upper_triangular(&qtb).ok_or_else(|| DiagnosisError::bad_input(what, "triangular solve failed"))?;
     let resid = &b - &a * &scaled;
     let sse = resid.norm_squared();
     let dof = (rows.len() - cols) as f64;
     let s2 = sse / dof;
     // (R^T R)^-1 = R^-1 R^-T; its diagonal is the squared row norms of R^-1.
-    let r_inv = r
-        .clone()
-        .try_inverse()
-        .ok_or_else(|| DiagnosisError::bad_input(what, "R is singular"))?;
+    let r_inv = r.clone().try_inverse().ok_or_else(|| DiagnosisError::bad_input(what, "R is singular"))?;
     let theta = DVector::from_iterator(cols, (0..cols).map(|j| scaled[j] / scale[j]));
     let standard_errors = DVector::from_iterator(cols, (0..cols).map(|j| (s2 * r_inv.row(j).norm_squared()).sqrt() / scale[j]));
     Ok(Fit { theta, standard_errors, sse, rows: rows.len(), condition: dmax / dmin })

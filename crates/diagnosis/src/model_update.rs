@@ -421,7 +421,9 @@ pub fn update(ctx: &Context, chosen: &Judged, rig: &RigConfig) -> Result<ModelUp
         r.bearing.clearance_m = cl;
         r.film()
             .ok()
-            .and_then(|mut f| operating_point::solve(f.as_mut(), &Running { omega_rad_s: omega, viscosity_pa_s: mu }, load, &EquilibriumOptions::default()).ok())
+            .and_then(|mut f| {
+                operating_point::solve(f.as_mut(), &Running { omega_rad_s: omega, viscosity_pa_s: mu }, load, &EquilibriumOptions::default()).ok()
+            })
             .map(|o| [o.journal.x_m, o.journal.y_m])
     };
     let measured_position_m = {

@@ -48,9 +48,9 @@ use oilfilm_physics::film::Running;
 use oilfilm_physics::operating_point::{self, EquilibriumOptions};
 use serde::{Deserialize, Serialize};
 
+use crate::error::DiagnosisError;
 use crate::evidence::Prepared;
 use crate::model_update::{self, ModelUpdate};
-use crate::error::DiagnosisError;
 use spectra::{phasor, segment_len, welch, wrap_deg, Welch};
 
 /// The eight linear coefficients in the order every array of this module uses: stiffness
@@ -365,7 +365,9 @@ pub const TREND_MIN_CHANGE: f64 = 0.02;
 pub enum ComponentKind {
     Excitation,
     /// `order` x an excitation line.
-    Harmonic { order: u32 },
+    Harmonic {
+        order: u32,
+    },
     /// Sum or difference of two excitation lines (a nonlinearity mixes them).
     Intermodulation,
     /// Once per shaft revolution.
@@ -486,10 +488,7 @@ fn strongest_lines(lines: &[f64], fx: &[f64], fy: &[f64], fs: f64, max: usize) -
     }
     let seg = segment_len(fx.len(), 1 << 16);
     let w = welch(&[fx, fy], seg, fs);
-    let mut scored: Vec<(f64, f64)> = lines
-        .iter()
-        .map(|&f| (f, w[0].line_power(f).unwrap_or(0.0) + w[1].line_power(f).unwrap_or(0.0)))
-        .collect();
+    let mut scored: Vec<(f64, f64)> = lines.iter().map(|&f| (f, w[0].line_power(f).unwrap_or(0.0) + w[1].line_power(f).unwrap_or(0.0))).collect();
     scored.sort_by(|a, b| b.1.total_cmp(&a.1));
     scored.truncate(max);
     scored.into_iter().map(|(f, _)| f).collect()
@@ -684,11 +683,7 @@ fn spectrum_band_top(lines: &[f64], speed_rpm: f64, cutoff: f64, config: &ShowCo
     top.min(0.5 * fs)
 }
 
-fn coefficient_comparison(
-    id: &pipeline::Identification,
-    rig: &RigConfig,
-    notes: &mut Vec<String>,
-) -> Result<CoefficientComparison, DiagnosisError> {
+fn coefficient_comparison(id: &pipeline::Identification, rig: &RigConfig, notes: &mut Vec<String>) -> Result<CoefficientComparison, DiagnosisError> {
     let mut windows = Vec::new();
     let mut refused = Vec::new();
     let mut film = rig.film()?;
@@ -705,7 +700,10 @@ fn coefficient_comparison(
                         refused.push(RefusedWindow {
                             t_start_s: w.t_start_s,
                             t_end_s: w.t_end_s,
-                            reason: format!("identified, but the film model has no equilibrium at this window's operating point ({:.0} N, {:.2} C): {e}", o.load_n, o.temperature_c),
+                            reason: format!(
+                                "identified, but the film model has no equilibrium at this window's operating point ({:.0} N, {:.2} C): {e}",
+                                o.load_n, o.temperature_c
+                            ),
                         });
                         continue;
                     }
@@ -885,9 +883,8 @@ fn residual_spectra(
     }
     let exclude: Vec<f64> = named.iter().map(|(_, _, f)| *f).collect();
     let floor = [spectra[0].floor(band[0], band[1], &exclude).unwrap_or(f64::NAN), spectra[1].floor(band[0], band[1], &exclude).unwrap_or(f64::NAN)];
-    let in_band = |s: &Welch| -> f64 {
-        s.power.iter().enumerate().filter(|(b, _)| (*b as f64 * df) >= band[0] && (*b as f64 * df) <= band[1]).map(|(_, p)| p).sum()
-    };
+    let in_band =
+        |s: &Welch| -> f64 { s.power.iter().enumerate().filter(|(b, _)| (*b as f64 * df) >= band[0] && (*b as f64 * df) <= band[1]).map(|(_, p)| p).sum() };
     let total = [in_band(&spectra[0]), in_band(&spectra[1])];
     let mut components = Vec::new();
     let mut named_power = [0.0; 2];

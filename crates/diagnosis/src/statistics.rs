@@ -199,10 +199,13 @@ fn whole_periods(lines: &[f64], grid_hz: f64, t: &[f64]) -> Option<usize> {
 
 /// Summed power of `v` at the frequencies `lines_hz` (phasor magnitudes squared).
 pub fn line_power(v: &[f64], t: &[f64], lines_hz: &[f64]) -> f64 {
-    lines_hz.iter().map(|&f| {
-        let (re, im) = phasor(v, t, f);
-        re * re + im * im
-    }).sum()
+    lines_hz
+        .iter()
+        .map(|&f| {
+            let (re, im) = phasor(v, t, f);
+            re * re + im * im
+        })
+        .sum()
 }
 
 /// The off-line probe frequencies: half a line spacing either side of every line (0.5 Hz
@@ -321,10 +324,14 @@ pub fn line_structure_normed(
         // The fit used 4 of the 2L line equations: scale its residual back to per-line noise.
         res_on += residual_power(&on) * rows as f64 / (rows - 4) as f64;
         res_off += residual_power(&offp);
-        force_on += lines.iter().map(|&f| {
-            let (re, im) = phasor_windowed(&norm[axis], t, f, hann);
-            re * re + im * im
-        }).sum::<f64>() / lines.len() as f64;
+        force_on += lines
+            .iter()
+            .map(|&f| {
+                let (re, im) = phasor_windowed(&norm[axis], t, f, hann);
+                re * re + im * im
+            })
+            .sum::<f64>()
+            / lines.len() as f64;
     }
     if !(res_off > 0.0 && force_on > 0.0) {
         return None;

@@ -82,14 +82,7 @@ pub struct DiagnosisOptions {
 
 impl Default for DiagnosisOptions {
     fn default() -> Self {
-        Self {
-            prepare: PrepareOptions::default(),
-            significance: 1e-4,
-            min_gain: 0.005,
-            min_fold_fraction: 0.7,
-            structure_gain: 0.06,
-            model_update: true,
-        }
+        Self { prepare: PrepareOptions::default(), significance: 1e-4, min_gain: 0.005, min_fold_fraction: 0.7, structure_gain: 0.06, model_update: true }
     }
 }
 

@@ -146,19 +146,23 @@ fn selection_text(d: &Diagnosis) -> String {
         .steps
         .iter()
         .map(|st| {
-            let tried: Vec<String> = st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
+            let tried: Vec<String> =
+                st.tried.iter().map(|c| format!("{} {:+.2}%{}", c.name, 100.0 * c.score.unwrap_or(f64::NAN), if c.earns { "*" } else { "" })).collect();
             format!("[{}: {}]", st.model, tried.join(", "))
         })
         .collect();
-    let structure: Vec<String> = d.structure.iter().map(|s| format!("{} {:+.2}%{}", s.name.name(), 100.0 * s.score.unwrap_or(f64::NAN), if s.earns_at_min_gain { "*" } else { "" })).collect();
+    let structure: Vec<String> = d
+        .structure
+        .iter()
+        .map(|s| format!("{} {:+.2}%{}", s.name.name(), 100.0 * s.score.unwrap_or(f64::NAN), if s.earns_at_min_gain { "*" } else { "" }))
+        .collect();
     let lines = d.residual_structure.map_or("no line test".to_string(), |r| format!("residual at the lines {:.2}x the floor, p = {:.1e}", r.ratio, r.p_value));
     format!("{} structure [{}], {lines}", steps.join(" "), structure.join(", "))
 }
 
 #[test]
 fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_better() {
-    let cases: Vec<(String, u64, Case)> =
-        CLASSES.iter().flat_map(|c| (1..=SEEDS_PER_CLASS).map(move |seed| (c.to_string(), seed, hidden(c, seed)))).collect();
+    let cases: Vec<(String, u64, Case)> = CLASSES.iter().flat_map(|c| (1..=SEEDS_PER_CLASS).map(move |seed| (c.to_string(), seed, hidden(c, seed)))).collect();
     let results = run_all(cases);
 
     // Confusion matrix: rows hidden, columns named.
@@ -166,7 +170,10 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
     let mut matrix = vec![vec![0usize; named_classes.len()]; CLASSES.len()];
     let mut failures = Vec::new();
     println!("\nhidden effect cases ({SEEDS_PER_CLASS} seeds each, {RMS_N} N rms multisine unless stated, {SECONDS} s at 5 kHz)");
-    println!("{:<24} {:>4} {:>6} {:>6} {:<24} {:>9} {:>9} {:>7}  parameter (hidden -> found)", "hidden", "seed", "rpm", "load", "named", "baseline", "extended", "gain");
+    println!(
+        "{:<24} {:>4} {:>6} {:>6} {:<24} {:>9} {:>9} {:>7}  parameter (hidden -> found)",
+        "hidden", "seed", "rpm", "load", "named", "baseline", "extended", "gain"
+    );
     for (class, seed, truth, d) in &results {
         let row = CLASSES.iter().position(|c| c == class).expect("class");
         let col = named_classes.iter().position(|c| *c == d.cause.name()).expect("cause in the matrix");
@@ -259,7 +266,12 @@ fn the_json_contract_holds_its_keys() {
     let mut r = rng(3);
     let (mut rig, speed_rpm, load_n) = base_case(&mut r, 3);
     rig.effects.synchronous_runout = Some(SynchronousRunout { amplitude_m: 0.3e-6, phase_deg: 10.0 });
-    let d = run(&Case { rig, truth: Truth { effect: "synchronous_runout", parameter: None, channel: None, speed_rpm, load_n }, seconds: 6.0, plan: multisine(RMS_N) });
+    let d = run(&Case {
+        rig,
+        truth: Truth { effect: "synchronous_runout", parameter: None, channel: None, speed_rpm, load_n },
+        seconds: 6.0,
+        plan: multisine(RMS_N),
+    });
     let v = serde_json::to_value(&d).expect("serialises");
     for key in ["cause", "reason", "candidates", "baseline_heldout_nrmse", "extended_heldout_nrmse", "gain", "parameters", "aliases", "evidence", "frame"] {
         assert!(v.get(key).is_some(), "missing `{key}` in {v}");
@@ -300,7 +312,12 @@ fn the_papers_finding_reproduced_as_a_diagnosis_the_same_point_is_linear_at_low_
     // Named because it matters: the coefficients move by more than the stated threshold over
     // the record's amplitude (Zhou's RV), and by less at the low level.
     let rv = |d: &Diagnosis| d.amplitude.as_ref().map_or(0.0, |a| a.largest_direct);
-    assert!(rv(&high) > oilfilm_diagnosis::amplitude::RV_THRESHOLD && rv(&low) < oilfilm_diagnosis::amplitude::RV_THRESHOLD, "RV {} (high) and {} (low)", rv(&high), rv(&low));
+    assert!(
+        rv(&high) > oilfilm_diagnosis::amplitude::RV_THRESHOLD && rv(&low) < oilfilm_diagnosis::amplitude::RV_THRESHOLD,
+        "RV {} (high) and {} (low)",
+        rv(&high),
+        rv(&low)
+    );
 }
 
 #[test]
@@ -311,7 +328,12 @@ fn aliases_are_reported_an_added_mass_and_a_wrong_housing_mass_cannot_be_told_ap
     let mut r = rng(404);
     let (mut rig, speed_rpm, load_n) = base_case(&mut r, 404);
     rig.effects.housing_mass_mismatch = Some(HousingMassMismatch { mass_error_kg: 90.0 });
-    let d = run(&Case { rig, truth: Truth { effect: "fluid_inertia", parameter: None, channel: None, speed_rpm, load_n }, seconds: SECONDS, plan: multisine(RMS_N) });
+    let d = run(&Case {
+        rig,
+        truth: Truth { effect: "fluid_inertia", parameter: None, channel: None, speed_rpm, load_n },
+        seconds: SECONDS,
+        plan: multisine(RMS_N),
+    });
     println!("housing 90 kg heavier than configured: {} | {} {}", d.cause, d.reason, selection_text(&d));
     for a in &d.aliases {
         println!("  alias {:?} separable {}: {}", a.pair, a.separable, a.evidence);

@@ -81,7 +81,8 @@ fn parameter_error(d: &Diagnosis, key: &str, truth: &Value) -> Result<Option<f64
 fn outside_records_are_named_with_their_parameters_and_the_updated_model_predicts_better() {
     let dir = records_dir();
     let answers: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("answers.json")).expect("answers.json")).expect("answers parse");
-    let mut cases: Vec<PathBuf> = std::fs::read_dir(&dir).expect("records").filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.join("record.txt.gz").is_file()).collect();
+    let mut cases: Vec<PathBuf> =
+        std::fs::read_dir(&dir).expect("records").filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.join("record.txt.gz").is_file()).collect();
     cases.sort();
     assert_eq!(cases.len(), 30, "the shared set holds 30 records");
 
@@ -103,7 +104,17 @@ fn outside_records_are_named_with_their_parameters_and_the_updated_model_predict
     results.sort_by(|a, b| a.0.cmp(&b.0));
     let seconds = start.elapsed().as_secs_f64();
 
-    let classes = ["amplitude_nonlinearity", "fluid_inertia", "channel_delay", "thermal_drift", "synchronous_runout", "probe_saturation", "support_friction", "none", "unexplained"];
+    let classes = [
+        "amplitude_nonlinearity",
+        "fluid_inertia",
+        "channel_delay",
+        "thermal_drift",
+        "synchronous_runout",
+        "probe_saturation",
+        "support_friction",
+        "none",
+        "unexplained",
+    ];
     let named_classes: Vec<&str> = classes.iter().copied().chain(["insufficient_data"]).collect();
     let mut matrix_counts = vec![vec![0usize; named_classes.len()]; classes.len()];
     let (mut right, mut failures) = (0usize, Vec::new());
@@ -162,8 +173,14 @@ fn outside_records_are_named_with_their_parameters_and_the_updated_model_predict
         }
         if expected == "none" {
             match &d.model_update {
-                Some(u) if u.improvement_factor >= 2.0 => param_text.push(format!("model update {}: {:.3} -> {:.3} ({:.1}x)", u.theory, u.nominal_heldout_nrmse, u.updated_heldout_nrmse, u.improvement_factor)),
-                Some(u) => failures.push(format!("{id}: the updated model predicts only {:.2}x better ({:.3} -> {:.3})", u.improvement_factor, u.nominal_heldout_nrmse, u.updated_heldout_nrmse)),
+                Some(u) if u.improvement_factor >= 2.0 => param_text.push(format!(
+                    "model update {}: {:.3} -> {:.3} ({:.1}x)",
+                    u.theory, u.nominal_heldout_nrmse, u.updated_heldout_nrmse, u.improvement_factor
+                )),
+                Some(u) => failures.push(format!(
+                    "{id}: the updated model predicts only {:.2}x better ({:.3} -> {:.3})",
+                    u.improvement_factor, u.nominal_heldout_nrmse, u.updated_heldout_nrmse
+                )),
                 None => failures.push(format!("{id}: no model update ({:?})", d.notes)),
             }
         }

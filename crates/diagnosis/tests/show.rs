@@ -10,11 +10,11 @@ use oilfilm_diagnosis::evidence::{self, PrepareOptions};
 use oilfilm_diagnosis::show::{TrendVariable, COEFFICIENT_NAMES};
 use oilfilm_diagnosis::{DiagnosisError, Show, ShowConfig};
 use oilfilm_identification::conditioning::RawRecord;
-use oilfilm_physics::daq::Calibration;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, SpeedSource};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
+use oilfilm_physics::daq::Calibration;
 use oilfilm_physics::effects::{FluidInertia, ThermalDrift};
 
 const SECONDS: f64 = 10.0;
@@ -25,7 +25,15 @@ fn show(raw: &RawRecord, cal: &Calibration, rig: &RigConfig, speed_rpm: f64, sou
     show_with(raw, cal, rig, speed_rpm, source, &PrepareOptions::default(), config)
 }
 
-fn show_with(raw: &RawRecord, cal: &Calibration, rig: &RigConfig, speed_rpm: f64, source: SpeedSource, prepare: &PrepareOptions, config: &ShowConfig) -> Result<Show, DiagnosisError> {
+fn show_with(
+    raw: &RawRecord,
+    cal: &Calibration,
+    rig: &RigConfig,
+    speed_rpm: f64,
+    source: SpeedSource,
+    prepare: &PrepareOptions,
+    config: &ShowConfig,
+) -> Result<Show, DiagnosisError> {
     config.validate()?;
     let p = evidence::prepare(raw, cal, rig, speed_rpm, source, prepare)?.map_err(|e| DiagnosisError::bad_input("record", e.0))?;
     oilfilm_diagnosis::show(&p, rig, None, config)
@@ -65,7 +73,10 @@ fn summary(label: &str, s: &Show, secs: f64) {
         println!("  {} windows, mean identified-model: {}", s.coefficients.windows.len(), txt.join(", "));
     }
     for c in &s.residual.components {
-        println!("  residual {:<28} x {:.3e} N ({:+.1} dB), y {:.3e} N ({:+.1} dB)", c.name, c.amplitude_n[0], c.db_above_floor[0], c.amplitude_n[1], c.db_above_floor[1]);
+        println!(
+            "  residual {:<28} x {:.3e} N ({:+.1} dB), y {:.3e} N ({:+.1} dB)",
+            c.name, c.amplitude_n[0], c.db_above_floor[0], c.amplitude_n[1], c.db_above_floor[1]
+        );
     }
     for n in &s.notes {
         println!("  note: {n}");
@@ -100,7 +111,8 @@ fn without_an_effect_the_model_predicts_motion_and_coefficients() {
         assert!(r.abs() < 0.03, "{n}: identified differs from the model by {:.2} %", 100.0 * r);
     }
     // Nothing trends notably: the coefficients scatter by about 1 % from window to window.
-    let notable: Vec<String> = s.trends.iter().filter(|t| t.is_notable()).map(|t| format!("{} vs {:?} (t = {:.1})", t.coefficient, t.variable, t.t_statistic)).collect();
+    let notable: Vec<String> =
+        s.trends.iter().filter(|t| t.is_notable()).map(|t| format!("{} vs {:?} (t = {:.1})", t.coefficient, t.variable, t.t_statistic)).collect();
     assert!(notable.is_empty(), "notable trends without an effect: {notable:?}");
     // The film model equilibrium sits where the probes say the journal is.
     let (mp, pp) = (s.operating.measured_position_m, s.operating.model_position_m);
@@ -141,7 +153,12 @@ fn fluid_inertia_makes_the_prediction_worse_and_the_stiffness_disagree() {
     summary("fluid inertia 80 kg, 41/73 Hz", &s, secs);
     // At the lines the linear model's error (the nonlinear film's intermodulation is not
     // there) grows with the hidden mass, most at the high line.
-    assert!(worst_line_error(&s) > 2.0 * worst_line_error(&base), "line error {:.4} vs {:.4} without the effect", worst_line_error(&s), worst_line_error(&base));
+    assert!(
+        worst_line_error(&s) > 2.0 * worst_line_error(&base),
+        "line error {:.4} vs {:.4} without the effect",
+        worst_line_error(&s),
+        worst_line_error(&base)
+    );
     // The K-C fit absorbs -w^2 M_a into the stiffness: identified kxx, kyy fall below the model.
     assert!(direct_stiffness_gap(&base) < 0.02, "without the effect: {:.2} %", 100.0 * direct_stiffness_gap(&base));
     assert!(direct_stiffness_gap(&s) > 0.04, "with 80 kg: {:.2} %", 100.0 * direct_stiffness_gap(&s));
@@ -162,7 +179,13 @@ fn thermal_drift_shows_as_a_significant_trend_against_temperature() {
         .filter(|t| t.variable == TrendVariable::TemperatureC && t.is_notable() && ["kxx", "kyy", "cxx", "cyy"].contains(&t.coefficient.as_str()))
         .collect();
     for t in s.trends.iter().filter(|t| t.variable == TrendVariable::TemperatureC) {
-        println!("  {} vs T: {:+.2} %/C, {:+.2} % over the range (t = {:.1})", t.coefficient, 100.0 * t.relative_slope_per_unit, 100.0 * t.relative_change_over_range, t.t_statistic);
+        println!(
+            "  {} vs T: {:+.2} %/C, {:+.2} % over the range (t = {:.1})",
+            t.coefficient,
+            100.0 * t.relative_slope_per_unit,
+            100.0 * t.relative_change_over_range,
+            t.t_statistic
+        );
     }
     assert!(!significant.is_empty(), "no direct coefficient trends significantly with temperature");
     let (base, _) = run(&model, &model);

@@ -34,7 +34,8 @@ fn comma_decimal(field: &str) -> bool {
 impl CsvRows {
     pub fn open(path: &Path, options: &CsvOptions) -> Result<Self> {
         let file = File::open(path).map_err(|e| ForeignError::io(format!("cannot open {}", path.display()), e))?;
-        let mut reader = csv::ReaderBuilder::new().delimiter(options.delimiter).has_headers(false).flexible(true).from_reader(BufReader::with_capacity(1 << 16, file));
+        let mut reader =
+            csv::ReaderBuilder::new().delimiter(options.delimiter).has_headers(false).flexible(true).from_reader(BufReader::with_capacity(1 << 16, file));
         let mut record = csv::ByteRecord::new();
         let bad = |line: Option<u64>, m: String| ForeignError::record(path, None, line.map(|l| format!("line {l}")), m);
         let read = |reader: &mut csv::Reader<BufReader<File>>, record: &mut csv::ByteRecord| -> Result<bool> {
@@ -43,10 +44,14 @@ impl CsvRows {
         if !read(&mut reader, &mut record)? {
             return Err(bad(None, "the file is empty: a header row naming the columns is needed".into()));
         }
-        let text = |r: &csv::ByteRecord| -> Vec<String> { r.iter().map(|f| String::from_utf8_lossy(f).trim().trim_start_matches('\u{feff}').to_string()).collect() };
+        let text =
+            |r: &csv::ByteRecord| -> Vec<String> { r.iter().map(|f| String::from_utf8_lossy(f).trim().trim_start_matches('\u{feff}').to_string()).collect() };
         let header = text(&record);
         if header.iter().all(|h| h.parse::<f64>().is_ok()) {
-            return Err(bad(Some(1), "the first row is numbers: a header row naming the columns is needed (the map's `from` names them; `index` counts them from 0)".into()));
+            return Err(bad(
+                Some(1),
+                "the first row is numbers: a header row naming the columns is needed (the map's `from` names them; `index` counts them from 0)".into(),
+            ));
         }
         let units = if options.units_row {
             if !read(&mut reader, &mut record)? {
@@ -85,7 +90,9 @@ impl CsvRows {
                 let hits: Vec<usize> = self.header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
                 match hits.as_slice() {
                     [one] => Ok(*one),
-                    [] => Err(bad(format!("no column `{name}` in the header ({})", self.header.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", ")))),
+                    [] => {
+                        Err(bad(format!("no column `{name}` in the header ({})", self.header.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", "))))
+                    }
                     many => Err(bad(format!("the header names `{name}` {} times (columns {:?})", many.len(), many))),
                 }
             }
@@ -99,7 +106,10 @@ impl CsvRows {
     pub fn look_ahead(&mut self, n: usize) -> Result<()> {
         while self.ahead.len() < n {
             let line = self.reader.position().line();
-            let more = self.reader.read_byte_record(&mut self.record).map_err(|e| ForeignError::record(&self.path, None, e.position().map(|p| format!("line {}", p.line())), format!("not readable as CSV: {e}")))?;
+            let more = self
+                .reader
+                .read_byte_record(&mut self.record)
+                .map_err(|e| ForeignError::record(&self.path, None, e.position().map(|p| format!("line {}", p.line())), format!("not readable as CSV: {e}")))?;
             if !more {
                 break;
             }
@@ -140,7 +150,12 @@ impl CsvRows {
         let Some((line, r)) = self.ahead.pop_front() else { return Ok(false) };
         if r.len() != self.header.len() {
             let hint = if self.reader_delimiter_is_comma(&r) { " (a comma decimal separator splits numbers in two: write decimal points)" } else { "" };
-            return Err(ForeignError::record(&self.path, None, Some(format!("line {line} (data row {})", self.row)), format!("{} fields, the header has {}: the rows are ragged{hint}", r.len(), self.header.len())));
+            return Err(ForeignError::record(
+                &self.path,
+                None,
+                Some(format!("line {line} (data row {})", self.row)),
+                format!("{} fields, the header has {}: the rows are ragged{hint}", r.len(), self.header.len()),
+            ));
         }
         for (c, label) in columns {
             out.push(self.parse(&r, line, *c, label)?);

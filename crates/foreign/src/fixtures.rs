@@ -198,8 +198,11 @@ pub fn mat(path: &Path, columns: &[(&str, &[f64])], scalars: &[(&str, f64)], lay
             variables.extend(scalars.iter().map(|(name, v)| double_matrix(name, 1, 1, std::iter::once(*v))));
         }
         MatLayout::Struct(name) => {
-            let fields: Vec<(&str, Vec<u8>)> =
-                columns.iter().map(|(f, v)| (*f, double_matrix("", v.len(), 1, v.iter().copied()))).chain(scalars.iter().map(|(f, v)| (*f, double_matrix("", 1, 1, std::iter::once(*v))))).collect();
+            let fields: Vec<(&str, Vec<u8>)> = columns
+                .iter()
+                .map(|(f, v)| (*f, double_matrix("", v.len(), 1, v.iter().copied())))
+                .chain(scalars.iter().map(|(f, v)| (*f, double_matrix("", 1, 1, std::iter::once(*v)))))
+                .collect();
             let mut body = Vec::new();
             element(&mut body, 6, &[2, 0, 0, 0, 0, 0, 0, 0]);
             element(&mut body, 5, &[1u32.to_le_bytes(), 1u32.to_le_bytes()].concat());
@@ -207,12 +210,14 @@ pub fn mat(path: &Path, columns: &[(&str, &[f64])], scalars: &[(&str, f64)], lay
             // Field name length as a small data element.
             body.extend(((4u32 << 16) | 5).to_le_bytes());
             body.extend(32u32.to_le_bytes());
-            let names: Vec<u8> = fields.iter().flat_map(|(f, _)| {
-                let mut b = f.as_bytes().to_vec();
-                b.resize(32, 0);
-                b
-            })
-            .collect();
+            let names: Vec<u8> = fields
+                .iter()
+                .flat_map(|(f, _)| {
+                    let mut b = f.as_bytes().to_vec();
+                    b.resize(32, 0);
+                    b
+                })
+                .collect();
             element(&mut body, 1, &names);
             for (_, m) in &fields {
                 body.extend(m);

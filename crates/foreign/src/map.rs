@@ -242,9 +242,17 @@ pub enum Speed {
     RigFile,
     Rpm(f64),
     /// A file property (TDMS: of the file, or `Group/name` of a group; .mat: a scalar variable).
-    Property { name: String, unit: SpeedUnit, scaling: Scaling },
+    Property {
+        name: String,
+        unit: SpeedUnit,
+        scaling: Scaling,
+    },
     /// A channel of the file, sampled with the others: each frame's status carries its mean.
-    Channel { source: Source, unit: SpeedUnit, scaling: Scaling },
+    Channel {
+        source: Source,
+        unit: SpeedUnit,
+        scaling: Scaling,
+    },
 }
 
 /// Where the bearing temperature comes from when no channel gives it.
@@ -383,7 +391,9 @@ impl ChannelMap {
             ("simultaneous", None) => Multiplexer::Simultaneous,
             ("sequential", Some(dt)) if dt.is_finite() && dt > 0.0 => Multiplexer::Sequential { channel_interval_s: dt },
             ("sequential", Some(dt)) => return Err(bad("timing.channel_interval_s", format!("must be finite and > 0, got {dt}"))),
-            ("sequential", None) => return Err(bad("timing.channel_interval_s", "multiplexer = \"sequential\" needs the time between two conversions, s".into())),
+            ("sequential", None) => {
+                return Err(bad("timing.channel_interval_s", "multiplexer = \"sequential\" needs the time between two conversions, s".into()))
+            }
             ("offsets", None) => Multiplexer::Offsets,
             ("simultaneous" | "offsets", Some(_)) => return Err(bad("timing.channel_interval_s", "applies only to multiplexer = \"sequential\"".into())),
             (other, _) => return Err(bad("timing.multiplexer", format!("`{other}`: expected simultaneous, sequential or offsets"))),
@@ -393,7 +403,8 @@ impl ChannelMap {
         let mut channels: Vec<MappedChannel> = Vec::with_capacity(file.channel.len());
         for (k, c) in file.channel.iter().enumerate() {
             let key = format!("channel[{k}]");
-            let rig = ChannelId::parse(c.rig.trim()).map_err(|_| bad(&format!("{key}.rig"), format!("`{}` is not a channel of the rig ({})", c.rig, ChannelId::all_names())))?;
+            let rig = ChannelId::parse(c.rig.trim())
+                .map_err(|_| bad(&format!("{key}.rig"), format!("`{}` is not a channel of the rig ({})", c.rig, ChannelId::all_names())))?;
             if let Some(first) = channels.iter().find(|m| m.rig == rig) {
                 return Err(bad(&format!("{key}.rig"), format!("`{rig}` is mapped twice: {} maps it already", first.key)));
             }
@@ -408,7 +419,12 @@ impl ChannelMap {
             let offset_s = match (&multiplexer, c.offset_s) {
                 (Multiplexer::Offsets, Some(o)) if o.is_finite() && o >= 0.0 => Some(o),
                 (Multiplexer::Offsets, Some(o)) => return Err(bad(&format!("{key}.offset_s"), format!("must be finite and >= 0, got {o}"))),
-                (Multiplexer::Offsets, None) => return Err(bad(&format!("{key}.offset_s"), "multiplexer = \"offsets\" needs each channel's conversion time after the scan start, s".into())),
+                (Multiplexer::Offsets, None) => {
+                    return Err(bad(
+                        &format!("{key}.offset_s"),
+                        "multiplexer = \"offsets\" needs each channel's conversion time after the scan start, s".into(),
+                    ))
+                }
                 (_, Some(_)) => return Err(bad(&format!("{key}.offset_s"), "applies only to multiplexer = \"offsets\"".into())),
                 (_, None) => None,
             };
@@ -420,11 +436,22 @@ impl ChannelMap {
             (Some(t), false) if t.celsius.is_finite() => Temperature::Celsius(t.celsius),
             (Some(t), false) => return Err(bad("temperature.celsius", format!("must be finite, got {}", t.celsius))),
             (None, true) => Temperature::Channel,
-            (None, false) => return Err(bad("channel", "the rig's `temperature` is not mapped: map a channel to it, or give [temperature] celsius = ...".into())),
+            (None, false) => {
+                return Err(bad("channel", "the rig's `temperature` is not mapped: map a channel to it, or give [temperature] celsius = ...".into()))
+            }
         };
-        let missing: Vec<&str> = ChannelId::ALL.iter().filter(|c| **c != ChannelId::Temperature && !channels.iter().any(|m| m.rig == **c)).map(|c| c.name()).collect();
+        let missing: Vec<&str> =
+            ChannelId::ALL.iter().filter(|c| **c != ChannelId::Temperature && !channels.iter().any(|m| m.rig == **c)).map(|c| c.name()).collect();
         if !missing.is_empty() {
-            return Err(bad("channel", format!("the rig's {} {} not mapped (each of {} needs a [[channel]])", missing.join(", "), if missing.len() == 1 { "is" } else { "are" }, ChannelId::all_names())));
+            return Err(bad(
+                "channel",
+                format!(
+                    "the rig's {} {} not mapped (each of {} needs a [[channel]])",
+                    missing.join(", "),
+                    if missing.len() == 1 { "is" } else { "are" },
+                    ChannelId::all_names()
+                ),
+            ));
         }
 
         let speed = match &file.speed {
@@ -441,7 +468,9 @@ impl ChannelMap {
                         }
                         Speed::Rpm(rpm)
                     }
-                    (None, Some(name), false) => Speed::Property { name: name.clone(), unit, scaling: scaling_of("speed", s.scale, s.offset, None).map_err(|(k, m)| bad(&k, m))? },
+                    (None, Some(name), false) => {
+                        Speed::Property { name: name.clone(), unit, scaling: scaling_of("speed", s.scale, s.offset, None).map_err(|(k, m)| bad(&k, m))? }
+                    }
                     (None, None, true) => {
                         let source = source_of("speed", s.from.as_deref(), s.index, format).map_err(|(k, m)| bad(&k, m))?;
                         if let Some(c) = channels.iter().find(|m| m.source == source) {
@@ -449,7 +478,9 @@ impl ChannelMap {
                         }
                         Speed::Channel { source, unit, scaling: scaling_of("speed", s.scale, s.offset, None).map_err(|(k, m)| bad(&k, m))? }
                     }
-                    _ => return Err(bad("speed", "give one of rpm (a number), property (a file property or scalar variable) or from/index (a channel)".into())),
+                    _ => {
+                        return Err(bad("speed", "give one of rpm (a number), property (a file property or scalar variable) or from/index (a channel)".into()))
+                    }
                 }
             }
         };
@@ -494,9 +525,16 @@ fn source_of(key: &str, from: Option<&str>, index: Option<usize>, format: Option
     }
     match (from, index, format) {
         (None, None, _) => Err((key.to_string(), "says neither from (a name) nor index (a position from 0) for the file's channel".into())),
-        (None, Some(_), Some(Format::Tdms)) => Err((format!("{key}.index"), "a TDMS channel is found by from = \"Group/Channel\", or from = \"Group\" with index = its position in the group".into())),
-        (None, Some(_), Some(Format::Mat)) => Err((format!("{key}.index"), "a .mat column needs from = the matrix variable (index = its column from 0)".into())),
-        (Some(_), Some(_), Some(Format::Csv)) => Err((key.to_string(), "a CSV column is from (its name in the header row) or index (its position from 0), not both".into())),
+        (None, Some(_), Some(Format::Tdms)) => Err((
+            format!("{key}.index"),
+            "a TDMS channel is found by from = \"Group/Channel\", or from = \"Group\" with index = its position in the group".into(),
+        )),
+        (None, Some(_), Some(Format::Mat)) => {
+            Err((format!("{key}.index"), "a .mat column needs from = the matrix variable (index = its column from 0)".into()))
+        }
+        (Some(_), Some(_), Some(Format::Csv)) => {
+            Err((key.to_string(), "a CSV column is from (its name in the header row) or index (its position from 0), not both".into()))
+        }
         _ => Ok(Source { from: from.map(str::to_string), index }),
     }
 }

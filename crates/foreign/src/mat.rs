@@ -273,7 +273,8 @@ impl Parser<'_> {
                 if len == 0 && !names.is_empty() {
                     return Err(format!("`{name}`: field names of length 0"));
                 }
-                let fields: Vec<String> = if len == 0 { Vec::new() } else { names.chunks(len).map(|c| String::from_utf8_lossy(c).trim_end_matches('\0').to_string()).collect() };
+                let fields: Vec<String> =
+                    if len == 0 { Vec::new() } else { names.chunks(len).map(|c| String::from_utf8_lossy(c).trim_end_matches('\0').to_string()).collect() };
                 self.arrays.push(Array { name: name.clone(), dims: dims.clone(), kind: Kind::Other("a struct".into()), data: None });
                 for k in 0..count {
                     for f in &fields {
@@ -343,7 +344,11 @@ impl MatFile {
         }
         let text = String::from_utf8_lossy(&header[..116]);
         if text.starts_with("MATLAB 7.3 MAT-file") || header[..8] == *b"\x89HDF\r\n\x1a\n" {
-            return Err(bad(None, "a MATLAB 7.3 MAT-file (HDF5) is not read (ADR 0030): in MATLAB `save(file, '-v7')` (variables under 2 GB), or export the channels as CSV".into()));
+            return Err(bad(
+                None,
+                "a MATLAB 7.3 MAT-file (HDF5) is not read (ADR 0030): in MATLAB `save(file, '-v7')` (variables under 2 GB), or export the channels as CSV"
+                    .into(),
+            ));
         }
         if !text.starts_with("MATLAB 5.0 MAT-file") {
             return Err(bad(Some(0), format!("not a MAT-file: its header begins {:?}", text.chars().take(20).collect::<String>())));
@@ -397,7 +402,21 @@ impl MatFile {
 
     /// The names of the numeric arrays, for a message.
     pub fn names(&self) -> String {
-        let v: Vec<String> = self.arrays.iter().map(|a| format!("`{}` ({} {})", a.name, a.dims_text(), match &a.kind { Kind::Numeric => "numbers", Kind::Other(w) => w })).collect();
+        let v: Vec<String> = self
+            .arrays
+            .iter()
+            .map(|a| {
+                format!(
+                    "`{}` ({} {})",
+                    a.name,
+                    a.dims_text(),
+                    match &a.kind {
+                        Kind::Numeric => "numbers",
+                        Kind::Other(w) => w,
+                    }
+                )
+            })
+            .collect();
         if v.is_empty() {
             "none".into()
         } else {
@@ -410,7 +429,14 @@ impl MatFile {
         let bad = |m: String| ForeignError::record(&self.path, Some(format!("`{name}`")), None, m);
         let a = self.find(name).ok_or_else(|| bad(format!("no such variable or field; the file has {}", self.names())))?;
         if a.kind != Kind::Numeric || a.len() != 1 {
-            return Err(bad(format!("is {} {}, not one number", a.dims_text(), match &a.kind { Kind::Numeric => "numbers", Kind::Other(w) => w })));
+            return Err(bad(format!(
+                "is {} {}, not one number",
+                a.dims_text(),
+                match &a.kind {
+                    Kind::Numeric => "numbers",
+                    Kind::Other(w) => w,
+                }
+            )));
         }
         let mut s = self.stream(name, None, name)?;
         let mut v = Vec::new();
@@ -448,7 +474,17 @@ impl MatFile {
                 Box::new(z)
             }
         };
-        Ok(ChannelStream { path: self.path.clone(), label: label.to_string(), source, storage: data.storage, esize, big: self.big, left: count, small: data.small.clone().map(|v| v.into_iter().skip((skip / esize) as usize).take(count as usize).collect()), buf: Vec::new() })
+        Ok(ChannelStream {
+            path: self.path.clone(),
+            label: label.to_string(),
+            source,
+            storage: data.storage,
+            esize,
+            big: self.big,
+            left: count,
+            small: data.small.clone().map(|v| v.into_iter().skip((skip / esize) as usize).take(count as usize).collect()),
+            buf: Vec::new(),
+        })
     }
 }
 
@@ -484,9 +520,14 @@ impl ChannelStream {
         }
         self.buf.resize(n * self.esize as usize, 0);
         let at = self.source.pos();
-        self.source
-            .read_exact(&mut self.buf)
-            .map_err(|e| ForeignError::record(&self.path, Some(self.label.clone()), Some(format!("byte {at} of the variable's values")), format!("cannot read the values: {e}")))?;
+        self.source.read_exact(&mut self.buf).map_err(|e| {
+            ForeignError::record(
+                &self.path,
+                Some(self.label.clone()),
+                Some(format!("byte {at} of the variable's values")),
+                format!("cannot read the values: {e}"),
+            )
+        })?;
         out.extend(self.buf.chunks_exact(self.esize as usize).map(|c| decode(self.storage, c, self.big)));
         self.left -= n as u64;
         Ok(n)

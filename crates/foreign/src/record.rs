@@ -13,7 +13,7 @@ use oilfilm_physics::daq::{Calibration, ChannelId};
 
 use crate::csv_file::CsvRows;
 use crate::error::{ForeignError, Result};
-use crate::map::{ChannelMap, Format, MappedChannel, Multiplexer, Rate, Speed, SpeedUnit, Scaling, Temperature, Unit};
+use crate::map::{ChannelMap, Format, MappedChannel, Multiplexer, Rate, Scaling, Speed, SpeedUnit, Temperature, Unit};
 use crate::{mat, tdms};
 
 /// Seconds from 1904-01-01 (LabVIEW's epoch) to 1970-01-01.
@@ -94,7 +94,9 @@ pub fn detect_format(path: &Path, map: &ChannelMap) -> Result<Format> {
         return Ok(f);
     }
     let mut head = [0u8; 6];
-    let n = std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut head)).map_err(|e| ForeignError::io(format!("cannot read {}", path.display()), e))?;
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+        .map_err(|e| ForeignError::io(format!("cannot read {}", path.display()), e))?;
     if head[..n.min(4)] == *b"TDSm" {
         return Ok(Format::Tdms);
     }
@@ -123,14 +125,18 @@ impl ForeignRecord {
                 let mut objects = Vec::new();
                 for c in &mapped {
                     let from = c.source.from.as_deref().unwrap_or("");
-                    let o = f.find(from, c.source.index).ok_or_else(|| at_file(Some(c.label()), format!("mapped by the map's {}, but the file has no such channel (it has {})", c.key, f.channel_names())))?;
+                    let o = f.find(from, c.source.index).ok_or_else(|| {
+                        at_file(Some(c.label()), format!("mapped by the map's {}, but the file has no such channel (it has {})", c.key, f.channel_names()))
+                    })?;
                     objects.push(o);
                 }
                 let mut streams: Vec<Stream> = mapped.iter().zip(&objects).map(|(c, o)| f.stream(o, &c.label()).map(Stream::Tdms)).collect::<Result<_>>()?;
                 let speed = match &map.speed {
                     Speed::Channel { source, unit, scaling } => {
                         let label = format!("{source} (speed)");
-                        let o = f.find(source.from.as_deref().unwrap_or(""), source.index).ok_or_else(|| at_file(Some(label.clone()), format!("the map's [speed] names it, but the file has no such channel (it has {})", f.channel_names())))?;
+                        let o = f.find(source.from.as_deref().unwrap_or(""), source.index).ok_or_else(|| {
+                            at_file(Some(label.clone()), format!("the map's [speed] names it, but the file has no such channel (it has {})", f.channel_names()))
+                        })?;
                         objects.push(o);
                         streams.push(Stream::Tdms(f.stream(o, &label)?));
                         speed_scaling = Some((*unit, *scaling));
@@ -142,7 +148,12 @@ impl ForeignRecord {
                             Some(g) => f.group(g),
                             None => Some(f.root()),
                         };
-                        let v = owner.and_then(|o| o.property(prop)).and_then(tdms::Property::as_f64).ok_or_else(|| map.error("speed.property", format!("{}: no numeric property `{name}` on the file{}", path.display(), if group.is_some() { "'s group" } else { "" })))?;
+                        let v = owner.and_then(|o| o.property(prop)).and_then(tdms::Property::as_f64).ok_or_else(|| {
+                            map.error(
+                                "speed.property",
+                                format!("{}: no numeric property `{name}` on the file{}", path.display(), if group.is_some() { "'s group" } else { "" }),
+                            )
+                        })?;
                         RecordSpeed::Rpm { rpm: unit.to_rpm(scaling.apply(v)), from: format!("property `{name}` of {}", path.display()) }
                     }
                     other => speed_of(other),
@@ -152,8 +163,17 @@ impl ForeignRecord {
                     Rate::From(prop) => {
                         let mut rate = None;
                         for (c, o) in mapped.iter().zip(&objects) {
-                            let value = o.property(prop).and_then(tdms::Property::as_f64).or_else(|| o.group.as_deref().and_then(|g| f.group(g)).and_then(|g| g.property(prop)).and_then(tdms::Property::as_f64)).or_else(|| f.root().property(prop).and_then(tdms::Property::as_f64));
-                            let v = value.ok_or_else(|| at_file(Some(c.label()), format!("the map's timing.sample_rate_from names property `{prop}`, which neither the channel, its group nor the file has")))?;
+                            let value = o
+                                .property(prop)
+                                .and_then(tdms::Property::as_f64)
+                                .or_else(|| o.group.as_deref().and_then(|g| f.group(g)).and_then(|g| g.property(prop)).and_then(tdms::Property::as_f64))
+                                .or_else(|| f.root().property(prop).and_then(tdms::Property::as_f64));
+                            let v = value.ok_or_else(|| {
+                                at_file(
+                                    Some(c.label()),
+                                    format!("the map's timing.sample_rate_from names property `{prop}`, which neither the channel, its group nor the file has"),
+                                )
+                            })?;
                             let hz = if prop == "wf_increment" { 1.0 / v } else { v };
                             if !(hz.is_finite() && hz > 0.0) {
                                 return Err(at_file(Some(c.label()), format!("property `{prop}` = {v} gives no sample rate")));
@@ -161,7 +181,12 @@ impl ForeignRecord {
                             match rate {
                                 None => rate = Some(hz),
                                 Some(r) if r == hz => {}
-                                Some(r) => return Err(at_file(Some(c.label()), format!("property `{prop}` gives {hz} Hz, the first mapped channel {r} Hz: the channels were not sampled together"))),
+                                Some(r) => {
+                                    return Err(at_file(
+                                        Some(c.label()),
+                                        format!("property `{prop}` gives {hz} Hz, the first mapped channel {r} Hz: the channels were not sampled together"),
+                                    ))
+                                }
                             }
                         }
                         rate.unwrap_or(0.0)
@@ -172,7 +197,8 @@ impl ForeignRecord {
                     _ => None,
                 });
                 let lens: Vec<u64> = objects.iter().map(|o| o.len()).collect();
-                let labels: Vec<String> = mapped.iter().map(MappedChannel::label).chain(matches!(speed, RecordSpeed::Channel { .. }).then(|| "speed".to_string())).collect();
+                let labels: Vec<String> =
+                    mapped.iter().map(MappedChannel::label).chain(matches!(speed, RecordSpeed::Channel { .. }).then(|| "speed".to_string())).collect();
                 let n = same_length(path, &lens, &labels)?;
                 (Columns::Streams(streams), rate, start, Some(n), speed)
             }
@@ -197,7 +223,9 @@ impl ForeignRecord {
                         speed_scaling = Some((*unit, *scaling));
                         RecordSpeed::Channel { label }
                     }
-                    Speed::Property { name, unit, scaling } => RecordSpeed::Rpm { rpm: unit.to_rpm(scaling.apply(f.scalar(name)?)), from: format!("variable `{name}` of {}", path.display()) },
+                    Speed::Property { name, unit, scaling } => {
+                        RecordSpeed::Rpm { rpm: unit.to_rpm(scaling.apply(f.scalar(name)?)), from: format!("variable `{name}` of {}", path.display()) }
+                    }
                     other => speed_of(other),
                 };
                 let rate = match &map.rate {
@@ -226,7 +254,12 @@ impl ForeignRecord {
                             _ => None,
                         };
                         if unit != Some(c.unit) {
-                            return Err(ForeignError::record(path, Some(c.label()), Some(format!("line 2, column {col}")), format!("the units row says `{said}`, the map's {}.unit `{}`: fix the map (or give its scale)", c.key, c.unit.name())));
+                            return Err(ForeignError::record(
+                                path,
+                                Some(c.label()),
+                                Some(format!("line 2, column {col}")),
+                                format!("the units row says `{said}`, the map's {}.unit `{}`: fix the map (or give its scale)", c.key, c.unit.name()),
+                            ));
                         }
                     }
                     columns.push((col, c.label()));
@@ -284,7 +317,9 @@ impl ForeignRecord {
         for (c, o) in mapped.iter().zip(&offsets_s) {
             if *o >= period {
                 let key = if matches!(map.multiplexer, Multiplexer::Offsets) { format!("{}.offset_s", c.key) } else { "timing.channel_interval_s".to_string() };
-                return Err(map.error(&key, format!("`{}` is converted {o} s after the scan starts, not within the scan period {period} s at {rate} Hz", c.rig)));
+                return Err(
+                    map.error(&key, format!("`{}` is converted {o} s after the scan starts, not within the scan period {period} s at {rate} Hz", c.rig))
+                );
             }
         }
         let constant_temperature = match map.temperature {
@@ -363,10 +398,17 @@ impl ForeignRecord {
                 let x = self.buf[c][k];
                 let mut v = m.convert(x);
                 if !self.volts && m.unit.is_volts() {
-                    v = self.calibration.to_si(m.rig, v).map_err(|e| ForeignError::record(&self.path, Some(m.label()), Some(format!("scan {scan}")), format!("{x} V through the rig's calibration: {e}")))?;
+                    v = self.calibration.to_si(m.rig, v).map_err(|e| {
+                        ForeignError::record(&self.path, Some(m.label()), Some(format!("scan {scan}")), format!("{x} V through the rig's calibration: {e}"))
+                    })?;
                 }
                 if !v.is_finite() {
-                    return Err(ForeignError::record(&self.path, Some(m.label()), Some(format!("scan {scan}")), format!("the value {x} is not a finite number")));
+                    return Err(ForeignError::record(
+                        &self.path,
+                        Some(m.label()),
+                        Some(format!("scan {scan}")),
+                        format!("the value {x} is not a finite number"),
+                    ));
                 }
                 block.values.push(v);
             }

@@ -45,7 +45,10 @@ pub enum Property {
     Bool(bool),
     Text(String),
     /// Seconds since 1904-01-01 UTC and the fraction in 2^-64 s.
-    Time { seconds: i64, fraction: u64 },
+    Time {
+        seconds: i64,
+        fraction: u64,
+    },
 }
 
 impl Property {
@@ -283,8 +286,16 @@ impl TdmsFile {
             let mut lead = [0u8; LEAD_IN as usize];
             reader.read_exact(&mut lead).map_err(|e| ForeignError::io(format!("cannot read {}", path.display()), e))?;
             if &lead[..4] != b"TDSm" {
-                let what = if &lead[..4] == b"TDSh" { "`TDSh`: this is a .tdms_index file; give the .tdms file beside it".to_string() } else { format!("{:?}", String::from_utf8_lossy(&lead[..4])) };
-                return Err(bad(segment, pos, format!("expected a segment's tag `TDSm`, found {what}{}", if segment == 0 { " (not a TDMS file)" } else { ": the file is damaged" })));
+                let what = if &lead[..4] == b"TDSh" {
+                    "`TDSh`: this is a .tdms_index file; give the .tdms file beside it".to_string()
+                } else {
+                    format!("{:?}", String::from_utf8_lossy(&lead[..4]))
+                };
+                return Err(bad(
+                    segment,
+                    pos,
+                    format!("expected a segment's tag `TDSm`, found {what}{}", if segment == 0 { " (not a TDMS file)" } else { ": the file is damaged" }),
+                ));
             }
             let toc = u32::from_le_bytes([lead[4], lead[5], lead[6], lead[7]]);
             let big = toc & TOC_BIG_ENDIAN != 0;
@@ -295,7 +306,14 @@ impl TdmsFile {
                 return Err(bad(segment, pos, "the segment was never finished by its writer (its length is 0xFFFFFFFFFFFFFFFF): the acquisition stopped while writing, and the file is truncated".into()));
             }
             let end = pos.checked_add(LEAD_IN).and_then(|p| p.checked_add(next)).filter(|&e| e <= file_len).ok_or_else(|| {
-                bad(segment, pos, format!("the segment says {next} bytes follow its lead-in, but the file ends {} bytes after it: the file is truncated", file_len - pos - LEAD_IN))
+                bad(
+                    segment,
+                    pos,
+                    format!(
+                        "the segment says {next} bytes follow its lead-in, but the file ends {} bytes after it: the file is truncated",
+                        file_len - pos - LEAD_IN
+                    ),
+                )
             })?;
             if raw_offset > next {
                 return Err(bad(segment, pos, format!("its metadata ({raw_offset} bytes) is longer than the segment ({next} bytes)")));
@@ -316,12 +334,18 @@ impl TdmsFile {
                     let id = match by_path.get(&object_path) {
                         Some(&id) => id,
                         None => {
-                            let names = split_path(&object_path).ok_or_else(|| bad(segment, pos, format!("object path `{object_path}` is not of the form /'group'/'channel'")))?;
+                            let names = split_path(&object_path)
+                                .ok_or_else(|| bad(segment, pos, format!("object path `{object_path}` is not of the form /'group'/'channel'")))?;
                             if names.len() > 2 {
                                 return Err(bad(segment, pos, format!("object path `{object_path}` is deeper than group/channel")));
                             }
                             let id = objects.len();
-                            objects.push(Object { path: object_path.clone(), group: names.first().cloned(), channel: names.get(1).cloned(), ..Default::default() });
+                            objects.push(Object {
+                                path: object_path.clone(),
+                                group: names.first().cloned(),
+                                channel: names.get(1).cloned(),
+                                ..Default::default()
+                            });
                             by_path.insert(object_path.clone(), id);
                             id
                         }
@@ -329,11 +353,15 @@ impl TdmsFile {
                     let index_len = m.u32().ok_or_else(|| short(&m))?;
                     let index = match index_len {
                         NO_DATA => None,
-                        SAME_AS_BEFORE => Some(*last_index.get(&id).ok_or_else(|| bad(segment, pos, format!("`{object_path}` repeats a raw data index it never had")))?),
+                        SAME_AS_BEFORE => {
+                            Some(*last_index.get(&id).ok_or_else(|| bad(segment, pos, format!("`{object_path}` repeats a raw data index it never had")))?)
+                        }
                         DAQMX_FORMAT_CHANGING | DAQMX_DIGITAL_LINE => {
-                            let (data_type, _dim, n) = (m.u32().ok_or_else(|| short(&m))?, m.u32().ok_or_else(|| short(&m))?, m.u64().ok_or_else(|| short(&m))?);
+                            let (data_type, _dim, n) =
+                                (m.u32().ok_or_else(|| short(&m))?, m.u32().ok_or_else(|| short(&m))?, m.u64().ok_or_else(|| short(&m))?);
                             let scalers = m.u32().ok_or_else(|| short(&m))? as usize;
-                            m.take(scalers.checked_mul(if index_len == DAQMX_FORMAT_CHANGING { 20 } else { 17 }).ok_or_else(|| short(&m))?).ok_or_else(|| short(&m))?;
+                            m.take(scalers.checked_mul(if index_len == DAQMX_FORMAT_CHANGING { 20 } else { 17 }).ok_or_else(|| short(&m))?)
+                                .ok_or_else(|| short(&m))?;
                             let widths = m.u32().ok_or_else(|| short(&m))? as usize;
                             let mut width = 0u64;
                             for k in 0..widths {
@@ -355,7 +383,9 @@ impl TdmsFile {
                             let bytes = if data_type == TYPE_STRING {
                                 m.u64().ok_or_else(|| short(&m))?
                             } else {
-                                let size = type_size(data_type).ok_or_else(|| bad(segment, pos, format!("`{object_path}` holds {}, which has no fixed size this reader knows", type_name(data_type))))?;
+                                let size = type_size(data_type).ok_or_else(|| {
+                                    bad(segment, pos, format!("`{object_path}` holds {}, which has no fixed size this reader knows", type_name(data_type)))
+                                })?;
                                 n.checked_mul(size).ok_or_else(|| bad(segment, pos, format!("`{object_path}`: {n} values overflow")))?
                             };
                             Some(RawIndex { data_type, count: n, bytes })
@@ -374,9 +404,11 @@ impl TdmsFile {
                     }
                     let properties = m.u32().ok_or_else(|| short(&m))?;
                     for _ in 0..properties {
-                        let name = m.string().ok_or_else(|| short(&m))?.map_err(|()| bad(segment, pos, format!("a property name of `{object_path}` is not UTF-8")))?;
+                        let name =
+                            m.string().ok_or_else(|| short(&m))?.map_err(|()| bad(segment, pos, format!("a property name of `{object_path}` is not UTF-8")))?;
                         let code = m.u32().ok_or_else(|| short(&m))?;
-                        let value = m.value(code).ok_or_else(|| short(&m))?.map_err(|why| bad(segment, pos, format!("`{object_path}` property `{name}`: {why}")))?;
+                        let value =
+                            m.value(code).ok_or_else(|| short(&m))?.map_err(|why| bad(segment, pos, format!("`{object_path}` property `{name}`: {why}")))?;
                         let props = &mut objects[id].properties;
                         props.retain(|(n, _)| *n != name);
                         props.push((name, value));
@@ -398,13 +430,21 @@ impl TdmsFile {
                     return Err(bad(segment, pos, format!("{raw} bytes of raw data but no object with data in the segment")));
                 }
                 if !raw.is_multiple_of(chunk) {
-                    return Err(bad(segment, pos, format!("its {raw} bytes of raw data are not a whole number of {chunk}-byte chunks: the segment is damaged or truncated")));
+                    return Err(bad(
+                        segment,
+                        pos,
+                        format!("its {raw} bytes of raw data are not a whole number of {chunk}-byte chunks: the segment is damaged or truncated"),
+                    ));
                 }
                 let interleaved = toc & TOC_INTERLEAVED != 0;
                 if interleaved {
                     let n = active.first().map_or(0, |(_, ix)| ix.count);
                     if let Some((id, ix)) = active.iter().find(|(_, ix)| ix.count != n || ix.data_type == TYPE_STRING) {
-                        return Err(bad(segment, pos, format!("interleaved data with `{}` holding {} {} values against {n}", objects[*id].path, ix.count, type_name(ix.data_type))));
+                        return Err(bad(
+                            segment,
+                            pos,
+                            format!("interleaved data with `{}` holding {} {} values against {n}", objects[*id].path, ix.count, type_name(ix.data_type)),
+                        ));
                     }
                 }
                 let row: u64 = active.iter().map(|(_, ix)| ix.bytes / ix.count.max(1)).sum();
@@ -414,13 +454,21 @@ impl TdmsFile {
                     for (id, ix) in &active {
                         let o = &mut objects[*id];
                         if o.data_type.is_some_and(|t| t != ix.data_type) && ix.count > 0 {
-                            return Err(bad(segment, pos, format!("`{}` changes its data type from {} to {}", o.path, type_name(o.data_type.unwrap_or(0)), type_name(ix.data_type))));
+                            return Err(bad(
+                                segment,
+                                pos,
+                                format!("`{}` changes its data type from {} to {}", o.path, type_name(o.data_type.unwrap_or(0)), type_name(ix.data_type)),
+                            ));
                         }
                         if ix.count > 0 {
                             o.data_type = Some(ix.data_type);
                         }
                         let size = ix.bytes / ix.count.max(1);
-                        let run = if interleaved { Run { offset: at, count: ix.count, stride: row, big_endian: big, segment } } else { Run { offset: at, count: ix.count, stride: size, big_endian: big, segment } };
+                        let run = if interleaved {
+                            Run { offset: at, count: ix.count, stride: row, big_endian: big, segment }
+                        } else {
+                            Run { offset: at, count: ix.count, stride: size, big_endian: big, segment }
+                        };
                         at += if interleaved { size } else { ix.bytes };
                         if run.count == 0 {
                             continue;
@@ -429,7 +477,11 @@ impl TdmsFile {
                         match o.runs.last_mut() {
                             // A contiguous continuation (the next chunk of a channel alone in
                             // its segments) extends the run before it.
-                            Some(last) if last.stride == size && run.stride == size && last.big_endian == big && last.offset + last.count * size == run.offset => last.count += run.count,
+                            Some(last)
+                                if last.stride == size && run.stride == size && last.big_endian == big && last.offset + last.count * size == run.offset =>
+                            {
+                                last.count += run.count
+                            }
                             _ => o.runs.push(run),
                         }
                     }
@@ -498,7 +550,17 @@ impl TdmsFile {
             other => return Err(bad(format!("the channel holds {} values, not numbers", type_name(other)))),
         };
         let file = File::open(&self.path).map_err(|e| ForeignError::io(format!("cannot open {}", self.path.display()), e))?;
-        Ok(ChannelStream { path: self.path.clone(), label: label.to_string(), file, runs: object.runs.clone(), run: 0, done_in_run: 0, data_type, size, buf: Vec::new() })
+        Ok(ChannelStream {
+            path: self.path.clone(),
+            label: label.to_string(),
+            file,
+            runs: object.runs.clone(),
+            run: 0,
+            done_in_run: 0,
+            data_type,
+            size,
+            buf: Vec::new(),
+        })
     }
 }
 
@@ -534,7 +596,14 @@ impl ChannelStream {
             let start = run.offset + self.done_in_run * run.stride;
             let bytes = (rows - 1) * run.stride + self.size;
             self.buf.resize(bytes as usize, 0);
-            let io = |e| ForeignError::record(&self.path, Some(self.label.clone()), Some(format!("segment {} at byte {start}", run.segment)), format!("cannot read the values: {e}"));
+            let io = |e| {
+                ForeignError::record(
+                    &self.path,
+                    Some(self.label.clone()),
+                    Some(format!("segment {} at byte {start}", run.segment)),
+                    format!("cannot read the values: {e}"),
+                )
+            };
             self.file.seek(SeekFrom::Start(start)).map_err(io)?;
             self.file.read_exact(&mut self.buf).map_err(io)?;
             for r in 0..rows as usize {

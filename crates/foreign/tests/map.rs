@@ -66,7 +66,11 @@ fn every_mistake_names_its_key() {
         (base.replace("channel_interval_s = 1e-5", ""), "timing.channel_interval_s", "needs the time between two conversions"),
         (base.replace("multiplexer = \"sequential\"", "multiplexer = \"round robin\""), "timing.multiplexer", "expected simultaneous, sequential or offsets"),
         (base.replace("[temperature]\ncelsius = 41.5", ""), "channel", "`temperature` is not mapped"),
-        (base.replace("rig = \"frame_x\"\nfrom = \"Frame/x\"\nunit = \"m\"", "rig = \"temperature\"\nfrom = \"Frame/x\"\nunit = \"C\""), "temperature", "mapped from a channel already"),
+        (
+            base.replace("rig = \"frame_x\"\nfrom = \"Frame/x\"\nunit = \"m\"", "rig = \"temperature\"\nfrom = \"Frame/x\"\nunit = \"C\""),
+            "temperature",
+            "mapped from a channel already",
+        ),
         (base.replace("from = \"Probes\"\nindex = 2", "index = 2"), "channel[2].index", "a TDMS channel is found by from"),
         (base.replace("from = \"Tacho/speed\"", "from = \"Forces/F2\""), "speed.from", "mapped to `f2` by channel[7] already"),
         (base.replace("from = \"Tacho/speed\"\nunit = \"Hz\"", "rpm = 1500\nunit = \"Hz\""), "speed", "rpm is a number in rpm"),
@@ -90,7 +94,13 @@ fn a_rig_channel_left_out_is_named() {
 fn csv_options_and_offsets() {
     let mut text = String::from("format = \"csv\"\n[timing]\nsample_rate_hz = 5000\nmultiplexer = \"offsets\"\n[csv]\ndelimiter = \";\"\nunits_row = true\n");
     for (k, c) in ChannelId::ALL.iter().enumerate() {
-        let unit = if c.is_displacement_probe() { "um" } else if *c == ChannelId::Temperature { "C" } else { "N" };
+        let unit = if c.is_displacement_probe() {
+            "um"
+        } else if *c == ChannelId::Temperature {
+            "C"
+        } else {
+            "N"
+        };
         text.push_str(&format!("[[channel]]\nrig = \"{c}\"\nindex = {k}\nunit = \"{unit}\"\noffset_s = {k}e-5\n"));
     }
     let m = parse(&text).unwrap();

@@ -102,7 +102,13 @@ fn tdms_contiguous_interleaved_big_endian_all_read_back_bit_for_bit() {
     {
         let path = d.join(format!("r{k}.tdms"));
         fixtures::tdms(&path, &tdms_channels(&columns, &speed), layout).unwrap();
-        let by_name = map("tdms", "sample_rate_from = \"wf_increment\"", |k| format!("from = \"{}/{}\"", GROUPS[k], names()[k]), "[speed]\nfrom = \"Tacho/speed\"\nunit = \"Hz\"\n", "");
+        let by_name = map(
+            "tdms",
+            "sample_rate_from = \"wf_increment\"",
+            |k| format!("from = \"{}/{}\"", GROUPS[k], names()[k]),
+            "[speed]\nfrom = \"Tacho/speed\"\nunit = \"Hz\"\n",
+            "",
+        );
         let (rec, values, got_speed) = read_all(&path, &by_name).unwrap_or_else(|e| panic!("{layout:?}: {e}"));
         assert_eq!(rec.sample_rate_hz, 5000.0);
         assert_eq!(rec.scans, Some(N as u64));
@@ -112,7 +118,13 @@ fn tdms_contiguous_interleaved_big_endian_all_read_back_bit_for_bit() {
         check_same(&values, &got_speed, &columns, &speed);
         // The same channels by their position in their group.
         let position = |k: usize| GROUPS[..k].iter().filter(|g| **g == GROUPS[k]).count();
-        let by_index = map("tdms", "sample_rate_hz = 5000", |k| format!("from = \"{}\"\nindex = {}", GROUPS[k], position(k)), "[speed]\nfrom = \"Tacho/speed\"\nunit = \"Hz\"\n", "");
+        let by_index = map(
+            "tdms",
+            "sample_rate_hz = 5000",
+            |k| format!("from = \"{}\"\nindex = {}", GROUPS[k], position(k)),
+            "[speed]\nfrom = \"Tacho/speed\"\nunit = \"Hz\"\n",
+            "",
+        );
         let (_, values, got_speed) = read_all(&path, &by_index).unwrap();
         check_same(&values, &got_speed, &columns, &speed);
     }
@@ -160,7 +172,13 @@ fn csv_with_a_units_row_and_a_time_column_reads_back_bit_for_bit() {
     units.push("Hz");
     let path = d.join("r.csv");
     fixtures::csv(&path, &cols, Some(&units)).unwrap();
-    let m = map("csv", "sample_rate_from = \"time\"", |k| format!("from = \"{}\"", names()[k]), "[speed]\nfrom = \"speed\"\nunit = \"Hz\"\n", "[csv]\nunits_row = true");
+    let m = map(
+        "csv",
+        "sample_rate_from = \"time\"",
+        |k| format!("from = \"{}\"", names()[k]),
+        "[speed]\nfrom = \"speed\"\nunit = \"Hz\"\n",
+        "[csv]\nunits_row = true",
+    );
     let (rec, values, got_speed) = read_all(&path, &m).unwrap();
     assert_eq!(rec.sample_rate_hz, 5000.0);
     assert_eq!(rec.start_time_s, 12.5);
@@ -224,7 +242,10 @@ fn broken_files_are_refused_naming_file_channel_and_place() {
     fixtures::tdms(&path, &[short], TdmsLayout { segments: 1, interleaved: false, big_endian: false }).unwrap();
     both.extend(std::fs::read(&path).unwrap());
     std::fs::write(&path, both).unwrap();
-    says(&refusal(read_all(&path, &tdms_map)), &["lengths.tdms", "differ in length", "`Frame/frame_x` (frame_x): 2342", "`Probes/probe_a_x` (probe_a_x): 2345"]);
+    says(
+        &refusal(read_all(&path, &tdms_map)),
+        &["lengths.tdms", "differ in length", "`Frame/frame_x` (frame_x): 2342", "`Probes/probe_a_x` (probe_a_x): 2345"],
+    );
 
     // A .mat variable of the wrong kind: a struct, and a matrix without a column.
     let path = d.join("kinds.mat");

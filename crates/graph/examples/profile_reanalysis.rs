@@ -9,11 +9,11 @@
 
 use std::time::Instant;
 
-use oilfilm_identification::excitation::ExcitationPlan;
-use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::conditioner::{Chain, ConditionerCore, ConditionerParams};
 use oilfilm_graph::estimator::{EstimatorCore, EstimatorParams};
+use oilfilm_graph::stamp::Stamp;
+use oilfilm_identification::excitation::ExcitationPlan;
+use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 
 fn main() -> anyhow::Result<()> {

@@ -41,11 +41,11 @@
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
 use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
 use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
-use oilfilm_physics::daq::CHANNEL_COUNT;
 use oilfilm_identification::pipeline::{calibration_for, mechanics_of};
 use oilfilm_msgs::{ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
+use oilfilm_physics::daq::CHANNEL_COUNT;
 use serde::{Deserialize, Serialize};
 
 use crate::error::NodeError;
@@ -162,7 +162,12 @@ impl ConditionerParams {
         if self.chain()? == Chain::Causal && conditioning::causal::causal_order(&c) > conditioning::lowpass::MAX_ORDER {
             return Err(NodeError::parameter(
                 "lowpass_order",
-                format!("the causal chain runs order 2 x lowpass_order, at most {}: must be <= {}, got {}", conditioning::lowpass::MAX_ORDER, conditioning::lowpass::MAX_ORDER / 2, self.lowpass_order),
+                format!(
+                    "the causal chain runs order 2 x lowpass_order, at most {}: must be <= {}, got {}",
+                    conditioning::lowpass::MAX_ORDER,
+                    conditioning::lowpass::MAX_ORDER / 2,
+                    self.lowpass_order
+                ),
             ));
         }
         Ok(())
@@ -290,13 +295,19 @@ impl ConditionerCore {
         let offsets: Vec<f64> = kept.iter().map(|(c, _)| frame.channel_offsets_s[*c]).collect();
         let restart = match &self.stream {
             None => Some("stream started".to_string()),
-            Some(s) if s.rate_hz != frame.sample_rate_hz || s.channels != channels || s.offsets_s != offsets || s.units != frame.units || s.rig != frame.rig => {
+            Some(s)
+                if s.rate_hz != frame.sample_rate_hz || s.channels != channels || s.offsets_s != offsets || s.units != frame.units || s.rig != frame.rig =>
+            {
                 Some(format!("stream restarted at scan {}: the DAQ's rate, schedule, units or rig changed", frame.first_scan))
             }
             Some(s) if s.end_scan() != frame.first_scan => Some(format!(
                 "stream restarted at scan {}: {} (expected scan {})",
                 frame.first_scan,
-                if frame.first_scan > s.end_scan() { format!("{} scans missing", frame.first_scan - s.end_scan()) } else { "scans repeated or out of order".to_string() },
+                if frame.first_scan > s.end_scan() {
+                    format!("{} scans missing", frame.first_scan - s.end_scan())
+                } else {
+                    "scans repeated or out of order".to_string()
+                },
                 s.end_scan()
             )),
             Some(_) => None,
@@ -351,9 +362,11 @@ impl ConditionerCore {
         // Straight from the frame's counts or values into the stream's columns (checked by
         // `check`: the picks are the frame's channels, the samples consistent).
         let picks: Vec<usize> = kept.iter().map(|(c, _)| *c).collect();
-        frame
-            .extend_columns(&picks, &mut stream.raw.columns)
-            .map_err(|reason| NodeError::BadMessage { topic: topics::DAQ_FRAMES.name.into(), sequence: frame.sequence, reason })?;
+        frame.extend_columns(&picks, &mut stream.raw.columns).map_err(|reason| NodeError::BadMessage {
+            topic: topics::DAQ_FRAMES.name.into(),
+            sequence: frame.sequence,
+            reason,
+        })?;
         if let Some(zp) = stream.zero_phase.as_mut() {
             // The stream's record holds every scan from `first_needed` on (see `condition_block`).
             zp.advance(&stream.raw, (stream.first_scan - stream.origin_scan) as usize)?;
@@ -413,7 +426,8 @@ impl ConditionerCore {
             Chain::ZeroPhase => {
                 // A stream that cannot be set up (a channel missing, say) leaves every block
                 // to the windowed conditioning, which names what is wrong in each block.
-                zero_phase = ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().flatten().map(Box::new);
+                zero_phase =
+                    ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().flatten().map(Box::new);
                 (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None)
             }
             Chain::Causal => {
@@ -552,26 +566,28 @@ impl ConditionerCore {
                     reason: format!("scans from {} needed, the record starts at {offset}", start - edge),
                 });
             };
-            conditioning::condition_window_into(&s.raw, begin..begin + block + 2 * edge, &s.calibration, &self.mechanics, &self.config, &mut self.work).map(|()| {
-                let w = &self.work;
-                let r = edge..edge + block;
-                if w.valid != r {
-                    frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
-                }
-                let cut = |v: &[f64]| v[r.clone()].to_vec();
-                Block {
-                    x_m: cut(&w.x_m),
-                    y_m: cut(&w.y_m),
-                    vx_m_s: cut(&w.vx_m_s),
-                    vy_m_s: cut(&w.vy_m_s),
-                    ax_m_s2: cut(&w.ax_m_s2),
-                    ay_m_s2: cut(&w.ay_m_s2),
-                    fx_n: cut(&w.fx_n),
-                    fy_n: cut(&w.fy_n),
-                    temperature_c: cut(&w.temperature_c),
-                    range_violations: w.range_violations.clone(),
-                }
-            })
+            conditioning::condition_window_into(&s.raw, begin..begin + block + 2 * edge, &s.calibration, &self.mechanics, &self.config, &mut self.work).map(
+                |()| {
+                    let w = &self.work;
+                    let r = edge..edge + block;
+                    if w.valid != r {
+                        frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
+                    }
+                    let cut = |v: &[f64]| v[r.clone()].to_vec();
+                    Block {
+                        x_m: cut(&w.x_m),
+                        y_m: cut(&w.y_m),
+                        vx_m_s: cut(&w.vx_m_s),
+                        vy_m_s: cut(&w.vy_m_s),
+                        ax_m_s2: cut(&w.ax_m_s2),
+                        ay_m_s2: cut(&w.ay_m_s2),
+                        fx_n: cut(&w.fx_n),
+                        fy_n: cut(&w.fy_n),
+                        temperature_c: cut(&w.temperature_c),
+                        range_violations: w.range_violations.clone(),
+                    }
+                },
+            )
         });
         match outcome {
             Ok(b) => {

@@ -21,8 +21,8 @@ use crate::lines::LineDaq;
 use crate::node::{skipped, Connect, Input, Node, Output, Start, Turn};
 use crate::params::{NodeParams, Rule, Spec};
 use crate::ports::Publish;
-use crate::topics;
 use crate::stamp::Stamp;
+use crate::topics;
 
 /// The DAQ node's parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -101,7 +101,10 @@ impl NodeParams for DaqParams {
 impl DaqParams {
     pub fn validate(&self) -> Result<(), NodeError> {
         if !["sim", "ascii", "foreign", "tcp"].contains(&self.source.as_str()) {
-            return Err(NodeError::parameter("source", format!("`{}`: expected `sim`, `ascii` (replay `file`), `foreign` (replay `file` through `map`) or `tcp` (connect to `address`)", self.source)));
+            return Err(NodeError::parameter(
+                "source",
+                format!("`{}`: expected `sim`, `ascii` (replay `file`), `foreign` (replay `file` through `map`) or `tcp` (connect to `address`)", self.source),
+            ));
         }
         if (self.source == "ascii" || self.source == "foreign") && self.file.is_empty() {
             return Err(NodeError::parameter("file", format!("source `{}` needs the record's path", self.source)));
@@ -452,7 +455,8 @@ impl Node for Daq {
     const NAME: &'static str = "daq";
     type Params = DaqParams;
     type Ports<'a> = DaqPorts<'a>;
-    const CLOCK_SOURCE: Option<&'static str> = Some("the DAQ is the rig's clock: its stamps are wall time at rate_factor 1 and it publishes /clock when it runs faster or replays");
+    const CLOCK_SOURCE: Option<&'static str> =
+        Some("the DAQ is the rig's clock: its stamps are wall time at rate_factor 1 and it publishes /clock when it runs faster or replays");
 
     /// Scan 0 of the simulated rig is at `start_stamp_ns`, or at `start.now` when 0.
     fn new(params: &DaqParams, start: &Start) -> Result<Self, NodeError> {
@@ -469,7 +473,14 @@ impl Node for Daq {
         let rig = (start.rig)(&params.rig)?;
         if params.source == "sim" {
             let epoch = if params.start_stamp_ns != 0 { Stamp(params.start_stamp_ns) } else { start.now };
-            Ok(Daq::Sim(SimDaq { core: SimDaqCore::new(&rig, params, epoch)?, params: params.clone(), reader_wait: None, wall_start: None, status_sent: false, waiting_since: None }))
+            Ok(Daq::Sim(SimDaq {
+                core: SimDaqCore::new(&rig, params, epoch)?,
+                params: params.clone(),
+                reader_wait: None,
+                wall_start: None,
+                status_sent: false,
+                waiting_since: None,
+            }))
         } else {
             Ok(Daq::Lines(LineDaq::new(params, &rig)?))
         }
@@ -617,7 +628,12 @@ impl SimDaq {
             if now.seconds_since(since) < p.command_timeout_s {
                 return Ok(Turn { wake: Some(later(since, p.command_timeout_s)), ..turn });
             }
-            tracing::warn!(node = "daq", "no exciter setpoints for the block ending at {:.3} s after {} s: running it with the force held", block_end_s, p.command_timeout_s);
+            tracing::warn!(
+                node = "daq",
+                "no exciter setpoints for the block ending at {:.3} s after {} s: running it with the force held",
+                block_end_s,
+                p.command_timeout_s
+            );
         }
         self.waiting_since = None;
         let frame = self.core.produce()?;

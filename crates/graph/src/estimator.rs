@@ -628,7 +628,13 @@ mod tests {
         let mut first = 0;
         while first < total {
             let n = size.min(total - first);
-            let mut f = ConditionedFrame { sequence: out.len() as u64, first_sample: first as u64, sample_rate_hz: fs, bearing_temperature_degc: 40.0, ..Default::default() };
+            let mut f = ConditionedFrame {
+                sequence: out.len() as u64,
+                first_sample: first as u64,
+                sample_rate_hz: fs,
+                bearing_temperature_degc: 40.0,
+                ..Default::default()
+            };
             for i in first..first + n {
                 let t = i as f64 / fs;
                 let (x, vx) = (5e-6 * (w1 * t).cos() + 3e-6 * (w2 * t).sin(), -5e-6 * w1 * (w1 * t).sin() + 3e-6 * w2 * (w2 * t).cos());

@@ -33,7 +33,7 @@
 
 use std::f64::consts::PI;
 
-use oilfilm_identification::excitation::{ExcitationPlan, LineSet, Limits, Waveform};
+use oilfilm_identification::excitation::{ExcitationPlan, Limits, LineSet, Waveform};
 use oilfilm_identification::simulate::limits_of;
 use oilfilm_msgs::{ExciterCommand, Header, RigStatus, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
@@ -103,7 +103,8 @@ fn waveform_rise(w: &Waveform, limit: f64) -> f64 {
             let mut steepest: f64 = 0.0;
             for i in 0..points {
                 let t = i as f64 * dt;
-                let d: f64 = tones.iter().map(|tone| -omega(tone.frequency_hz) * tone.amplitude_n * (omega(tone.frequency_hz) * t + tone.phase_rad).sin()).sum();
+                let d: f64 =
+                    tones.iter().map(|tone| -omega(tone.frequency_hz) * tone.amplitude_n * (omega(tone.frequency_hz) * t + tone.phase_rad).sin()).sum();
                 steepest = steepest.max(d.abs());
             }
             let curvature: f64 = tones.iter().map(|t| omega(t.frequency_hz).powi(2) * t.amplitude_n.abs()).sum();
@@ -204,12 +205,7 @@ impl ExciterParams {
             }
             "sine" => ExcitationPlan::paper_sine(self.frequency_1_hz, self.amplitude_n),
             "off" => ExcitationPlan { exciters: [Waveform::Off, Waveform::Off], ramp_s: 0.0, amplitude_steps: Vec::new() },
-            other => {
-                return Err(NodeError::parameter(
-                    "plan",
-                    format!("`{other}` is not a plan (two_tone, multisine, sine, off)"),
-                ))
-            }
+            other => return Err(NodeError::parameter("plan", format!("`{other}` is not a plan (two_tone, multisine, sine, off)"))),
         };
         plan.ramp_s = self.ramp_s;
         Ok(plan)
@@ -261,7 +257,8 @@ impl ExciterParams {
             return Err(NodeError::parameter("ramp_s", format!("must be finite and >= 0, got {}", self.ramp_s)));
         }
         let limits = self.limits(&hard.force)?;
-        check_plan(&self.plan()?, &limits, hard.max_slew_n_per_s).map_err(|e| NodeError::parameter("plan", format!("the {} plan is outside the limits: {e}", self.plan)))
+        check_plan(&self.plan()?, &limits, hard.max_slew_n_per_s)
+            .map_err(|e| NodeError::parameter("plan", format!("the {} plan is outside the limits: {e}", self.plan)))
     }
 }
 
@@ -492,11 +489,7 @@ impl ExciterCore {
             self.stop();
             return Ok(());
         }
-        let reject = |reason: String| NodeError::BadMessage {
-            topic: crate::topics::EXCITER_REQUEST.name.into(),
-            sequence: request.sequence,
-            reason,
-        };
+        let reject = |reason: String| NodeError::BadMessage { topic: crate::topics::EXCITER_REQUEST.name.into(), sequence: request.sequence, reason };
         let plan = plan_from_request(request).map_err(reject)?;
         check_plan(&plan, &self.limits, self.hard.max_slew_n_per_s).map_err(|e| reject(format!("outside the exciter's limits: {e}")))?;
         if self.halt == Some(Halt::Stopped) {
@@ -767,7 +760,12 @@ impl Node for Exciter {
             match (self.subscribers, now) {
                 (Some(before), 0) if before > 0 => {
                     if let Some(cmd) = self.core.subscriber_lost() {
-                        tracing::warn!(node = "exciter", "no subscriber left on {}: ramping to zero over {} setpoints; the plan starts again when one is back", topics::EXCITER_COMMAND.name, cmd.force_1_n.len());
+                        tracing::warn!(
+                            node = "exciter",
+                            "no subscriber left on {}: ramping to zero over {} setpoints; the plan starts again when one is back",
+                            topics::EXCITER_COMMAND.name,
+                            cmd.force_1_n.len()
+                        );
                         ports.commands.publish(cmd)?;
                         turn.handled += 1;
                     }
@@ -853,11 +851,9 @@ pub fn plan_from_request(m: &ExciterCommand) -> Result<ExcitationPlan, String> {
     for (j, w) in exciters.iter_mut().enumerate() {
         *w = match m.waveform[j] {
             ExciterCommand::WAVEFORM_OFF => Waveform::Off,
-            ExciterCommand::WAVEFORM_SINE => Waveform::Sine {
-                frequency_hz: m.frequency_hz[j],
-                amplitude_n: m.amplitude_n[j],
-                phase_deg: m.phase_rad[j].to_degrees(),
-            },
+            ExciterCommand::WAVEFORM_SINE => {
+                Waveform::Sine { frequency_hz: m.frequency_hz[j], amplitude_n: m.amplitude_n[j], phase_deg: m.phase_rad[j].to_degrees() }
+            }
             ExciterCommand::WAVEFORM_MULTISINE => Waveform::Multisine {
                 band_hz: [m.band_low_hz[j], m.band_high_hz[j]],
                 period_s: m.period_s[j],
@@ -869,12 +865,9 @@ pub fn plan_from_request(m: &ExciterCommand) -> Result<ExcitationPlan, String> {
                     other => return Err(format!("line_set[{j}] = {other} is not LINES_ALL, LINES_ODD or LINES_EVEN")),
                 },
             },
-            ExciterCommand::WAVEFORM_CHIRP => Waveform::Chirp {
-                start_hz: m.chirp_start_hz[j],
-                end_hz: m.chirp_end_hz[j],
-                sweep_s: m.sweep_s[j],
-                amplitude_n: m.amplitude_n[j],
-            },
+            ExciterCommand::WAVEFORM_CHIRP => {
+                Waveform::Chirp { start_hz: m.chirp_start_hz[j], end_hz: m.chirp_end_hz[j], sweep_s: m.sweep_s[j], amplitude_n: m.amplitude_n[j] }
+            }
             other => return Err(format!("waveform[{j}] = {other} is not WAVEFORM_OFF, _SINE, _MULTISINE or _CHIRP")),
         };
     }

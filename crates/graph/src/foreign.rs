@@ -111,7 +111,8 @@ impl ForeignSource {
         let mean_si = |position: Option<usize>, channel: ChannelId| {
             let Some(p) = position else { return f64::NAN };
             // Every scan has `width` values and `p` < `width`.
-            let sum: f64 = b.values.chunks_exact(width).map(|scan| if volts { self.calibration.to_si(channel, scan[p]).unwrap_or(f64::NAN) } else { scan[p] }).sum();
+            let sum: f64 =
+                b.values.chunks_exact(width).map(|scan| if volts { self.calibration.to_si(channel, scan[p]).unwrap_or(f64::NAN) } else { scan[p] }).sum();
             sum / n as f64
         };
         let (speed_rpm, speed_note) = match &self.speed {

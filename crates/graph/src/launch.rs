@@ -87,7 +87,10 @@ pub fn read_with(path: &Path, launch_args: &[(String, String)]) -> Result<Vec<No
     }
     for (k, _) in launch_args {
         if !vars.iter().any(|(n, _)| n == k) {
-            return Err(NodeError::File { file, reason: format!("no launch argument `{k}` (declared: {})", vars.iter().map(|v| v.0.as_str()).collect::<Vec<_>>().join(", ")) });
+            return Err(NodeError::File {
+                file,
+                reason: format!("no launch argument `{k}` (declared: {})", vars.iter().map(|v| v.0.as_str()).collect::<Vec<_>>().join(", ")),
+            });
         }
     }
     let mut values = Vec::new();

@@ -19,7 +19,6 @@ use crate::replay::{Produced, ReplayCore};
 use crate::stamp::Stamp;
 use crate::topics;
 
-
 /// How [`read_lines`] ended.
 #[derive(Debug)]
 pub enum LinesEnd {
@@ -41,7 +40,11 @@ pub const MAX_LINE_BYTES: usize = 64 * 1024;
 /// `stop()`. A read that times out (a socket with a read timeout) only gives `stop()` a
 /// chance: the part of a line read so far is kept. Bytes that are not UTF-8 become U+FFFD
 /// (and the row is then refused by the reader with its column). `Err` only from `on_line`.
-pub fn read_lines(mut stream: impl BufRead, stop: &dyn Fn() -> bool, on_line: &mut dyn FnMut(usize, &str) -> Result<(), NodeError>) -> Result<LinesEnd, NodeError> {
+pub fn read_lines(
+    mut stream: impl BufRead,
+    stop: &dyn Fn() -> bool,
+    on_line: &mut dyn FnMut(usize, &str) -> Result<(), NodeError>,
+) -> Result<LinesEnd, NodeError> {
     let mut line: Vec<u8> = Vec::new();
     let mut number = 0;
     loop {
@@ -170,7 +173,10 @@ impl DroppingSender {
             Err(mpsc::TrySendError::Full(out)) => {
                 let total = self.dropped.fetch_add(out.frames.len() as u64, Ordering::SeqCst) + out.frames.len() as u64;
                 if self.warnings.admit(Instant::now()).is_some() {
-                    tracing::warn!(node = "daq", "the input arrives faster than the node publishes: {total} frame(s) dropped so far (queue of {QUEUE_FRAMES} frames full)");
+                    tracing::warn!(
+                        node = "daq",
+                        "the input arrives faster than the node publishes: {total} frame(s) dropped so far (queue of {QUEUE_FRAMES} frames full)"
+                    );
                 }
                 Ok(())
             }
@@ -193,7 +199,13 @@ pub struct ReplayPace {
 /// status to `emit` when it is due (paced on the wall clock), bad rows logged as warnings.
 /// Returns after the last frame of the record, after `duration_s` of rig time or at
 /// `stop()`; `Err` for a header error (the record cannot be interpreted) or from `emit`.
-pub fn run_ascii_source(stream: impl BufRead, core: &mut ReplayCore, pace: &ReplayPace, stop: &dyn Fn() -> bool, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
+pub fn run_ascii_source(
+    stream: impl BufRead,
+    core: &mut ReplayCore,
+    pace: &ReplayPace,
+    stop: &dyn Fn() -> bool,
+    emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>,
+) -> Result<(), NodeError> {
     let wall_start = Instant::now();
     let origin: Cell<Option<Stamp>> = Cell::new(None);
     let done = Cell::new(false);
@@ -264,7 +276,13 @@ fn connect(address: &str) -> std::io::Result<TcpStream> {
 /// followed by a reconnection after the back-off (which grows while connections give no
 /// header); each connection starts a new stream with its own header and line numbers,
 /// labelled `tcp://address#n`. `Err` only from `emit`.
-pub fn run_tcp_source(address: &str, core: &mut ReplayCore, backoff: &Backoff, stop: &dyn Fn() -> bool, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
+pub fn run_tcp_source(
+    address: &str,
+    core: &mut ReplayCore,
+    backoff: &Backoff,
+    stop: &dyn Fn() -> bool,
+    emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>,
+) -> Result<(), NodeError> {
     let mut wait = backoff.initial;
     let mut connection = 0_u64;
     while !stop() {
@@ -346,7 +364,12 @@ enum Source {
 /// replay is. Returns at the end of the record, after `duration_s` of rig time or at
 /// `stop()`; `Err` when the record turns out unreadable (the error names the file, the
 /// channel and the scan) or from `emit`.
-pub fn run_foreign_source(source: &mut ForeignSource, pace: &ReplayPace, stop: &dyn Fn() -> bool, emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>) -> Result<(), NodeError> {
+pub fn run_foreign_source(
+    source: &mut ForeignSource,
+    pace: &ReplayPace,
+    stop: &dyn Fn() -> bool,
+    emit: &mut dyn FnMut(Produced) -> Result<(), NodeError>,
+) -> Result<(), NodeError> {
     let wall_start = Instant::now();
     let mut origin: Option<Stamp> = None;
     while !stop() {
@@ -388,7 +411,9 @@ impl LineDaq {
         };
         let core = ReplayCore::new(rig, params, kind, &name)?;
         let source = match params.source.as_str() {
-            "ascii" => Source::Ascii(std::fs::File::open(&params.file).map_err(|e| NodeError::Io { what: format!("ascii record `{}`", params.file), source: e })?),
+            "ascii" => {
+                Source::Ascii(std::fs::File::open(&params.file).map_err(|e| NodeError::Io { what: format!("ascii record `{}`", params.file), source: e })?)
+            }
             // Opened here, so that a bad map or file fails the node before it runs.
             "foreign" => Source::Foreign(Box::new(ForeignSource::open(std::path::Path::new(&params.file), std::path::Path::new(&params.map), rig, params)?)),
             _ => Source::Tcp(params.address.clone()),
@@ -411,12 +436,24 @@ impl LineDaq {
                 match source {
                     // A file waits for room in the queue: nothing of it is dropped.
                     Source::Ascii(file) => {
-                        let mut emit = |out: Produced| if out.frames.is_empty() { Ok(()) } else { tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into())) };
+                        let mut emit = |out: Produced| {
+                            if out.frames.is_empty() {
+                                Ok(())
+                            } else {
+                                tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into()))
+                            }
+                        };
                         run_ascii_source(BufReader::new(file), &mut core, &pace, &stopped, &mut emit)?
                     }
                     // A foreign file, likewise.
                     Source::Foreign(mut source) => {
-                        let mut emit = |out: Produced| if out.frames.is_empty() { Ok(()) } else { tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into())) };
+                        let mut emit = |out: Produced| {
+                            if out.frames.is_empty() {
+                                Ok(())
+                            } else {
+                                tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into()))
+                            }
+                        };
                         run_foreign_source(&mut source, &pace, &stopped, &mut emit)?
                     }
                     Source::Tcp(address) => {
@@ -441,7 +478,9 @@ impl LineDaq {
                     let dropped = reader.dropped.load(Ordering::SeqCst);
                     for (frame, mut status) in out.frames {
                         if dropped > 0 {
-                            status.message.push_str(&format!("; {dropped} frame(s) dropped: the input came faster than the node published (queue of {QUEUE_FRAMES} frames)"));
+                            status.message.push_str(&format!(
+                                "; {dropped} frame(s) dropped: the input came faster than the node published (queue of {QUEUE_FRAMES} frames)"
+                            ));
                         }
                         ports.frames.publish(frame)?;
                         ports.status.publish(status)?;
@@ -459,7 +498,14 @@ impl LineDaq {
         let Some(reader) = self.reader.take() else { return Ok(()) };
         let core = reader.thread.join().map_err(|_| NodeError::Closed("the DAQ's reading thread panicked".into()))??;
         if self.params.source == "ascii" {
-            tracing::info!(node = "daq", "{}: replay finished: {} frame(s), {} malformed row(s) skipped, {} gap(s)", self.params.file, core.frames(), core.malformed_rows(), core.gaps());
+            tracing::info!(
+                node = "daq",
+                "{}: replay finished: {} frame(s), {} malformed row(s) skipped, {} gap(s)",
+                self.params.file,
+                core.frames(),
+                core.malformed_rows(),
+                core.gaps()
+            );
         }
         Ok(())
     }

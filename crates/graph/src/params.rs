@@ -323,7 +323,10 @@ pub fn load_texts<P: NodeParams>(args: &NodeArgs, texts: &[(String, String)]) ->
                 continue;
             }
             if !known.contains(&k) {
-                return Err(NodeError::File { file: name, reason: format!("unknown parameter `{k}` for node {} (known: {})", args.fully_qualified_name(), known.join(", ")) });
+                return Err(NodeError::File {
+                    file: name,
+                    reason: format!("unknown parameter `{k}` for node {} (known: {})", args.fully_qualified_name(), known.join(", ")),
+                });
             }
             sources.given.insert(k.clone(), Given::File { file: name.clone(), section });
             map.insert(k, v);
@@ -419,8 +422,12 @@ pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
         err(format!("line {line} column {column}: byte {at} is not UTF-8 text"))
     })?;
     check_yaml_depth(&text).map_err(|r| match r {
-        Refused::Deep(line, column, depth) => err(format!("line {line} column {column}: nested {depth} deep, more than the {MAX_YAML_DEPTH} a params or launch file may be")),
-        Refused::Alias(line, column) => err(format!("line {line} column {column}: a YAML alias (`*name`); params and launch files take none (nor does ROS 2's own params parser)")),
+        Refused::Deep(line, column, depth) => {
+            err(format!("line {line} column {column}: nested {depth} deep, more than the {MAX_YAML_DEPTH} a params or launch file may be"))
+        }
+        Refused::Alias(line, column) => {
+            err(format!("line {line} column {column}: a YAML alias (`*name`); params and launch files take none (nor does ROS 2's own params parser)"))
+        }
     })?;
     Ok(text)
 }
@@ -473,7 +480,10 @@ fn check_yaml_depth(text: &str) -> Result<(), Refused> {
                 // An alias: a plain token starting with `*`. Aliases can expand a few hundred
                 // bytes into millions of nodes (seconds of parsing), and ROS 2's own params
                 // parser takes none, so none is taken here.
-                (None, '*') if (c == 0 || matches!(line.as_bytes()[c - 1], b' ' | b'[' | b'{' | b',' | b'\t')) && line[c + 1..].starts_with(|x: char| !x.is_whitespace()) => {
+                (None, '*')
+                    if (c == 0 || matches!(line.as_bytes()[c - 1], b' ' | b'[' | b'{' | b',' | b'\t'))
+                        && line[c + 1..].starts_with(|x: char| !x.is_whitespace()) =>
+                {
                     return Err(Refused::Alias(n + 1, line[..c].chars().count() + 1));
                 }
                 _ => {}
@@ -548,8 +558,12 @@ pub fn to_ros_value(v: &Value) -> oilfilm_msgs::ParameterValue {
         Value::Number(n) => P { r#type: 3, double_value: n.as_f64().unwrap_or(f64::NAN), ..P::default() },
         Value::Null => P { r#type: 3, double_value: f64::NAN, ..P::default() },
         Value::String(s) => P { r#type: 4, string_value: s.clone(), ..P::default() },
-        Value::Array(a) if a.iter().all(Value::is_i64) && !a.is_empty() => P { r#type: 7, integer_array_value: a.iter().filter_map(Value::as_i64).collect(), ..P::default() },
-        Value::Array(a) if a.iter().all(Value::is_number) && !a.is_empty() => P { r#type: 8, double_array_value: a.iter().filter_map(Value::as_f64).collect(), ..P::default() },
+        Value::Array(a) if a.iter().all(Value::is_i64) && !a.is_empty() => {
+            P { r#type: 7, integer_array_value: a.iter().filter_map(Value::as_i64).collect(), ..P::default() }
+        }
+        Value::Array(a) if a.iter().all(Value::is_number) && !a.is_empty() => {
+            P { r#type: 8, double_array_value: a.iter().filter_map(Value::as_f64).collect(), ..P::default() }
+        }
         Value::Array(a) => P { r#type: 9, string_array_value: a.iter().filter_map(|s| s.as_str().map(str::to_string)).collect(), ..P::default() },
         Value::Object(_) => P::default(),
     }
@@ -575,7 +589,8 @@ pub fn from_ros_value(p: &oilfilm_msgs::ParameterValue) -> Option<Value> {
 /// The event a node publishes on `/parameter_events` when it starts: every parameter it
 /// declared (`use_sim_time` included), at `now`.
 pub fn declaration_event(fully_qualified: &str, params: &Map<String, Value>, use_sim_time: bool, now: crate::stamp::Stamp) -> oilfilm_msgs::ParameterEvent {
-    let mut new_parameters: Vec<oilfilm_msgs::Parameter> = params.iter().map(|(k, v)| oilfilm_msgs::Parameter { name: k.clone(), value: to_ros_value(v) }).collect();
+    let mut new_parameters: Vec<oilfilm_msgs::Parameter> =
+        params.iter().map(|(k, v)| oilfilm_msgs::Parameter { name: k.clone(), value: to_ros_value(v) }).collect();
     new_parameters.push(oilfilm_msgs::Parameter { name: USE_SIM_TIME.into(), value: to_ros_value(&Value::Bool(use_sim_time)) });
     oilfilm_msgs::ParameterEvent { stamp: now.to_time(), node: fully_qualified.to_string(), new_parameters, ..Default::default() }
 }
@@ -602,7 +617,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("oilfilm-params-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("p.yaml");
-        std::fs::write(&file, "/**:\n  ros__parameters:\n    window: 1000\n/oilfilm/estimator:\n  ros__parameters:\n    hop: 500\nother:\n  ros__parameters:\n    bogus: 1\n").unwrap();
+        std::fs::write(
+            &file,
+            "/**:\n  ros__parameters:\n    window: 1000\n/oilfilm/estimator:\n  ros__parameters:\n    hop: 500\nother:\n  ros__parameters:\n    bogus: 1\n",
+        )
+        .unwrap();
         let a = parse_args("estimator", args(&["--ros-args", "--params-file", file.to_str().unwrap(), "-p", "model:=kcm", "-p", "speed_rpm:=1500"])).unwrap();
         let (p, _) = load::<EstimatorParams>(&a).unwrap();
         assert_eq!((p.window, p.hop, p.model.as_str(), p.speed_rpm), (1000, 500, "kcm", 1500.0));

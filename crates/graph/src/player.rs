@@ -138,7 +138,11 @@ pub struct PlayItem {
 
 /// The topics and messages of a bag's messages (in the order read: by log time), keeping
 /// the topics named in `wanted` (all when empty). `qos_of` gives a topic's recorded QoS.
-pub fn play_list(messages: Vec<BagMessage>, wanted: &[String], qos_of: &dyn Fn(&str) -> Option<QosProfile>) -> Result<(Vec<PlayTopic>, Vec<PlayItem>), NodeError> {
+pub fn play_list(
+    messages: Vec<BagMessage>,
+    wanted: &[String],
+    qos_of: &dyn Fn(&str) -> Option<QosProfile>,
+) -> Result<(Vec<PlayTopic>, Vec<PlayItem>), NodeError> {
     let mut topics: Vec<PlayTopic> = Vec::new();
     let mut names: Vec<Arc<str>> = Vec::new();
     let mut items = Vec::with_capacity(messages.len());
@@ -255,7 +259,7 @@ impl PlayerCore {
         // message about to be published, never past the last message.
         let bag_now = match self.options.rate {
             Rate::Fast => publish.end.checked_sub(1).map(|i| self.items[i].log_time),
-            Rate::Factor(r) => Some((start.1 + ((wall.0 - start.0.0).max(0) as f64 * r) as u64).min(last_log)),
+            Rate::Factor(r) => Some((start.1 + ((wall.0 - start.0 .0).max(0) as f64 * r) as u64).min(last_log)),
         };
         let bag_now = bag_now.map(|t| match publish.end.checked_sub(1) {
             Some(i) if !publish.is_empty() => t.max(self.items[i].log_time),
@@ -274,7 +278,11 @@ impl PlayerCore {
         let next_wall = if self.next < self.items.len() {
             let message = self.due(self.next, start);
             let tick = self.last_clock.map_or(wall, |(w, _)| Stamp(w.0 + self.options.clock_period_ns));
-            if matches!(self.options.rate, Rate::Fast) { wall } else { message.min(tick) }
+            if matches!(self.options.rate, Rate::Fast) {
+                wall
+            } else {
+                message.min(tick)
+            }
         } else {
             wall
         };
@@ -345,7 +353,9 @@ impl Node for Player {
         let options = params.options()?;
         let bag = oilfilm_bag::Bag::open(&params.bag)?;
         let info = bag.info().clone();
-        let qos_of = |name: &str| info.topics_with_message_count.iter().find(|t| t.topic_metadata.name == name).and_then(|t| t.topic_metadata.offered_qos_profiles.first().copied());
+        let qos_of = |name: &str| {
+            info.topics_with_message_count.iter().find(|t| t.topic_metadata.name == name).and_then(|t| t.topic_metadata.offered_qos_profiles.first().copied())
+        };
         let (topics, items) = play_list(bag.messages()?, &params.topics, &qos_of)?;
         let core = PlayerCore::new(topics, items, options)?;
         Ok(Self { core, bag: params.bag.clone(), wait_s: params.wait_s, clock: params.clock, phase: Phase::Waiting(None) })
@@ -413,7 +423,12 @@ impl Node for Player {
 
     /// Reliable readers get the last messages before the writers go.
     fn finish(&mut self, _now: Stamp, ports: &mut PlayerPorts<'_>) -> Result<(), NodeError> {
-        tracing::info!(node = Self::NAME, "played {} message(s), {} full pass(es)", self.core.position(), self.core.passes() + u64::from(self.core.position() == self.core.items().len()));
+        tracing::info!(
+            node = Self::NAME,
+            "played {} message(s), {} full pass(es)",
+            self.core.position(),
+            self.core.passes() + u64::from(self.core.position() == self.core.items().len())
+        );
         for port in &mut ports.topics {
             if !port.flush(LAST_ACK).unwrap_or(false) {
                 tracing::warn!(node = Self::NAME, "a reader did not acknowledge the last messages within {} s", LAST_ACK.as_secs());
@@ -438,11 +453,8 @@ mod tests {
         ];
         // Log times 1000 s + 0, 0.1, 0.2, 0.2, 1.0 s.
         let at = [0, 100_000_000, 200_000_000, 200_000_000, 1_000_000_000];
-        let items = at
-            .iter()
-            .enumerate()
-            .map(|(k, &dt)| PlayItem { topic: k % 2, log_time: 1000 * S as u64 + dt, data: RawCdr(vec![0, 1, 0, 0, k as u8]) })
-            .collect();
+        let items =
+            at.iter().enumerate().map(|(k, &dt)| PlayItem { topic: k % 2, log_time: 1000 * S as u64 + dt, data: RawCdr(vec![0, 1, 0, 0, k as u8]) }).collect();
         PlayerCore::new(topics, items, PlayerOptions { rate, looped, clock_period_ns: 10_000_000, fast_batch: 2 }).unwrap()
     }
 

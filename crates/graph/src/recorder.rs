@@ -52,14 +52,7 @@ pub struct RecorderParams {
 
 impl Default for RecorderParams {
     fn default() -> Self {
-        Self {
-            output: String::new(),
-            topics: Vec::new(),
-            compression: "zstd".into(),
-            split_size_mb: 0.0,
-            split_duration_s: 0.0,
-            status_period_s: 1.0,
-        }
+        Self { output: String::new(), topics: Vec::new(), compression: "zstd".into(), split_size_mb: 0.0, split_duration_s: 0.0, status_period_s: 1.0 }
     }
 }
 
@@ -67,8 +60,12 @@ impl NodeParams for RecorderParams {
     fn specs() -> Vec<Spec> {
         vec![
             Spec::fixed("output", "the bag directory (must not exist, or be empty); empty: rosbag2_YYYY_MM_DD-HH_MM_SS in the working directory", Rule::Any),
-            Spec::fixed("topics", "topics to record, relative to the namespace (daq/frames) or absolute; empty: all six of ours and /parameter_events", Rule::Any)
-                .with_constraints("each one of our topics, or /parameter_events"),
+            Spec::fixed(
+                "topics",
+                "topics to record, relative to the namespace (daq/frames) or absolute; empty: all six of ours and /parameter_events",
+                Rule::Any,
+            )
+            .with_constraints("each one of our topics, or /parameter_events"),
             Spec::fixed("compression", "chunk compression", Rule::OneOf(&["zstd", "lz4", "none"])),
             Spec::fixed("split_size_mb", "start a new file of the bag after this many MB (10^6 bytes); 0: never", Rule::number(0.0, 1e12)),
             Spec::fixed("split_duration_s", "start a new file of the bag after this many seconds of log time; 0: never", Rule::number(0.0, 1e12)),
@@ -149,10 +146,17 @@ pub fn select_topics(namespace: &str, wanted: &[String]) -> Result<Vec<RecordTop
     }
     let mut out: Vec<RecordTopic> = Vec::new();
     for w in wanted {
-        let found = topics::RECORDED
-            .iter()
-            .find(|t| if w.starts_with('/') { topics::qualified(namespace, t) == *w } else { t.name == w.as_str() || t.name.strip_prefix('/') == Some(w.as_str()) })
-            .map(of);
+        let found =
+            topics::RECORDED
+                .iter()
+                .find(|t| {
+                    if w.starts_with('/') {
+                        topics::qualified(namespace, t) == *w
+                    } else {
+                        t.name == w.as_str() || t.name.strip_prefix('/') == Some(w.as_str())
+                    }
+                })
+                .map(of);
         match found {
             Some(t) if !out.contains(&t) => out.push(t),
             Some(_) => {}
@@ -245,19 +249,9 @@ pub fn poll(core: &mut RecorderCore, inputs: &mut [Input<'_, RawCdr>], clock: &d
 /// The status line: totals, throughput since the last line, and per-topic counts.
 /// `mb_per_s`: MB (10^6 bytes) of CDR per second over the last period.
 pub fn status_line(stats: &RecorderStats, topics: &[RecordTopic], elapsed_s: f64, mb_per_s: f64) -> String {
-    let per_topic: Vec<String> = topics
-        .iter()
-        .zip(&stats.per_topic)
-        .map(|(t, n)| format!("{} {n}", t.name.rsplit_once("/oilfilm/").map_or(t.name.as_str(), |(_, r)| r)))
-        .collect();
-    format!(
-        "recording {:.0} s: {} msgs, {:.2} MB, {:.2} MB/s | {}",
-        elapsed_s,
-        stats.messages,
-        stats.bytes as f64 * 1e-6,
-        mb_per_s,
-        per_topic.join(", ")
-    )
+    let per_topic: Vec<String> =
+        topics.iter().zip(&stats.per_topic).map(|(t, n)| format!("{} {n}", t.name.rsplit_once("/oilfilm/").map_or(t.name.as_str(), |(_, r)| r))).collect();
+    format!("recording {:.0} s: {} msgs, {:.2} MB, {:.2} MB/s | {}", elapsed_s, stats.messages, stats.bytes as f64 * 1e-6, mb_per_s, per_topic.join(", "))
 }
 
 /// The recorder node: our topics to a bag until it is stopped.
@@ -312,7 +306,15 @@ impl Node for Recorder {
         let dir = params.output_dir(start.now);
         let core = RecorderCore::new(BagWriter::create(&dir, options)?, topics)?;
         tracing::info!(node = Self::NAME, "recording {} topic(s) to {}", core.topics().len(), dir.display());
-        Ok(Self { core: Some(core), dir, status_period_s: params.status_period_s, started: start.now, last_status: (start.now, 0), last_log: Stamp(i64::MIN), closed: None })
+        Ok(Self {
+            core: Some(core),
+            dir,
+            status_period_s: params.status_period_s,
+            started: start.now,
+            last_status: (start.now, 0),
+            last_log: Stamp(i64::MIN),
+            closed: None,
+        })
     }
 
     /// Each topic with its publisher's reliability and durability (so they match), but a
@@ -322,7 +324,13 @@ impl Node for Recorder {
         let topics = self.core.as_ref().map_or(&[][..], |core| core.topics());
         topics
             .iter()
-            .map(|t| c.raw_input(&RawTopic { name: t.name.clone(), type_name: t.type_name.clone(), qos: QosProfile::keep_last(10_000, t.qos.reliable, t.qos.transient_local) }))
+            .map(|t| {
+                c.raw_input(&RawTopic {
+                    name: t.name.clone(),
+                    type_name: t.type_name.clone(),
+                    qos: QosProfile::keep_last(10_000, t.qos.reliable, t.qos.transient_local),
+                })
+            })
             .collect()
     }
 

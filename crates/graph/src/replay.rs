@@ -97,9 +97,7 @@ pub struct ReplayCore {
 /// The identification crate's parse error as the node's.
 fn bad_record(e: IdentificationError) -> NodeError {
     match e {
-        IdentificationError::Parse { file, line, column, message } => {
-            NodeError::BadRecord { source_name: file, line, column, reason: message }
-        }
+        IdentificationError::Parse { file, line, column, message } => NodeError::BadRecord { source_name: file, line, column, reason: message },
         other => NodeError::Identification(other),
     }
 }
@@ -204,10 +202,7 @@ impl ReplayCore {
         };
         let (units, channel_units) = match header.units {
             Units::Volts => (DaqFrame::UNITS_VOLTS, vec!["V".to_string(); header.channels.len()]),
-            Units::Si => (
-                DaqFrame::UNITS_SI,
-                header.channels.iter().map(|n| ChannelId::parse(n).map_or("", ChannelId::unit).to_string()).collect(),
-            ),
+            Units::Si => (DaqFrame::UNITS_SI, header.channels.iter().map(|n| ChannelId::parse(n).map_or("", ChannelId::unit).to_string()).collect()),
         };
         let epoch = self.start_override.unwrap_or(Stamp((header.start_time_s * 1e9).round() as i64));
         self.stream = Some(Stream {
@@ -225,11 +220,8 @@ impl ReplayCore {
     }
 
     fn push_row(&mut self, row: Row, out: &mut Produced) {
-        let block = self.block.get_or_insert_with(|| Block {
-            first_scan: row.scan_index,
-            scans: 0,
-            values: Vec::with_capacity(self.block_scans * row.values.len()),
-        });
+        let block =
+            self.block.get_or_insert_with(|| Block { first_scan: row.scan_index, scans: 0, values: Vec::with_capacity(self.block_scans * row.values.len()) });
         block.values.extend_from_slice(&row.values);
         block.scans += 1;
         if block.scans >= self.block_scans {
@@ -300,4 +292,3 @@ impl ReplayCore {
         out.frames.push((frame, status));
     }
 }
-

@@ -42,9 +42,7 @@ impl Stamp {
 
     /// The wall clock now.
     pub fn now() -> Self {
-        let d = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap_or_default();
+        let d = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
         Self(i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
     }
 }

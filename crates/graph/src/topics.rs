@@ -65,16 +65,12 @@ const fn qos(depth: i32, transient_local: bool) -> TopicQos {
     TopicQos { reliable: true, depth, transient_local }
 }
 
-pub const EXCITER_REQUEST: Topic =
-    Topic { name: "exciter/request", type_name: "oilfilm_msgs/msg/ExciterCommand", qos: qos(10, false) };
-pub const EXCITER_COMMAND: Topic =
-    Topic { name: "exciter/command", type_name: "oilfilm_msgs/msg/ExciterCommand", qos: qos(50, true) };
+pub const EXCITER_REQUEST: Topic = Topic { name: "exciter/request", type_name: "oilfilm_msgs/msg/ExciterCommand", qos: qos(10, false) };
+pub const EXCITER_COMMAND: Topic = Topic { name: "exciter/command", type_name: "oilfilm_msgs/msg/ExciterCommand", qos: qos(50, true) };
 pub const DAQ_FRAMES: Topic = Topic { name: "daq/frames", type_name: "oilfilm_msgs/msg/DaqFrame", qos: qos(200, false) };
 pub const RIG_STATUS: Topic = Topic { name: "rig/status", type_name: "oilfilm_msgs/msg/RigStatus", qos: qos(10, false) };
-pub const CONDITIONED: Topic =
-    Topic { name: "conditioned", type_name: "oilfilm_msgs/msg/ConditionedFrame", qos: qos(200, false) };
-pub const ESTIMATES: Topic =
-    Topic { name: "estimates", type_name: "oilfilm_msgs/msg/CoefficientEstimate", qos: qos(100, false) };
+pub const CONDITIONED: Topic = Topic { name: "conditioned", type_name: "oilfilm_msgs/msg/ConditionedFrame", qos: qos(200, false) };
+pub const ESTIMATES: Topic = Topic { name: "estimates", type_name: "oilfilm_msgs/msg/CoefficientEstimate", qos: qos(100, false) };
 
 /// The simulated (or replayed) clock: absolute, outside the graph's namespace; the player
 /// publishes it.
@@ -83,8 +79,7 @@ pub const CLOCK: Topic = Topic { name: "/clock", type_name: "rosgraph_msgs/msg/C
 /// The nodes' parameter events (absolute, as in every ROS 2 graph): each node announces
 /// its declared parameters when it starts and every change it applied, transient-local so a
 /// recorder that joins later still gets the declarations (ADR 0026).
-pub const PARAMETER_EVENTS: Topic =
-    Topic { name: "/parameter_events", type_name: "rcl_interfaces/msg/ParameterEvent", qos: qos(1000, true) };
+pub const PARAMETER_EVENTS: Topic = Topic { name: "/parameter_events", type_name: "rcl_interfaces/msg/ParameterEvent", qos: qos(1000, true) };
 
 /// What the recorder keeps by default: the graph's topics and the parameter events.
 pub const RECORDED: &[Topic] = &[EXCITER_REQUEST, EXCITER_COMMAND, DAQ_FRAMES, RIG_STATUS, CONDITIONED, ESTIMATES, PARAMETER_EVENTS];

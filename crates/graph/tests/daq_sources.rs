@@ -10,18 +10,18 @@ use std::net::TcpListener;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use oilfilm_identification::ascii::{self, Record, Units};
-use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_msgs::{DaqFrame, RigStatus};
 use oilfilm_graph::conditioner::ConditionerParams;
 use oilfilm_graph::daq::DaqParams;
 use oilfilm_graph::error::NodeError;
 use oilfilm_graph::estimator::EstimatorParams;
 use oilfilm_graph::exciter::ExciterParams;
-use oilfilm_graph::runner::bag::reanalyse;
-use oilfilm_graph::replay::{Produced, ReplayCore};
 use oilfilm_graph::lines::{read_lines, run_ascii_source, run_tcp_source, Backoff, ReplayPace};
+use oilfilm_graph::replay::{Produced, ReplayCore};
+use oilfilm_graph::runner::bag::reanalyse;
 use oilfilm_graph::stamp::Stamp;
+use oilfilm_identification::ascii::{self, Record, Units};
+use oilfilm_identification::simulate::{self, SimulateOptions};
+use oilfilm_msgs::{DaqFrame, RigStatus};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
 use oilfilm_physics::operating_point::OperatingPoint;
@@ -112,10 +112,7 @@ fn scans(frames: &[DaqFrame]) -> Vec<(u64, Vec<f64>)> {
 
 /// The record's scans, except those at `missing` positions.
 fn record_scans(record: &Record, missing: &[usize]) -> Vec<(u64, Vec<f64>)> {
-    (0..record.len())
-        .filter(|i| !missing.contains(i))
-        .map(|i| (record.scan_index[i], record.columns.iter().map(|c| c[i]).collect()))
-        .collect()
+    (0..record.len()).filter(|i| !missing.contains(i)).map(|i| (record.scan_index[i], record.columns.iter().map(|c| c[i]).collect())).collect()
 }
 
 fn bits(s: &[(u64, Vec<f64>)]) -> Vec<(u64, Vec<u64>)> {
@@ -289,11 +286,7 @@ fn malformed_rows_are_reported_with_their_position_and_skipped_and_a_gap_restart
     let out = reanalyse(&f.rig, &conditioner_params(), &estimator_params(), &frames, &sink.status()).unwrap();
     let restarts: Vec<&String> = out.conditioned.iter().flat_map(|c| &c.flags).filter(|f| f.contains("restarted")).collect();
     assert_eq!(restarts.len(), 1, "{restarts:?}");
-    assert!(
-        restarts[0].contains(&format!("stream restarted at scan {}: 1 scans missing (expected scan {skipped})", skipped + 1)),
-        "{}",
-        restarts[0]
-    );
+    assert!(restarts[0].contains(&format!("stream restarted at scan {}: 1 scans missing (expected scan {skipped})", skipped + 1)), "{}", restarts[0]);
     assert!(out.estimates.iter().any(|e| e.solved));
 }
 
@@ -382,7 +375,10 @@ fn a_tcp_stream_with_a_bad_line_and_a_reconnection_gives_the_files_frames() {
     assert_eq!(sink.frames(), file.frames());
     let statuses = sink.status();
     for (a, b) in statuses.iter().zip(file.status()) {
-        assert_eq!((&a.header.stamp, a.speed_rad_s, a.static_load_n, a.bearing_temperature_degc), (&b.header.stamp, b.speed_rad_s, b.static_load_n, b.bearing_temperature_degc));
+        assert_eq!(
+            (&a.header.stamp, a.speed_rad_s, a.static_load_n, a.bearing_temperature_degc),
+            (&b.header.stamp, b.speed_rad_s, b.static_load_n, b.bearing_temperature_degc)
+        );
     }
     assert!(statuses[0].message.starts_with(&format!("tcp stream of tcp://{address}#1")), "{}", statuses[0].message);
     assert!(statuses.last().unwrap().message.starts_with(&format!("tcp stream of tcp://{address}#2")));
@@ -394,7 +390,13 @@ fn daq_params_accept_the_ascii_and_tcp_sources_with_what_they_need() {
     assert!(p("ascii", "run.txt", "").validate().is_ok());
     assert!(p("tcp", "", "daq-host:5000").validate().is_ok());
     assert!(p("tcp", "", "[::1]:5000").validate().is_ok());
-    for (bad, name) in [(p("ascii", "", ""), "file"), (p("tcp", "", ""), "address"), (p("tcp", "", "daq-host"), "address"), (p("tcp", "", "h:99999"), "address"), (p("udp", "", ""), "source")] {
+    for (bad, name) in [
+        (p("ascii", "", ""), "file"),
+        (p("tcp", "", ""), "address"),
+        (p("tcp", "", "daq-host"), "address"),
+        (p("tcp", "", "h:99999"), "address"),
+        (p("udp", "", ""), "source"),
+    ] {
         match bad.validate() {
             Err(NodeError::Parameter { name: n, .. }) => assert_eq!(n, name),
             other => panic!("{bad:?}: {other:?}"),

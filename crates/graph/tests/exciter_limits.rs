@@ -2,10 +2,10 @@
 //! it is given: hostile requests (NaN, infinities, huge amplitudes, bad enums, negative
 //! periods, out-of-band lines), random ones, and parameter sets that try to raise the limit.
 
-use oilfilm_identification::excitation::Limits;
-use oilfilm_msgs::ExciterCommand;
 use oilfilm_graph::exciter::{ExciterCore, ExciterParams, HardLimits};
 use oilfilm_graph::stamp::Stamp;
+use oilfilm_identification::excitation::Limits;
+use oilfilm_msgs::ExciterCommand;
 
 const HARD: HardLimits = HardLimits { force: Limits { max_force_n: 1500.0, band_hz: [0.0, 80.0] }, max_slew_n_per_s: 1.0e6 };
 
@@ -50,7 +50,28 @@ impl Xorshift {
 
     /// A hostile f64: ordinary, huge, tiny, negative, NaN or infinite.
     fn value(&mut self) -> f64 {
-        let pool = [0.0, -0.0, 1.0, 37.0, 80.0, 80.0001, 1e3, 1499.9, 1500.0, 1500.1, 1e9, 1e308, -1e308, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, f64::MIN_POSITIVE, -5.0, 0.5, 1e-12];
+        let pool = [
+            0.0,
+            -0.0,
+            1.0,
+            37.0,
+            80.0,
+            80.0001,
+            1e3,
+            1499.9,
+            1500.0,
+            1500.1,
+            1e9,
+            1e308,
+            -1e308,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MIN_POSITIVE,
+            -5.0,
+            0.5,
+            1e-12,
+        ];
         let v = pool[(self.next() % pool.len() as u64) as usize];
         if self.next().is_multiple_of(3) {
             v * (self.next() % 1000) as f64 / 100.0

@@ -46,7 +46,13 @@ impl Driver {
     /// The largest change between consecutive setpoints in `range` (and where).
     fn largest_step(&self, range: std::ops::Range<usize>) -> (f64, usize) {
         let end = range.end.min(self.f.len());
-        (range.start.max(1)..end).map(|k| ((0..2).map(|j| (self.f[k][j] - self.f[k - 1][j]).abs()).fold(0.0, f64::max), k)).fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+        (range.start.max(1)..end).map(|k| ((0..2).map(|j| (self.f[k][j] - self.f[k - 1][j]).abs()).fold(0.0, f64::max), k)).fold((0.0, 0), |a, b| {
+            if b.0 > a.0 {
+                b
+            } else {
+                a
+            }
+        })
     }
 
     fn peak(&self, range: std::ops::Range<usize>) -> f64 {
@@ -328,7 +334,11 @@ fn the_node_ramps_down_when_its_last_subscriber_goes_and_restarts_when_one_is_ba
     let (requests, status, commands) = (Bus::<ExciterCommand>::new(), Bus::<RigStatus>::new(), Bus::<ExciterCommand>::new());
     let readers = std::rc::Rc::new(std::cell::Cell::new(1));
     let mut out = commands.subscriber();
-    let mut ports = ExciterPorts { requests: Box::new(requests.subscriber()), status: Box::new(status.subscriber()), commands: Box::new(Commands { bus: commands.publisher(), readers: readers.clone() }) };
+    let mut ports = ExciterPorts {
+        requests: Box::new(requests.subscriber()),
+        status: Box::new(status.subscriber()),
+        commands: Box::new(Commands { bus: commands.publisher(), readers: readers.clone() }),
+    };
     let mut rig_clock = status.publisher();
     let mut d = Driver::default();
     let mut tick = |node: &mut Exciter, ports: &mut ExciterPorts, k: i64| {

@@ -33,7 +33,13 @@ fn a_tdms_record_replays_as_its_ascii_twin() {
     let txt = dir.join("run.txt");
     std::fs::write(&txt, ascii::write(&record).unwrap()).unwrap();
     let groups = ["Journal", "Journal", "Journal", "Journal", "Housing", "Housing", "Loads", "Loads", "Loads", "Thermal"];
-    let chans: Vec<TdmsChannel> = record.header.channels.iter().enumerate().map(|(k, name)| TdmsChannel { group: groups[k], name, values: &record.columns[k], properties: vec![] }).collect();
+    let chans: Vec<TdmsChannel> = record
+        .header
+        .channels
+        .iter()
+        .enumerate()
+        .map(|(k, name)| TdmsChannel { group: groups[k], name, values: &record.columns[k], properties: vec![] })
+        .collect();
     let tdms = dir.join("run.tdms");
     fixtures::tdms(&tdms, &chans, TdmsLayout { segments: 6, interleaved: true, big_endian: false }).unwrap();
     let mut map = String::from("[timing]\nsample_rate_hz = 5000\nmultiplexer = \"sequential\"\nchannel_interval_s = 1e-5\n[speed]\nrpm = 1500\n");
@@ -50,12 +56,18 @@ fn a_tdms_record_replays_as_its_ascii_twin() {
         // The rig name differs (the ASCII header's against the rig file's): all else is equal.
         assert_eq!(DaqFrame { rig: String::new(), ..f.clone() }, DaqFrame { rig: String::new(), ..a.clone() }, "frame {}", f.sequence);
     }
-    assert!(estimates.len() >= 2 && estimates.iter().all(|e| e.solved), "{} estimates, solved: {:?}", estimates.len(), estimates.iter().map(|e| (e.solved, e.refusal_reason.clone())).collect::<Vec<_>>());
+    assert!(
+        estimates.len() >= 2 && estimates.iter().all(|e| e.solved),
+        "{} estimates, solved: {:?}",
+        estimates.len(),
+        estimates.iter().map(|e| (e.solved, e.refusal_reason.clone())).collect::<Vec<_>>()
+    );
     assert_eq!(estimates, ascii_estimates, "the same estimates");
 
     // A map naming a channel the file does not have: the node does not start.
     std::fs::write(&map_path, map.replace("Loads/f2", "Loads/F2")).unwrap();
-    let err = run(&[("file", tdms.display().to_string()), ("source", "foreign".into()), ("map", map_path.display().to_string())]).expect_err("refused").to_string();
+    let err =
+        run(&[("file", tdms.display().to_string()), ("source", "foreign".into()), ("map", map_path.display().to_string())]).expect_err("refused").to_string();
     assert!(err.contains("run.tdms") && err.contains("`Loads/F2` (f2)") && err.contains("no such channel"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }

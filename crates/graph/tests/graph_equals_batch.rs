@@ -104,7 +104,14 @@ fn compare(rig: &RigConfig, chain: &str) -> (f64, usize) {
         for (name, node, batch) in [("k", e.stiffness_n_m, bk), ("d", e.damping_n_s_m, bd)] {
             for i in 0..4 {
                 let rel = (node[i] - batch[i]).abs() / batch[i].abs();
-                println!("{chain} window {}: {name}{} node {:.6e} batch {:.6e} ({:.2e})", e.window_start_sample, ["xx", "xy", "yx", "yy"][i], node[i], batch[i], rel);
+                println!(
+                    "{chain} window {}: {name}{} node {:.6e} batch {:.6e} ({:.2e})",
+                    e.window_start_sample,
+                    ["xx", "xy", "yx", "yy"][i],
+                    node[i],
+                    batch[i],
+                    rel
+                );
                 worst = worst.max(rel);
             }
         }

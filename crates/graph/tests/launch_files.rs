@@ -142,9 +142,13 @@ fn a_recorded_bag_holds_its_parameters_and_re_estimates_to_the_live_estimates() 
 
     let bag = Bag::open(&dir).unwrap();
     let recorded = recorded_parameters_of(&bag).unwrap();
-    assert_eq!(recorded.nodes.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(), ["/oilfilm/recorder", "/oilfilm/exciter", "/oilfilm/daq", "/oilfilm/conditioner", "/oilfilm/estimator"]);
+    assert_eq!(
+        recorded.nodes.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(),
+        ["/oilfilm/recorder", "/oilfilm/exciter", "/oilfilm/daq", "/oilfilm/conditioner", "/oilfilm/estimator"]
+    );
     assert!(recorded.changed_later.is_empty());
-    let from_file = |node: &str| parse_args(node, ["--ros-args".to_string(), "--params-file".into(), shipped("params/sim_rig.yaml").display().to_string()]).unwrap();
+    let from_file =
+        |node: &str| parse_args(node, ["--ros-args".to_string(), "--params-file".into(), shipped("params/sim_rig.yaml").display().to_string()]).unwrap();
     let (c, e) = (recorded.of::<ConditionerParams>("conditioner").unwrap().unwrap(), recorded.of::<EstimatorParams>("estimator").unwrap().unwrap());
     assert_eq!((c.0.as_str(), e.0.as_str()), ("/oilfilm/conditioner", "/oilfilm/estimator"));
     assert_eq!(c.1, load::<ConditionerParams>(&from_file("conditioner")).unwrap().0, "the conditioner's parameters as the params file gave them");

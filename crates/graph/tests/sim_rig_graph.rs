@@ -5,11 +5,11 @@
 //! live bit for bit, independence of frame boundaries, and the DAQ equal to the offline
 //! simulator bit for bit.
 
+use oilfilm_graph::runner::bag::reanalyse;
+use oilfilm_graph::runner::memory::{run_sim_rig, Recording};
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::cdr::encode;
 use oilfilm_msgs::{CoefficientEstimate, DaqFrame};
-use oilfilm_graph::runner::bag::reanalyse;
-use oilfilm_graph::runner::memory::{run_sim_rig, Recording};
 use oilfilm_physics::config::RigConfig;
 
 use crate::common;
@@ -45,7 +45,11 @@ fn recovers_and_replays(chain: &str) {
         // Causal blocks sit at multiples of block_scans, as the estimator's windows sit at
         // multiples of hop.
         let block = p.conditioner.block_scans as u64;
-        assert!(rec.conditioned.iter().all(|c| c.first_sample % block == 0 && c.x_m.len() as u64 == block), "{:?}", rec.conditioned.iter().map(|c| c.first_sample).take(3).collect::<Vec<_>>());
+        assert!(
+            rec.conditioned.iter().all(|c| c.first_sample % block == 0 && c.x_m.len() as u64 == block),
+            "{:?}",
+            rec.conditioned.iter().map(|c| c.first_sample).take(3).collect::<Vec<_>>()
+        );
     }
     let kt = truth.coefficients.stiffness_n_m;
     let ct = truth.coefficients.damping_n_s_m;
@@ -59,7 +63,14 @@ fn recovers_and_replays(chain: &str) {
             let ce = (e.damping_n_s_m[k] - ct[(i, j)]) / ct[(i, j)];
             println!(
                 "{chain} window {}: k{name} {:.5e} (truth {:.5e}, {:+.3} %, SE {:.2e})  d{name} {:.5e} (truth {:.5e}, {:+.3} %)",
-                e.window_start_sample, e.stiffness_n_m[k], kt[(i, j)], 100.0 * ke, e.stiffness_se_n_m[k], e.damping_n_s_m[k], ct[(i, j)], 100.0 * ce
+                e.window_start_sample,
+                e.stiffness_n_m[k],
+                kt[(i, j)],
+                100.0 * ke,
+                e.stiffness_se_n_m[k],
+                e.damping_n_s_m[k],
+                ct[(i, j)],
+                100.0 * ce
             );
             assert!(ke.abs() < 0.01, "k{name}: {:.3} % off", 100.0 * ke);
             assert!(ce.abs() < 0.02, "d{name}: {:.3} % off", 100.0 * ce);
@@ -86,9 +97,21 @@ fn recovers_and_replays(chain: &str) {
         let recut = recut(&rec.frames, size);
         let replay = reanalyse(&rig, &p.conditioner, &p.estimator, &recut, &rec.status).unwrap();
         let span = |c: &[oilfilm_msgs::ConditionedFrame]| (c.first().map(|f| f.first_sample), c.last().map(|f| f.first_sample + f.x_m.len() as u64));
-        assert_eq!(replay.conditioned.len(), rec.conditioned.len(), "{chain}: {size}-scan frames: conditioned samples {:?}, live {:?}", span(&replay.conditioned), span(&rec.conditioned));
+        assert_eq!(
+            replay.conditioned.len(),
+            rec.conditioned.len(),
+            "{chain}: {size}-scan frames: conditioned samples {:?}, live {:?}",
+            span(&replay.conditioned),
+            span(&rec.conditioned)
+        );
         for (a, b) in replay.conditioned.iter().zip(&rec.conditioned) {
-            assert!(encode(a) == encode(b), "{chain}: conditioned frame {} (first sample {} / {}) depends on the framing ({size}-scan frames)", a.sequence, a.first_sample, b.first_sample);
+            assert!(
+                encode(a) == encode(b),
+                "{chain}: conditioned frame {} (first sample {} / {}) depends on the framing ({size}-scan frames)",
+                a.sequence,
+                a.first_sample,
+                b.first_sample
+            );
         }
         assert_eq!(bytes(&replay.estimates), bytes(&rec.estimates), "{chain}: estimates depend on how the scans were framed ({size}-scan frames)");
     }

@@ -29,7 +29,11 @@ fn corpus() -> Vec<(String, Vec<u8>)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files: Vec<PathBuf> = Vec::new();
     for dir in [root.join("../../launch_configs"), root.join("../../launch_configs/params"), root.join("tests/data/fuzz/yaml")] {
-        let mut here: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())).map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == "yaml")).collect();
+        let mut here: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "yaml"))
+            .collect();
         here.sort();
         files.extend(here);
     }
@@ -132,7 +136,8 @@ fn mutated_params_and_launch_files_never_panic_or_hang_and_name_the_file() {
             }
             results
         }));
-        let results = outcome.unwrap_or_else(|_| panic!("case {case} (seed {}, from {seed_name}): a panic on\n{}", seed.wrapping_add(case), String::from_utf8_lossy(&bytes)));
+        let results = outcome
+            .unwrap_or_else(|_| panic!("case {case} (seed {}, from {seed_name}): a panic on\n{}", seed.wrapping_add(case), String::from_utf8_lossy(&bytes)));
         slowest = slowest.max(t.elapsed());
         for r in &results {
             match r {
@@ -145,7 +150,11 @@ fn mutated_params_and_launch_files_never_panic_or_hang_and_name_the_file() {
         }
     }
     let total = start.elapsed();
-    println!("yaml fuzz: {cases} cases (a node's params each, the launch reader every tenth) in {:.2} s (slowest case {:.1} ms): {loaded} read, {refused} refused", total.as_secs_f64(), slowest.as_secs_f64() * 1e3);
+    println!(
+        "yaml fuzz: {cases} cases (a node's params each, the launch reader every tenth) in {:.2} s (slowest case {:.1} ms): {loaded} read, {refused} refused",
+        total.as_secs_f64(),
+        slowest.as_secs_f64() * 1e3
+    );
     assert!(refused > 0 && loaded > 0, "the mutations reach both outcomes: {loaded} read, {refused} refused");
     let _ = std::fs::remove_dir_all(&dir);
 }

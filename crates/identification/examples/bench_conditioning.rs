@@ -15,8 +15,8 @@ use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
 use oilfilm_identification::conditioning::{
-    calibrate, condition, Chain, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
-    range_check, ConditioningConfig, Mechanics, RawRecord, RawUnits,
+    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass, range_check, Chain, ConditioningConfig, Mechanics, RawRecord,
+    RawUnits,
 };
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
@@ -33,26 +33,13 @@ fn best_of(repeats: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn report(name: &str, samples: usize, seconds: f64) {
-    println!(
-        "{name:<44} {samples:>9} samples  {:>9.3} ms  {:>8.1} M samples/s",
-        seconds * 1e3,
-        samples as f64 / seconds / 1e6
-    );
+    println!("{name:<44} {samples:>9} samples  {:>9.3} ms  {:>8.1} M samples/s", seconds * 1e3, samples as f64 / seconds / 1e6);
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let scans: usize = args
-        .next()
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(50_000);
-    let repeats: usize = args
-        .next()
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(15)
-        .max(1);
+    let scans: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(50_000);
+    let repeats: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(15).max(1);
     let only = args.next();
     let (only_into, only_causal) = (only.as_deref() == Some("into"), only.as_deref() == Some("causal"));
 
@@ -71,30 +58,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 _ => (-20e-6, 30e-6),
             };
             let f = 7.0 + 8.0 * k as f64;
-            s.set(
-                ch,
-                c + a * ((w * f).sin() + 0.3 * (w * 80.0 + k as f64).sin()),
-            );
+            s.set(ch, c + a * ((w * f).sin() + 0.3 * (w * 80.0 + k as f64).sin()));
         }
         s
     };
-    let recs: Vec<DaqScan> = (0..scans as u64)
-        .map(|i| daq.scan(i, i as f64 / fs, &mut signals))
-        .collect();
+    let recs: Vec<DaqScan> = (0..scans as u64).map(|i| daq.scan(i, i as f64 / fs, &mut signals)).collect();
     let raw = RawRecord::from_scans(&recs, fs)?;
     let cal = daq.calibration().clone();
     let conf = ConditioningConfig::default();
-    let mech = Mechanics {
-        housing_mass_kg: 60.0,
-        exciter_angles_deg: [45.0, 135.0],
-        gravity_m_s2: 9.81,
-    };
+    let mech = Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 };
     let n = raw.len();
     let channels = raw.channels.len();
     let all = n * channels;
-    println!(
-        "record: {n} scans x {channels} channels = {all} samples at {fs} Hz; best of {repeats} runs"
-    );
+    println!("record: {n} scans x {channels} channels = {all} samples at {fs} Hz; best of {repeats} runs");
     if only_into {
         // `... [scans] [repeats] into`: only `condition_into`, for a profiler.
         let mut out = condition(&raw, &cal, &mech, &conf)?;
@@ -163,18 +139,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     report("range_check::check (step 2)", all, t);
 
-    let delays: Vec<deskew::FractionalDelay> = raw
-        .channels
-        .iter()
-        .map(|&ch| {
-            deskew::FractionalDelay::for_offset(
-                cal.sample_offset_s(ch).unwrap(),
-                fs,
-                conf.deskew_taps,
-            )
-            .unwrap()
-        })
-        .collect();
+    let delays: Vec<deskew::FractionalDelay> =
+        raw.channels.iter().map(|&ch| deskew::FractionalDelay::for_offset(cal.sample_offset_s(ch).unwrap(), fs, conf.deskew_taps).unwrap()).collect();
     let mut out = vec![0.0; n];
     let t = best_of(repeats, || {
         for (d, col) in delays.iter().zip(&si) {
@@ -223,10 +189,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     let (mut fx, mut fy) = (vec![0.0; n], vec![0.0; n]);
     let t = best_of(repeats, || {
-        film_force::eq2_into(
-            &si[6], &si[7], &si[8], &si[4], &si[5], &mech, &mut fx, &mut fy,
-        )
-        .unwrap();
+        film_force::eq2_into(&si[6], &si[7], &si[8], &si[4], &si[5], &mech, &mut fx, &mut fy).unwrap();
         black_box((&fx, &fy));
     });
     report("film_force::eq2 (step 7, 5 columns)", 5 * n, t);

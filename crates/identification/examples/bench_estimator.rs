@@ -12,9 +12,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 use oilfilm_identification::estimator::solve::ScaledFactor;
 use oilfilm_identification::estimator::window::BlockSummary;
-use oilfilm_identification::estimator::{
-    estimate_window, normal_equations, EstimatorConfig, ModelOrder, Signals, Solver,
-};
+use oilfilm_identification::estimator::{estimate_window, normal_equations, EstimatorConfig, ModelOrder, Signals, Solver};
 
 const FS: f64 = 5000.0;
 const WINDOW: usize = 50_000;
@@ -88,7 +86,10 @@ fn main() {
     let w: Vec<&[f64]> = d.cols.iter().map(|c| &c[..WINDOW]).collect();
     let reps = 101;
 
-    println!("least-squares stage, window {WINDOW} x 4 regressors (+ intercept) x 2 right-hand sides; numpy.linalg.lstsq = {NUMPY_MS} ms/window = {:.1} M samples/s", WINDOW as f64 / NUMPY_MS / 1e3);
+    println!(
+        "least-squares stage, window {WINDOW} x 4 regressors (+ intercept) x 2 right-hand sides; numpy.linalg.lstsq = {NUMPY_MS} ms/window = {:.1} M samples/s",
+        WINDOW as f64 / NUMPY_MS / 1e3
+    );
     println!("| {:<46} | {:>10} | {:>10} | {:>8} | notes", "method", "ms/window", "M samp/s", "vs numpy");
     println!("|{:-<48}|{:-<12}|{:-<12}|{:-<10}|------", "", "", "", "");
 
@@ -132,17 +133,18 @@ fn main() {
     row("normal equations (Zhou et al. eq. 6)", t_ne, WINDOW, "cond squared; comparison only");
 
     // 5. Whole window analysis for context: line search (FFT), HAC errors, flags.
-    let s = Signals {
-        x_m: &d.cols[0],
-        y_m: &d.cols[1],
-        vx_m_s: &d.cols[2],
-        vy_m_s: &d.cols[3],
-        ax_m_s2: None,
-        ay_m_s2: None,
-        fx_n: &d.cols[4],
-        fy_n: &d.cols[5],
+    let s =
+        Signals { x_m: &d.cols[0], y_m: &d.cols[1], vx_m_s: &d.cols[2], vy_m_s: &d.cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: &d.cols[4], fy_n: &d.cols[5] };
+    let cfg = EstimatorConfig {
+        window: WINDOW,
+        hop: HOP,
+        model: ModelOrder::Kc,
+        solver: Solver::Qr,
+        max_relative_se: 0.25,
+        max_condition: 1e6,
+        sample_rate_hz: FS,
+        signal_band_hz: None,
     };
-    let cfg = EstimatorConfig { window: WINDOW, hop: HOP, model: ModelOrder::Kc, solver: Solver::Qr, max_relative_se: 0.25, max_condition: 1e6, sample_rate_hz: FS, signal_band_hz: None };
     let t_full = median_time(7, || {
         black_box(estimate_window(&s, 0..WINDOW, &cfg).ok());
     });

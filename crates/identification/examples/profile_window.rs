@@ -12,7 +12,9 @@ use std::time::Instant;
 
 use oilfilm_identification::estimator::solve::ScaledFactor;
 use oilfilm_identification::estimator::window::BlockSummary;
-use oilfilm_identification::estimator::{self, estimate_window, estimate_window_with_search, spectrum, uncertainty, EstimatorConfig, ModelOrder, Signals, Solver};
+use oilfilm_identification::estimator::{
+    self, estimate_window, estimate_window_with_search, spectrum, uncertainty, EstimatorConfig, ModelOrder, Signals, Solver,
+};
 
 /// A two-tone record with deterministic pseudo-noise (xorshift, no RNG dependency).
 fn data(n: usize, fs: f64) -> Vec<Vec<f64>> {
@@ -58,7 +60,8 @@ fn main() {
         // comparing builds.
         for (fs, n) in [(5_000.0, 25_000usize), (100_000.0, 200_000)] {
             let cols = data(n, fs);
-            let signals = Signals { x_m: &cols[0], y_m: &cols[1], vx_m_s: &cols[2], vy_m_s: &cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: &cols[4], fy_n: &cols[5] };
+            let signals =
+                Signals { x_m: &cols[0], y_m: &cols[1], vx_m_s: &cols[2], vy_m_s: &cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: &cols[4], fy_n: &cols[5] };
             for solver in [Solver::Qr, Solver::Svd, Solver::NormalEquations] {
                 let cfg = EstimatorConfig { window: n, hop: n, model: ModelOrder::Kc, solver, sample_rate_hz: fs, ..EstimatorConfig::default() };
                 println!("{:?}", estimate_window(&signals, 0..n, &cfg));
@@ -70,7 +73,8 @@ fn main() {
         // One 200 000-sample window and nothing else (for valgrind --tool=callgrind).
         let (fs, n) = (100_000.0, 200_000);
         let cols = data(n, fs);
-        let signals = Signals { x_m: &cols[0], y_m: &cols[1], vx_m_s: &cols[2], vy_m_s: &cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: &cols[4], fy_n: &cols[5] };
+        let signals =
+            Signals { x_m: &cols[0], y_m: &cols[1], vx_m_s: &cols[2], vy_m_s: &cols[3], ax_m_s2: None, ay_m_s2: None, fx_n: &cols[4], fy_n: &cols[5] };
         let cfg = EstimatorConfig { window: n, hop: n, model: ModelOrder::Kc, solver: Solver::Qr, sample_rate_hz: fs, ..EstimatorConfig::default() };
         black_box(estimate_window(&signals, 0..n, &cfg).ok());
         return;

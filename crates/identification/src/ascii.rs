@@ -144,15 +144,7 @@ pub const CHANNEL_UNITS_SI: [&str; 10] = {
     units
 };
 /// Header keys, in the order [`write`] prints them.
-const KEYS: [&str; 7] = [
-    "rig",
-    "sample_rate_hz",
-    "channel_interval_s",
-    "channel_offsets_s",
-    "units",
-    "start_time_s",
-    "speed_rpm",
-];
+const KEYS: [&str; 7] = ["rig", "sample_rate_hz", "channel_interval_s", "channel_offsets_s", "units", "start_time_s", "speed_rpm"];
 
 /// Header keys a file may leave out.
 const OPTIONAL_KEYS: [&str; 2] = ["channel_offsets_s", "speed_rpm"];
@@ -222,14 +214,9 @@ impl Header {
 
     /// Checks everything a reader would check, so that what [`Writer`] writes reads back.
     pub fn validate(&self) -> Result<(), IdentificationError> {
-        let bad = |field: &str, reason: String| {
-            Err(IdentificationError::invalid(format!("header.{field}"), reason))
-        };
+        let bad = |field: &str, reason: String| Err(IdentificationError::invalid(format!("header.{field}"), reason));
         if self.version != FORMAT_VERSION {
-            return bad(
-                "version",
-                format!("this writer writes version {FORMAT_VERSION}, not {}", self.version),
-            );
+            return bad("version", format!("this writer writes version {FORMAT_VERSION}, not {}", self.version));
         }
         if let Err(reason) = check_rig(&self.rig) {
             return bad("rig", reason);
@@ -252,11 +239,7 @@ impl Header {
             return bad("channels", reason);
         }
         if let Err((_, reason)) = check_timing(self) {
-            let field = if self.channel_offsets_s.is_some() {
-                "channel_offsets_s"
-            } else {
-                "channel_interval_s"
-            };
+            let field = if self.channel_offsets_s.is_some() { "channel_offsets_s" } else { "channel_interval_s" };
             return bad(field, reason);
         }
         Ok(())
@@ -358,9 +341,7 @@ fn check_start_time(x: f64) -> Result<(), String> {
     if (0.0..=MAX_START_TIME_S).contains(&x) {
         Ok(())
     } else {
-        Err(format!(
-            "start_time_s must be in [0, {MAX_START_TIME_S}] s (0, or seconds since the Unix epoch up to ROS 2's int32 limit in 2038), got {x:?}"
-        ))
+        Err(format!("start_time_s must be in [0, {MAX_START_TIME_S}] s (0, or seconds since the Unix epoch up to ROS 2's int32 limit in 2038), got {x:?}"))
     }
 }
 
@@ -378,14 +359,7 @@ fn check_channels<'a>(names: impl Iterator<Item = &'a str>) -> Result<(), (Optio
     let mut first_seen: [Option<usize>; 10] = [None; 10];
     for (position, name) in names.enumerate() {
         let Some(c) = CHANNEL_NAMES.iter().position(|n| *n == name) else {
-            return Err((
-                Some(position),
-                format!(
-                    "unknown column `{}` (the channels are {})",
-                    excerpt(name),
-                    CHANNEL_NAMES.join(" ")
-                ),
-            ));
+            return Err((Some(position), format!("unknown column `{}` (the channels are {})", excerpt(name), CHANNEL_NAMES.join(" "))));
         };
         if let Some(first) = first_seen[c] {
             return Err((
@@ -399,12 +373,7 @@ fn check_channels<'a>(names: impl Iterator<Item = &'a str>) -> Result<(), (Optio
         }
         first_seen[c] = Some(position);
     }
-    let missing: Vec<&str> = CHANNEL_NAMES
-        .iter()
-        .zip(first_seen)
-        .filter(|(_, seen)| seen.is_none())
-        .map(|(name, _)| *name)
-        .collect();
+    let missing: Vec<&str> = CHANNEL_NAMES.iter().zip(first_seen).filter(|(_, seen)| seen.is_none()).map(|(name, _)| *name).collect();
     if missing.is_empty() {
         Ok(())
     } else {
@@ -427,14 +396,7 @@ fn check_timing(header: &Header) -> Result<(), (Option<usize>, String)> {
     match &header.channel_offsets_s {
         Some(offsets) => {
             if offsets.len() != header.channels.len() {
-                return Err((
-                    None,
-                    format!(
-                        "channel_offsets_s has {} values but the column line names {} channels",
-                        offsets.len(),
-                        header.channels.len()
-                    ),
-                ));
+                return Err((None, format!("channel_offsets_s has {} values but the column line names {} channels", offsets.len(), header.channels.len())));
             }
             for (i, &o) in offsets.iter().enumerate() {
                 if !(o.is_finite() && o >= 0.0 && o < period) {
@@ -524,10 +486,7 @@ fn comma_hint(line: &str) -> &'static str {
 fn parse_number(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(x) if x.is_finite() => Ok(x),
-        Ok(_) => Err(format!(
-            "`{}` is not a finite number (NaN and infinities are refused)",
-            excerpt(text)
-        )),
+        Ok(_) => Err(format!("`{}` is not a finite number (NaN and infinities are refused)", excerpt(text))),
         Err(_) => Err(format!("`{}` is not a number{}", excerpt(text), comma_hint(text))),
     }
 }
@@ -535,8 +494,7 @@ fn parse_number(text: &str) -> Result<f64, String> {
 /// A scan index: decimal digits only, fitting in u64.
 fn parse_scan_index(text: &str) -> Result<u64, String> {
     if !text.is_empty() && text.bytes().all(|b| b.is_ascii_digit()) {
-        text.parse::<u64>()
-            .map_err(|_| format!("scan index `{}` is too large (at most 2^64 - 1)", excerpt(text)))
+        text.parse::<u64>().map_err(|_| format!("scan index `{}` is too large (at most 2^64 - 1)", excerpt(text)))
     } else {
         Err(format!("scan index `{}` is not a non-negative integer", excerpt(text)))
     }
@@ -644,12 +602,9 @@ impl LineReader {
         match &self.stage {
             Stage::Rows { header, column_line, .. } => Ok((header, *column_line)),
             Stage::Failed(e) => Err(e.clone()),
-            Stage::Format | Stage::Header { .. } => Err(parse_error(
-                &self.file,
-                last_line,
-                0,
-                format!("the file ends before the column line `scan {}`", CHANNEL_NAMES.join(" ")),
-            )),
+            Stage::Format | Stage::Header { .. } => {
+                Err(parse_error(&self.file, last_line, 0, format!("the file ends before the column line `scan {}`", CHANNEL_NAMES.join(" "))))
+            }
         }
     }
 
@@ -676,8 +631,7 @@ impl LineReader {
                 Ok(Some(())) => {
                     let version = *version;
                     column_line(version, entries, number, line, &fail).map(|header| {
-                        self.stage =
-                            Stage::Rows { header: header.clone(), column_line: number, last_scan: None };
+                        self.stage = Stage::Rows { header: header.clone(), column_line: number, last_scan: None };
                         Fed::Header(header)
                     })
                 }
@@ -713,38 +667,19 @@ fn header_line(
     };
     let body_start = line.len() - body.len();
     let Some(colon) = body.find(':') else {
-        return Err(fail(
-            number,
-            0,
-            format!(
-                "header lines read `# key: value`, found `{}` (comments start with `##`)",
-                excerpt(line)
-            ),
-        ));
+        return Err(fail(number, 0, format!("header lines read `# key: value`, found `{}` (comments start with `##`)", excerpt(line))));
     };
     let key_raw = &body[..colon];
     let key = key_raw.trim_matches([' ', '\t']);
-    let key_column =
-        column_of(line, body_start + (key_raw.len() - key_raw.trim_start_matches([' ', '\t']).len()));
+    let key_column = column_of(line, body_start + (key_raw.len() - key_raw.trim_start_matches([' ', '\t']).len()));
     let value_raw = &body[colon + 1..];
     let value = value_raw.trim_matches([' ', '\t']);
-    let value_column = column_of(
-        line,
-        body_start + colon + 1 + (value_raw.len() - value_raw.trim_start_matches([' ', '\t']).len()),
-    );
+    let value_column = column_of(line, body_start + colon + 1 + (value_raw.len() - value_raw.trim_start_matches([' ', '\t']).len()));
     let Some(&key) = KEYS.iter().find(|k| **k == key) else {
-        return Err(fail(
-            number,
-            key_column,
-            format!("unknown header key `{}` (the keys are {})", excerpt(key), KEYS.join(", ")),
-        ));
+        return Err(fail(number, key_column, format!("unknown header key `{}` (the keys are {})", excerpt(key), KEYS.join(", "))));
     };
     if let Some(earlier) = entries.get(key) {
-        return Err(fail(
-            number,
-            key_column,
-            format!("header key `{key}` given twice (first on line {})", earlier.line),
-        ));
+        return Err(fail(number, key_column, format!("header key `{key}` given twice (first on line {})", earlier.line)));
     }
     if value.is_empty() {
         return Err(fail(number, value_column, format!("header key `{key}` has no value")));
@@ -778,13 +713,7 @@ fn column_line(
 }
 
 /// One line after the column line.
-fn data_row(
-    number: usize,
-    line: &str,
-    header: &Header,
-    last_scan: &mut Option<u64>,
-    fail: &dyn Fn(usize, usize, String) -> IdentificationError,
-) -> Fed {
+fn data_row(number: usize, line: &str, header: &Header, last_scan: &mut Option<u64>, fail: &dyn Fn(usize, usize, String) -> IdentificationError) -> Fed {
     let n = header.channels.len();
     let trimmed = line.trim_start_matches([' ', '\t']);
     if trimmed.is_empty() || trimmed.starts_with("##") {
@@ -802,16 +731,7 @@ fn data_row(
     let row = fields(line);
     if row.len() != n + 1 {
         let column = row.get(n + 1).map_or(0, |(c, _)| *c);
-        return Fed::Bad(fail(
-            number,
-            column,
-            format!(
-                "expected {} fields (scan index and {n} channels), found {}{}",
-                n + 1,
-                row.len(),
-                comma_hint(line)
-            ),
-        ));
+        return Fed::Bad(fail(number, column, format!("expected {} fields (scan index and {n} channels), found {}{}", n + 1, row.len(), comma_hint(line))));
     }
     let mut row = row.into_iter();
     // The length was checked just above: n + 1 >= 1 fields.
@@ -822,11 +742,7 @@ fn data_row(
     };
     if let Some(previous) = *last_scan {
         if index <= previous {
-            return Fed::Bad(fail(
-                number,
-                index_column,
-                format!("scan index {index} does not increase: the previous row is scan {previous}"),
-            ));
+            return Fed::Bad(fail(number, index_column, format!("scan index {index} does not increase: the previous row is scan {previous}")));
         }
     }
     let mut values = Vec::with_capacity(n);
@@ -841,11 +757,7 @@ fn data_row(
         Some(previous) if index != previous + 1 => Some(if index - previous == 2 {
             format!("scan index {index} skips scan {} (previous row is scan {previous})", previous + 1)
         } else {
-            format!(
-                "scan index {index} skips scans {} to {} (previous row is scan {previous})",
-                previous + 1,
-                index - 1
-            )
+            format!("scan index {index} skips scans {} to {} (previous row is scan {previous})", previous + 1, index - 1)
         }),
         _ => None,
     };
@@ -929,12 +841,7 @@ pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> 
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let (header, column_line) = reader.finish(text.lines().count().max(1))?;
     if scan_index.is_empty() {
-        return Err(parse_error(
-            file_name,
-            column_line,
-            0,
-            "no data: no scan rows follow the column line".into(),
-        ));
+        return Err(parse_error(file_name, column_line, 0, "no data: no scan rows follow the column line".into()));
     }
     Ok(Record { header: header.clone(), scan_index, columns })
 }
@@ -942,15 +849,7 @@ pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> 
 /// The version from the format line, or (column, message).
 fn parse_format_line(line: &str) -> Result<u32, (usize, String)> {
     let expected = format!("# {FORMAT_TAG} {FORMAT_VERSION}");
-    let missing = || {
-        (
-            0,
-            format!(
-                "missing format line: the first line must be `{expected}`, found `{}`",
-                excerpt(line)
-            ),
-        )
-    };
+    let missing = || (0, format!("missing format line: the first line must be `{expected}`, found `{}`", excerpt(line)));
     let body = line.trim_start_matches([' ', '\t']).strip_prefix('#').ok_or_else(missing)?;
     let offset = line.len() - body.len();
     let parts = fields(body);
@@ -959,10 +858,10 @@ fn parse_format_line(line: &str) -> Result<u32, (usize, String)> {
             [] => Err((0, format!("the format line lacks its version: expected `{expected}`"))),
             [(c, v)] => {
                 let column = column_of(line, offset) + c - 1;
-                let version =
-                    parse_scan_index(v).ok().and_then(|v| u32::try_from(v).ok()).ok_or_else(
-                        || (column, format!("format version `{}` is not an integer", excerpt(v))),
-                    )?;
+                let version = parse_scan_index(v)
+                    .ok()
+                    .and_then(|v| u32::try_from(v).ok())
+                    .ok_or_else(|| (column, format!("format version `{}` is not an integer", excerpt(v))))?;
                 if version == FORMAT_VERSION {
                     Ok(version)
                 } else {
@@ -975,10 +874,7 @@ fn parse_format_line(line: &str) -> Result<u32, (usize, String)> {
                     ))
                 }
             }
-            [_, (c, extra), ..] => Err((
-                column_of(line, offset) + c - 1,
-                format!("unexpected `{}` after the format version", excerpt(extra)),
-            )),
+            [_, (c, extra), ..] => Err((column_of(line, offset) + c - 1, format!("unexpected `{}` after the format version", excerpt(extra)))),
         },
         _ => Err(missing()),
     }
@@ -993,14 +889,8 @@ fn parse_header(
     fail: &dyn Fn(usize, usize, String) -> IdentificationError,
 ) -> Result<Header, IdentificationError> {
     // Present: checked by the caller for every key but the optional ones.
-    let get = |key: &str| {
-        entries
-            .get(key)
-            .ok_or_else(|| fail(column_line_number, 0, format!("header key `{key}` is missing")))
-    };
-    let number = |key: &str,
-                  check: fn(f64) -> Result<(), String>|
-     -> Result<f64, IdentificationError> {
+    let get = |key: &str| entries.get(key).ok_or_else(|| fail(column_line_number, 0, format!("header key `{key}` is missing")));
+    let number = |key: &str, check: fn(f64) -> Result<(), String>| -> Result<f64, IdentificationError> {
         let e = get(key)?;
         let x = parse_number(&e.value).map_err(|m| fail(e.line, e.column, format!("{key}: {m}")))?;
         check(x).map_err(|m| fail(e.line, e.column, m))?;
@@ -1023,13 +913,7 @@ fn parse_header(
         match e.value.as_str() {
             "si" => Units::Si,
             "volts" => Units::Volts,
-            other => {
-                return Err(fail(
-                    e.line,
-                    e.column,
-                    format!("units must be `si` or `volts`, found `{}`", excerpt(other)),
-                ))
-            }
+            other => return Err(fail(e.line, e.column, format!("units must be `si` or `volts`, found `{}`", excerpt(other)))),
         }
     };
     // Offsets: positions of each value on its line, for errors.
@@ -1039,8 +923,7 @@ fn parse_header(
             let mut values = Vec::new();
             for (c, text) in fields(&e.value) {
                 let column = e.column + c - 1;
-                let x = parse_number(text)
-                    .map_err(|m| fail(e.line, column, format!("channel_offsets_s: {m}")))?;
+                let x = parse_number(text).map_err(|m| fail(e.line, column, format!("channel_offsets_s: {m}")))?;
                 values.push((column, x));
             }
             Some((e, values))
@@ -1056,12 +939,7 @@ fn parse_header(
         return Err(fail(
             column_line_number,
             first_column,
-            format!(
-                "expected the column line `scan {}`, found `{}`{}",
-                CHANNEL_NAMES.join(" "),
-                excerpt(first),
-                comma_hint(column_line)
-            ),
+            format!("expected the column line `scan {}`, found `{}`{}", CHANNEL_NAMES.join(" "), excerpt(first), comma_hint(column_line)),
         ));
     }
     let names = &parts[1..];
@@ -1157,25 +1035,14 @@ impl<W: Write> Writer<W> {
         let what = || format!("scan {scan_index}");
         if let Some(last) = self.last_scan {
             if last.checked_add(1) != Some(scan_index) {
-                return Err(IdentificationError::BadInput {
-                    what: what(),
-                    reason: format!(
-                        "scan indices must be consecutive: the previous scan is {last}"
-                    ),
-                });
+                return Err(IdentificationError::BadInput { what: what(), reason: format!("scan indices must be consecutive: the previous scan is {last}") });
             }
         }
         if values.len() != self.channels.len() {
-            return Err(IdentificationError::BadInput {
-                what: what(),
-                reason: format!("{} values for {} channels", values.len(), self.channels.len()),
-            });
+            return Err(IdentificationError::BadInput { what: what(), reason: format!("{} values for {} channels", values.len(), self.channels.len()) });
         }
         if let Some((x, name)) = values.iter().zip(&self.channels).find(|(x, _)| !x.is_finite()) {
-            return Err(IdentificationError::BadInput {
-                what: format!("scan {scan_index}, channel {name}"),
-                reason: format!("value {x} is not finite"),
-            });
+            return Err(IdentificationError::BadInput { what: format!("scan {scan_index}, channel {name}"), reason: format!("value {x} is not finite") });
         }
         self.line.clear();
         let _ = write!(self.line, "{scan_index}"); // writing to a String cannot fail
@@ -1192,10 +1059,7 @@ impl<W: Write> Writer<W> {
     /// Flushes and returns the output. Refuses a record without rows (a reader would).
     pub fn finish(mut self) -> Result<W, IdentificationError> {
         if self.last_scan.is_none() {
-            return Err(IdentificationError::BadInput {
-                what: "ascii record".into(),
-                reason: "no scans were written; a record needs at least one".into(),
-            });
+            return Err(IdentificationError::BadInput { what: "ascii record".into(), reason: "no scans were written; a record needs at least one".into() });
         }
         self.out.flush().map_err(io_error)?;
         Ok(self.out)
@@ -1208,14 +1072,9 @@ impl<W: Write> Writer<W> {
 pub fn write(record: &Record) -> Result<String, IdentificationError> {
     let n = record.header.channels.len();
     if record.columns.len() != n {
-        return Err(IdentificationError::BadInput {
-            what: "record.columns".into(),
-            reason: format!("{} columns for {n} channels", record.columns.len()),
-        });
+        return Err(IdentificationError::BadInput { what: "record.columns".into(), reason: format!("{} columns for {n} channels", record.columns.len()) });
     }
-    if let Some((name, c)) =
-        record.header.channels.iter().zip(&record.columns).find(|(_, c)| c.len() != record.len())
-    {
+    if let Some((name, c)) = record.header.channels.iter().zip(&record.columns).find(|(_, c)| c.len() != record.len()) {
         return Err(IdentificationError::BadInput {
             what: format!("record.columns ({name})"),
             reason: format!("{} values for {} scans", c.len(), record.len()),
@@ -1230,8 +1089,5 @@ pub fn write(record: &Record) -> Result<String, IdentificationError> {
         writer.push(index, &row)?;
     }
     let bytes = writer.finish()?;
-    String::from_utf8(bytes).map_err(|e| IdentificationError::BadInput {
-        what: "ascii output".into(),
-        reason: e.to_string(),
-    })
+    String::from_utf8(bytes).map_err(|e| IdentificationError::BadInput { what: "ascii output".into(), reason: e.to_string() })
 }

@@ -87,16 +87,7 @@ pub struct Coefficients8 {
 
 impl Coefficients8 {
     pub fn from_matrices(k: &Matrix2<f64>, d: &Matrix2<f64>) -> Self {
-        Self {
-            kxx: k[(0, 0)],
-            kxy: k[(0, 1)],
-            kyx: k[(1, 0)],
-            kyy: k[(1, 1)],
-            dxx: d[(0, 0)],
-            dxy: d[(0, 1)],
-            dyx: d[(1, 0)],
-            dyy: d[(1, 1)],
-        }
+        Self { kxx: k[(0, 0)], kxy: k[(0, 1)], kyx: k[(1, 0)], kyy: k[(1, 1)], dxx: d[(0, 0)], dxy: d[(0, 1)], dyx: d[(1, 0)], dyy: d[(1, 1)] }
     }
 
     pub fn from_dimensionless(c: &DimensionlessCoefficients) -> Self {
@@ -397,16 +388,19 @@ impl CubicNoLinearFit {
 /// Returns the coefficients, R^2, the rms residual and the coefficients' covariance from the
 /// residual scatter (`None` with no degree of freedom left).
 #[allow(clippy::type_complexity)]
-fn least_squares(what: &str, x: &[f64], y: &[f64], p: usize, basis: impl Fn(f64) -> Vec<f64>) -> Result<(Vec<f64>, f64, f64, Option<Vec<Vec<f64>>>), IdentificationError> {
+fn least_squares(
+    what: &str,
+    x: &[f64],
+    y: &[f64],
+    p: usize,
+    basis: impl Fn(f64) -> Vec<f64>,
+) -> Result<(Vec<f64>, f64, f64, Option<Vec<Vec<f64>>>), IdentificationError> {
     let n = x.len();
     if y.len() != n {
         return Err(IdentificationError::BadInput { what: what.into(), reason: format!("{n} abscissae for {} ordinates", y.len()) });
     }
     if n < p {
-        return Err(IdentificationError::BadInput {
-            what: what.into(),
-            reason: format!("under-determined: {n} point(s) for {p} parameters"),
-        });
+        return Err(IdentificationError::BadInput { what: what.into(), reason: format!("under-determined: {n} point(s) for {p} parameters") });
     }
     if let Some(i) = x.iter().zip(y).position(|(a, b)| !(a.is_finite() && b.is_finite())) {
         return Err(IdentificationError::BadInput { what: what.into(), reason: format!("point {i} is not finite ({}, {})", x[i], y[i]) });
@@ -428,7 +422,8 @@ fn least_squares(what: &str, x: &[f64], y: &[f64], p: usize, basis: impl Fn(f64)
         col.iter_mut().for_each(|v| *v /= m);
     }
     let cols: Vec<&[f64]> = a.iter().map(Vec::as_slice).collect();
-    let fit = qr::least_squares(&cols, y).ok_or_else(|| IdentificationError::BadInput { what: what.into(), reason: "least squares failed: the design is rank deficient".into() })?;
+    let fit = qr::least_squares(&cols, y)
+        .ok_or_else(|| IdentificationError::BadInput { what: what.into(), reason: "least squares failed: the design is rank deficient".into() })?;
     let sigma = SmallSvd::new(&fit.r, p).map(|s| s.sigma).unwrap_or_default();
     let (smax, smin) = (sigma.first().copied().unwrap_or(0.0), sigma.last().copied().unwrap_or(0.0));
     if !(smin > 1e-10 * smax) {
@@ -448,7 +443,13 @@ fn least_squares(what: &str, x: &[f64], y: &[f64], p: usize, basis: impl Fn(f64)
         ss_res += (yi - fit).powi(2);
         ss_tot += (yi - mean).powi(2);
     }
-    let r2 = if ss_tot > 0.0 { 1.0 - ss_res / ss_tot } else if ss_res <= f64::EPSILON * mean.abs().max(1.0) { 1.0 } else { 0.0 };
+    let r2 = if ss_tot > 0.0 {
+        1.0 - ss_res / ss_tot
+    } else if ss_res <= f64::EPSILON * mean.abs().max(1.0) {
+        1.0
+    } else {
+        0.0
+    };
     let covariance = match inverse_normal {
         Some(m) if n > p => {
             let sigma2 = ss_res / (n - p) as f64;
@@ -645,9 +646,9 @@ fn unit_response(rig: &RigConfig, model: &ModelPoint, freqs: [f64; 2]) -> Result
             let mass = if r == c { w * w * m } else { 0.0 };
             Complex::new(model.stiffness_n_m[(r, c)] - mass, w * model.damping_n_s_m[(r, c)])
         });
-        let inv = dyn_stiff.try_inverse().ok_or_else(|| {
-            IdentificationError::invalid("excitation", format!("the housing's linear dynamic stiffness is singular at {f} Hz"))
-        })?;
+        let inv = dyn_stiff
+            .try_inverse()
+            .ok_or_else(|| IdentificationError::invalid("excitation", format!("the housing's linear dynamic stiffness is singular at {f} Hz")))?;
         let force = Vector2::new(Complex::new(0.0, -a.cos()), Complex::new(0.0, -a.sin()));
         let x = inv * force;
         out[j] = [-x[0], -x[1]];
@@ -676,12 +677,7 @@ fn unit_amplitude(resp: &[[Complex<f64>; 2]; 2], freqs: [f64; 2], seconds: f64) 
 
 /// Designs the excitation of a record: the amplitude for `target_d` (or the given force),
 /// limited by the exciters.
-fn design_excitation(
-    rig: &RigConfig,
-    model: &ModelPoint,
-    settings: &RecordSettings,
-    amplitude: Amplitude,
-) -> Result<ExcitationDesign, IdentificationError> {
+fn design_excitation(rig: &RigConfig, model: &ModelPoint, settings: &RecordSettings, amplitude: Amplitude) -> Result<ExcitationDesign, IdentificationError> {
     let n_hz = model.speed_rpm / 60.0;
     let freqs = [settings.frequency_ratios[0] * n_hz, settings.frequency_ratios[1] * n_hz];
     let resp = unit_response(rig, model, freqs)?;
@@ -850,7 +846,13 @@ fn total_records(cfg: &CampaignConfig) -> usize {
     cfg.load.points.len() + 2 * cfg.amplitude.steps
 }
 
-fn run_load_study_from(rig: &RigConfig, cfg: &CampaignConfig, first: usize, total: usize, progress: &mut dyn FnMut(Progress)) -> Result<LoadStudy, IdentificationError> {
+fn run_load_study_from(
+    rig: &RigConfig,
+    cfg: &CampaignConfig,
+    first: usize,
+    total: usize,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<LoadStudy, IdentificationError> {
     let mut points = Vec::with_capacity(cfg.load.points.len());
     for (i, p) in cfg.load.points.iter().enumerate() {
         let temperature_c = p.temperature_c.unwrap_or(rig.operating.bearing_temperature_c);
@@ -1034,7 +1036,13 @@ pub fn run_amplitude_study(rig: &RigConfig, cfg: &CampaignConfig, progress: &mut
     run_amplitude_study_from(rig, cfg, cfg.load.points.len(), total, progress)
 }
 
-fn run_amplitude_study_from(rig: &RigConfig, cfg: &CampaignConfig, first: usize, total: usize, progress: &mut dyn FnMut(Progress)) -> Result<AmplitudeStudy, IdentificationError> {
+fn run_amplitude_study_from(
+    rig: &RigConfig,
+    cfg: &CampaignConfig,
+    first: usize,
+    total: usize,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<AmplitudeStudy, IdentificationError> {
     let a = &cfg.amplitude;
     let low = sweep(rig, cfg, "amplitude.low", &a.low, 0, first, total, progress)?;
     let high = sweep(rig, cfg, "amplitude.high", &a.high, a.steps, first + a.steps, total, progress)?;
@@ -1061,7 +1069,9 @@ fn sweep(
     let a = &cfg.amplitude;
     let temperature_c = point.temperature_c.unwrap_or(rig.operating.bearing_temperature_c);
     let load_n = load_for(rig, point.load_parameter, point.speed_rpm, temperature_c)?;
-    let ctx = |e: IdentificationError| IdentificationError::invalid(field, format!("F_Y {} at {} rpm, {load_n:.0} N, {temperature_c} C: {e}", point.load_parameter, point.speed_rpm));
+    let ctx = |e: IdentificationError| {
+        IdentificationError::invalid(field, format!("F_Y {} at {} rpm, {load_n:.0} N, {temperature_c} C: {e}", point.load_parameter, point.speed_rpm))
+    };
     rig_at(rig, point.speed_rpm, load_n, temperature_c).map_err(ctx)?;
     let model = model_point(rig, point.speed_rpm, load_n, temperature_c).map_err(ctx)?;
     // Force per unit d from the linear model, then the force range.
@@ -1075,7 +1085,10 @@ fn sweep(
         (max_f, format!("exciter force limit {max_f} N (linear prediction d {:.3})", max_f / per_d))
     };
     if !(f_min < f_max) {
-        return Err(ctx(IdentificationError::invalid("amplitude.d_min", format!("d_min {} needs {f_min:.0} N, not below the largest force {f_max:.0} N", a.d_min))));
+        return Err(ctx(IdentificationError::invalid(
+            "amplitude.d_min",
+            format!("d_min {} needs {f_min:.0} N, not below the largest force {f_max:.0} N", a.d_min),
+        )));
     }
     let label = format!("F_Y {}", point.load_parameter);
     let mut steps = Vec::with_capacity(a.steps);
@@ -1083,7 +1096,13 @@ fn sweep(
         let force = f_min + (f_max - f_min) * s as f64 / (a.steps - 1) as f64;
         let why_step = if s + 1 == a.steps { why.clone() } else { format!("step {} of {}", s + 1, a.steps) };
         let design = design_excitation(rig, &model, &cfg.record, Amplitude::Force(force, why_step)).map_err(ctx)?;
-        let spec = RecordSpec { speed_rpm: point.speed_rpm, load_n, temperature_c, amplitude_n: design.amplitude_n, seed: seed_for(rig, AMPLITUDE_SEED_OFFSET, seed_index + s) };
+        let spec = RecordSpec {
+            speed_rpm: point.speed_rpm,
+            load_n,
+            temperature_c,
+            amplitude_n: design.amplitude_n,
+            seed: seed_for(rig, AMPLITUDE_SEED_OFFSET, seed_index + s),
+        };
         let step_label = format!("{label}: {:.0} rpm, {load_n:.0} N, {force:.0} N excitation", point.speed_rpm);
         let mut cb = |fraction: f64| progress(Progress { study: "amplitude", record: first + s, records: total, label: step_label.clone(), fraction });
         steps.push(run_record(rig, &cfg.record, step_label.clone(), spec, model.clone(), design, &mut cb).map_err(ctx)?);
@@ -1389,10 +1408,9 @@ pub fn run_campaign(rig: &RigConfig, cfg: &CampaignConfig, progress: &mut dyn Fn
     let findings = findings(&load_study, &amplitude_study)?;
     let film_model = match rig.film {
         FilmModelConfig::Short => "Ocvirk short-bearing pi-film (closed form)".to_string(),
-        FilmModelConfig::Finite { n_theta, n_z, tabulate } => format!(
-            "finite-difference Reynolds film, {n_theta} x {n_z} grid per pad{}",
-            if tabulate { " (the rig integrates its force map)" } else { "" }
-        ),
+        FilmModelConfig::Finite { n_theta, n_z, tabulate } => {
+            format!("finite-difference Reynolds film, {n_theta} x {n_z} grid per pad{}", if tabulate { " (the rig integrates its force map)" } else { "" })
+        }
     };
     Ok(Campaign {
         rig: rig.name.clone(),

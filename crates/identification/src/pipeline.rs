@@ -143,21 +143,14 @@ impl Identification {
 
 /// The mechanics eq. 2 needs, from a rig file.
 pub fn mechanics_of(rig: &RigConfig) -> Mechanics {
-    Mechanics {
-        housing_mass_kg: rig.housing.mass_kg,
-        exciter_angles_deg: rig.housing.exciter_angles_deg,
-        gravity_m_s2: rig.housing.gravity_m_s2,
-    }
+    Mechanics { housing_mass_kg: rig.housing.mass_kg, exciter_angles_deg: rig.housing.exciter_angles_deg, gravity_m_s2: rig.housing.gravity_m_s2 }
 }
 
 /// The rig's calibration on the record's own schedule: the record's rate, channel order and
 /// per-channel conversion offsets (`offsets_s[k]` for `raw.channels[k]`).
 pub fn calibration_for(rig: &RigConfig, raw: &RawRecord, offsets_s: &[f64]) -> Result<Calibration, IdentificationError> {
     if offsets_s.len() != raw.channels.len() {
-        return Err(IdentificationError::invalid(
-            "offsets_s",
-            format!("{} offsets for {} channels", offsets_s.len(), raw.channels.len()),
-        ));
+        return Err(IdentificationError::invalid("offsets_s", format!("{} offsets for {} channels", offsets_s.len(), raw.channels.len())));
     }
     let schedule: Vec<(ChannelId, f64)> = raw.channels.iter().copied().zip(offsets_s.iter().copied()).collect();
     Ok(rig.daq.calibration().with_schedule(raw.sample_rate_hz, &schedule)?)
@@ -271,10 +264,7 @@ pub fn excitation_lines(raw: &RawRecord) -> Result<Vec<f64>, IdentificationError
     let lines: Vec<f64> = (1..power.len())
         .filter(|&k| {
             let p = power[k];
-            p >= LINE_FRACTION_OF_STRONGEST * strongest
-                && p >= LINE_OVER_MEDIAN * median
-                && p >= power[k - 1]
-                && power.get(k + 1).is_none_or(|&q| p >= q)
+            p >= LINE_FRACTION_OF_STRONGEST * strongest && p >= LINE_OVER_MEDIAN * median && p >= power[k - 1] && power.get(k + 1).is_none_or(|&q| p >= q)
         })
         .map(|k| k as f64 / duration)
         .collect();
@@ -305,10 +295,7 @@ pub fn identify_conditioned(
     };
     if !conditioned.range_violations.is_empty() {
         let reasons: Vec<String> = conditioned.range_violations.iter().map(ToString::to_string).collect();
-        out.refusal = Some(format!(
-            "record refused (Zhou et al. step 2: a probe out of its linear range invalidates the file): {}",
-            reasons.join("; ")
-        ));
+        out.refusal = Some(format!("record refused (Zhou et al. step 2: a probe out of its linear range invalidates the file): {}", reasons.join("; ")));
         return Ok(out);
     }
     let mut est = config.estimator.clone();
@@ -610,7 +597,8 @@ mod tests {
             }
         }
         let n = 20_011;
-        let x: Vec<f64> = (0..n).map(|t| 3e-6 * (t as f64 * 0.013).sin() + 1e-6 * (t as f64 * 0.0371).cos() - 2e-5 + 1e-9 * ((t * 7919) % 101) as f64).collect();
+        let x: Vec<f64> =
+            (0..n).map(|t| 3e-6 * (t as f64 * 0.013).sin() + 1e-6 * (t as f64 * 0.0371).cos() - 2e-5 + 1e-9 * ((t * 7919) % 101) as f64).collect();
         let y: Vec<f64> = (0..n).map(|t| 4e-6 * (t as f64 * 0.0371).cos() + 2e-6 * (t as f64 * 0.013).sin() - 6e-5).collect();
         let fx: Vec<f64> = x.iter().map(|v| 150.0 - 1e8 * v).collect();
         let fy: Vec<f64> = y.iter().map(|v| 8000.0 - 2e8 * v).collect();

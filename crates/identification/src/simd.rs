@@ -19,7 +19,6 @@
 use std::cell::Cell;
 use std::sync::OnceLock;
 
-
 /// An instruction set a [`Kernel`] can be compiled for.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
 pub enum Isa {
@@ -216,7 +215,7 @@ mod x86 {
     use std::arch::x86_64::*;
 
     use super::{derivative_point, Kernel, Simd};
-    
+
     /// AVX2's token. Made only by [`on_avx2`], which runs only on a CPU with AVX2.
     #[derive(Copy, Clone)]
     pub(crate) struct Avx2(());
@@ -460,7 +459,18 @@ mod x86 {
     }
 
     derivative_kernel!(derivative_avx2, "avx2", 4, __m256d, _mm256_set1_pd, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_add_pd, _mm256_sub_pd, _mm256_mul_pd);
-    derivative_kernel!(derivative_avx512, "avx512f", 8, __m512d, _mm512_set1_pd, _mm512_loadu_pd, _mm512_storeu_pd, _mm512_add_pd, _mm512_sub_pd, _mm512_mul_pd);
+    derivative_kernel!(
+        derivative_avx512,
+        "avx512f",
+        8,
+        __m512d,
+        _mm512_set1_pd,
+        _mm512_loadu_pd,
+        _mm512_storeu_pd,
+        _mm512_add_pd,
+        _mm512_sub_pd,
+        _mm512_mul_pd
+    );
 }
 
 #[cfg(test)]

@@ -3,9 +3,7 @@
 
 use std::path::PathBuf;
 
-use oilfilm_identification::ascii::{
-    self, Fed, Header, LineReader, Record, Row, Units, Writer, CHANNEL_NAMES, CHANNEL_UNITS_SI,
-};
+use oilfilm_identification::ascii::{self, Fed, Header, LineReader, Record, Row, Units, Writer, CHANNEL_NAMES, CHANNEL_UNITS_SI};
 use oilfilm_identification::IdentificationError;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -148,21 +146,11 @@ fn each_rule_is_enforced_with_a_precise_position() {
         (good_with("# oilfilm-ascii 1", "# oilfilm-ascii"), 1, 0, "lacks its version"),
         (good_with("# oilfilm-ascii 1", "# oilfilm-ascii one"), 1, 17, "not an integer"),
         (good_with("# oilfilm-ascii 1", "# oilfilm-ascii 99999999999"), 1, 17, "not an integer"),
-        (
-            good_with("# oilfilm-ascii 1", "# oilfilm-ascii 1 beta"),
-            1,
-            19,
-            "after the format version",
-        ),
+        (good_with("# oilfilm-ascii 1", "# oilfilm-ascii 1 beta"), 1, 19, "after the format version"),
         (good_with("# oilfilm-ascii 1", "oilfilm-ascii 1"), 1, 0, "missing format line"),
         (good_with("# rig: zhou2004", "# rig zhou2004"), 2, 0, "# key: value"),
         (good_with("# rig: zhou2004", "# rig:   "), 2, 10, "has no value"),
-        (
-            good_with("# units: si", "# units: si\n# rig: other"),
-            6,
-            3,
-            "given twice (first on line 2)",
-        ),
+        (good_with("# units: si", "# units: si\n# rig: other"), 6, 3, "given twice (first on line 2)"),
         (good_with("# units: si", "# units: SI"), 5, 10, "`si` or `volts`"),
         (good_with("# units: si", "# units: millivolts"), 5, 10, "`si` or `volts`"),
         (good_with("5000", "-5000"), 3, 19, "must be in (0, 1e7] Hz, got -5000.0"),
@@ -181,56 +169,21 @@ fn each_rule_is_enforced_with_a_precise_position() {
         (good_with("1e-5", "-1e-5"), 4, 23, "non-negative"),
         (good_with("1e-5", "1e-4"), 4, 23, "not within the scan period"),
         (good_with("# start_time_s: 0", "# start_time_s: nan"), 6, 17, "not a finite number"),
-        (
-            good_with("# units: si", "# units: si\n# channel_offsets_s: 0 1e-5 2e-5"),
-            6,
-            22,
-            "has 3 values but the column line names 10",
-        ),
-        (
-            good_with("# units: si", "# units: si\n# channel_offsets_s: 0 0 0 0 0 0 0 0 2e-4 0"),
-            6,
-            38,
-            "shorter than the scan period",
-        ),
-        (
-            good_with("# units: si", "# units: si\n# channel_offsets_s: 0 0 0 0 x 0 0 0 0 0"),
-            6,
-            30,
-            "`x` is not a number",
-        ),
+        (good_with("# units: si", "# units: si\n# channel_offsets_s: 0 1e-5 2e-5"), 6, 22, "has 3 values but the column line names 10"),
+        (good_with("# units: si", "# units: si\n# channel_offsets_s: 0 0 0 0 0 0 0 0 2e-4 0"), 6, 38, "shorter than the scan period"),
+        (good_with("# units: si", "# units: si\n# channel_offsets_s: 0 0 0 0 x 0 0 0 0 0"), 6, 30, "`x` is not a number"),
         (good_with("# start_time_s: 0\n", "# start_time_s: 0\n## c\n"), 0, 0, ""),
         (GOOD.replace("scan probe_a_x", "index probe_a_x"), 7, 1, "expected the column line"),
         (GOOD.replace("scan probe_a_x", "scan  probe_a_x  bogus"), 7, 18, "unknown column `bogus`"),
-        (
-            good_with("1 5.1e-05", "# sample_rate_hz: 1\n1 5.1e-05"),
-            9,
-            1,
-            "header line after the column line",
-        ),
-        (
-            good_with("1 5.1e-05", "0 5.1e-05"),
-            9,
-            1,
-            "does not increase: the previous row is scan 0",
-        ),
+        (good_with("1 5.1e-05", "# sample_rate_hz: 1\n1 5.1e-05"), 9, 1, "header line after the column line"),
+        (good_with("1 5.1e-05", "0 5.1e-05"), 9, 1, "does not increase: the previous row is scan 0"),
         (good_with("1 5.1e-05", "7 5.1e-05"), 9, 1, "skips scans 1 to 6"),
         (good_with("1 5.1e-05", "-1 5.1e-05"), 9, 1, "not a non-negative integer"),
         (good_with("1 5.1e-05", "+1 5.1e-05"), 9, 1, "not a non-negative integer"),
         (good_with("1 5.1e-05", "1.0 5.1e-05"), 9, 1, "not a non-negative integer"),
         (good_with("1 5.1e-05", "99999999999999999999 5.1e-05"), 9, 1, "too large"),
-        (
-            good_with("5601 29\n", "5601 29 7\n"),
-            9,
-            62,
-            "expected 11 fields (scan index and 10 channels), found 12",
-        ),
-        (
-            good_with("5601 29\n", "5601 inf\n"),
-            9,
-            59,
-            "channel `temperature`: value `inf` is not a finite",
-        ),
+        (good_with("5601 29\n", "5601 29 7\n"), 9, 62, "expected 11 fields (scan index and 10 channels), found 12"),
+        (good_with("5601 29\n", "5601 inf\n"), 9, 59, "channel `temperature`: value `inf` is not a finite"),
         (good_with("5601 29\n", "5601 1e400\n"), 9, 59, "not a finite number"),
         (good_with("5601 29\n", "5601 29,5\n"), 9, 59, "not commas"),
         (good_with("5601 29\n", "5601 29°\n"), 9, 59, "`29°` is not a number"),
@@ -267,8 +220,7 @@ fn awkward(rng: &mut ChaCha8Rng) -> f64 {
             0 => f64::from_bits(rng.random::<u64>()),
             1 => rng.random_range(-1e-4..1e-4),
             2 => rng.random_range(-2000.0..2000.0),
-            3 => [0.0, -0.0, f64::MIN_POSITIVE, 5e-324, f64::MAX, f64::MIN, 0.1 + 0.2, 1.0 / 3.0]
-                [rng.random_range(0..8)],
+            3 => [0.0, -0.0, f64::MIN_POSITIVE, 5e-324, f64::MAX, f64::MIN, 0.1 + 0.2, 1.0 / 3.0][rng.random_range(0..8)],
             4 => rng.random::<f64>() * 10f64.powi(rng.random_range(-300..300)),
             _ => f64::from_bits(rng.random_range(0..1u64 << 52)), // subnormal
         };
@@ -287,9 +239,7 @@ fn random_record(rng: &mut ChaCha8Rng, scans: usize) -> Record {
     let sample_rate_hz = rng.random_range(100.0..100_000.0);
     let period = 1.0 / sample_rate_hz;
     let channel_interval_s = rng.random::<f64>() * period / 10.0;
-    let channel_offsets_s = rng
-        .random::<bool>()
-        .then(|| (0..10).map(|_| rng.random::<f64>() * period * 0.999).collect());
+    let channel_offsets_s = rng.random::<bool>().then(|| (0..10).map(|_| rng.random::<f64>() * period * 0.999).collect());
     let first = if rng.random::<bool>() { 0 } else { rng.random_range(0..u64::MAX - scans as u64) };
     Record {
         header: Header {
@@ -300,9 +250,7 @@ fn random_record(rng: &mut ChaCha8Rng, scans: usize) -> Record {
             channel_offsets_s,
             units: if rng.random::<bool>() { Units::Si } else { Units::Volts },
             // Awkward values within the documented range (0 to ROS 2's int32 seconds).
-            start_time_s: std::iter::repeat_with(|| awkward(rng).abs())
-                .find(|t| *t <= ascii::MAX_START_TIME_S)
-                .expect("an endless iterator"),
+            start_time_s: std::iter::repeat_with(|| awkward(rng).abs()).find(|t| *t <= ascii::MAX_START_TIME_S).expect("an endless iterator"),
             speed_rpm: rng.random::<bool>().then(|| 1.0 + rng.random::<f64>() * 5000.0),
             channels,
         },
@@ -319,8 +267,7 @@ fn assert_bit_identical(a: &Record, b: &Record) {
         assert_eq!(bits(ca), bits(cb));
     }
     let h = |r: &Record| {
-        let mut v =
-            vec![r.header.sample_rate_hz, r.header.channel_interval_s, r.header.start_time_s];
+        let mut v = vec![r.header.sample_rate_hz, r.header.channel_interval_s, r.header.start_time_s];
         v.extend(r.header.channel_offsets_s.clone().unwrap_or_default());
         bits(&v)
     };
@@ -335,8 +282,7 @@ fn write_then_read_is_bit_identical() {
         let scans = rng.random_range(1..40);
         let record = random_record(&mut rng, scans);
         let text = ascii::write(&record).unwrap_or_else(|e| panic!("case {case}: {e}"));
-        let back =
-            ascii::read(&text, "roundtrip").unwrap_or_else(|e| panic!("case {case}: {e}\n{text}"));
+        let back = ascii::read(&text, "roundtrip").unwrap_or_else(|e| panic!("case {case}: {e}\n{text}"));
         assert_bit_identical(&record, &back);
         // The streaming writer produces the same text.
         let mut w = Writer::new(Vec::new(), &record.header).expect("header");
@@ -388,33 +334,17 @@ fn writers_refuse_what_a_reader_would_refuse() {
         (Header { start_time_s: 9.3e9, ..header.clone() }, "header.start_time_s"),
         (Header { speed_rpm: Some(1e308), ..header.clone() }, "header.speed_rpm"),
         (Header { speed_rpm: Some(f64::NAN), ..header.clone() }, "header.speed_rpm"),
-        (
-            Header { channel_offsets_s: Some(vec![0.0; 9]), ..header.clone() },
-            "header.channel_offsets_s",
-        ),
-        (
-            Header { channel_offsets_s: Some(vec![1.0; 10]), ..header.clone() },
-            "header.channel_offsets_s",
-        ),
-        (
-            Header { channels: header.channels[1..].to_vec(), ..header.clone() },
-            "missing channel probe_a_x",
-        ),
-        (
-            Header {
-                channels: [&header.channels[..], &["f1".to_string()]].concat(),
-                ..header.clone()
-            },
-            "appears twice",
-        ),
+        (Header { channel_offsets_s: Some(vec![0.0; 9]), ..header.clone() }, "header.channel_offsets_s"),
+        (Header { channel_offsets_s: Some(vec![1.0; 10]), ..header.clone() }, "header.channel_offsets_s"),
+        (Header { channels: header.channels[1..].to_vec(), ..header.clone() }, "missing channel probe_a_x"),
+        (Header { channels: [&header.channels[..], &["f1".to_string()]].concat(), ..header.clone() }, "appears twice"),
     ];
     for (h, words) in bad_headers {
         let err = Writer::new(Vec::new(), &h).err().expect(words).to_string();
         assert!(err.contains(words), "`{err}` lacks `{words}`");
     }
 
-    let record =
-        Record { header: header.clone(), scan_index: vec![0, 1], columns: vec![vec![0.0; 2]; 10] };
+    let record = Record { header: header.clone(), scan_index: vec![0, 1], columns: vec![vec![0.0; 2]; 10] };
     assert!(ascii::write(&record).is_ok());
     let ragged = Record { columns: vec![vec![0.0; 2], vec![0.0; 1]], ..record.clone() };
     assert!(ascii::write(&ragged).is_err());
@@ -429,22 +359,8 @@ fn writers_refuse_what_a_reader_would_refuse() {
 
 /// One random damaging edit of `bytes`.
 fn mutate(rng: &mut ChaCha8Rng, bytes: &mut Vec<u8>) {
-    const TOKENS: [&[u8]; 14] = [
-        b"nan",
-        b"inf",
-        b"-",
-        b"#",
-        b"##",
-        b":",
-        b" ",
-        b"\t",
-        b"\r",
-        b"\n",
-        b"1e999",
-        b"18446744073709551616",
-        b"scan",
-        "\u{feff}é☺".as_bytes(),
-    ];
+    const TOKENS: [&[u8]; 14] =
+        [b"nan", b"inf", b"-", b"#", b"##", b":", b" ", b"\t", b"\r", b"\n", b"1e999", b"18446744073709551616", b"scan", "\u{feff}é☺".as_bytes()];
     if bytes.is_empty() {
         bytes.extend_from_slice(TOKENS[rng.random_range(0..TOKENS.len())]);
         return;
@@ -463,8 +379,7 @@ fn mutate(rng: &mut ChaCha8Rng, bytes: &mut Vec<u8>) {
         }
         _ => {
             // Line-level edits: swap, duplicate or drop lines.
-            let mut lines: Vec<Vec<u8>> =
-                bytes.split(|b| *b == b'\n').map(<[u8]>::to_vec).collect();
+            let mut lines: Vec<Vec<u8>> = bytes.split(|b| *b == b'\n').map(<[u8]>::to_vec).collect();
             let n = lines.len();
             let (i, j) = (rng.random_range(0..n), rng.random_range(0..n));
             match rng.random_range(0..3) {
@@ -491,8 +406,7 @@ fn mutated_files_never_make_the_reader_panic() {
     let mut rng = ChaCha8Rng::seed_from_u64(0xa5c11);
     let (mut ok, mut refused) = (0, 0);
     // OILFILM_FUZZ_CASES=200000 searches longer; the default keeps the suite fast.
-    let cases: usize =
-        std::env::var("OILFILM_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000);
+    let cases: usize = std::env::var("OILFILM_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000);
     for case in 0..cases {
         // A short file half the time, so that the header takes more of the damage.
         let base = match case % 4 {
@@ -506,8 +420,7 @@ fn mutated_files_never_make_the_reader_panic() {
         }
         let text = String::from_utf8_lossy(&bytes);
         let outcome = std::panic::catch_unwind(|| ascii::read(&text, "mutant.txt"));
-        let result =
-            outcome.unwrap_or_else(|_| panic!("case {case}: the reader panicked on\n{text}"));
+        let result = outcome.unwrap_or_else(|_| panic!("case {case}: the reader panicked on\n{text}"));
         // The streaming reader gives the same record or the same error.
         let streamed = std::panic::catch_unwind(|| ascii::read_stream(text.as_bytes(), "mutant.txt"))
             .unwrap_or_else(|_| panic!("case {case}: the streaming reader panicked on\n{text}"));
@@ -519,21 +432,14 @@ fn mutated_files_never_make_the_reader_panic() {
         match result {
             Ok(record) => {
                 ok += 1;
-                assert!(
-                    record.columns.len() == 10
-                        && record.columns.iter().all(|c| c.len() == record.len())
-                );
+                assert!(record.columns.len() == 10 && record.columns.iter().all(|c| c.len() == record.len()));
                 // Whatever reads also writes and reads back unchanged.
-                let again =
-                    ascii::read(&ascii::write(&record).expect("write"), "again").expect("reread");
+                let again = ascii::read(&ascii::write(&record).expect("write"), "again").expect("reread");
                 assert_bit_identical(&record, &again);
             }
             Err(IdentificationError::Parse { line, .. }) => {
                 refused += 1;
-                assert!(
-                    line >= 1 && line <= text.split('\n').count().max(1),
-                    "case {case}: line {line}"
-                );
+                assert!(line >= 1 && line <= text.split('\n').count().max(1), "case {case}: line {line}");
             }
             Err(other) => panic!("case {case}: not a parse error: {other}"),
         }
@@ -572,10 +478,21 @@ fn the_line_reader_gives_the_header_then_rows_and_skips_bad_rows_with_their_posi
     let mut reader = LineReader::new("stream");
     let fed = feed_all(&mut reader, GOOD);
     let record = ascii::read(GOOD, "good").expect("good");
-    let header: Vec<&Header> =
-        fed.iter().filter_map(|f| match f { Ok(Fed::Header(h)) => Some(h), _ => None }).collect();
+    let header: Vec<&Header> = fed
+        .iter()
+        .filter_map(|f| match f {
+            Ok(Fed::Header(h)) => Some(h),
+            _ => None,
+        })
+        .collect();
     assert_eq!(header, [&record.header]);
-    let rows: Vec<&Row> = fed.iter().filter_map(|f| match f { Ok(Fed::Row(r)) => Some(r), _ => None }).collect();
+    let rows: Vec<&Row> = fed
+        .iter()
+        .filter_map(|f| match f {
+            Ok(Fed::Row(r)) => Some(r),
+            _ => None,
+        })
+        .collect();
     assert_eq!(rows.len(), 2);
     assert_eq!((rows[1].line, rows[1].scan_index), (9, 1));
     assert_eq!(rows[1].values, record.columns.iter().map(|c| c[1]).collect::<Vec<_>>());

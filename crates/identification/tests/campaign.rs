@@ -163,7 +163,16 @@ fn load_study_identifies_the_film_and_its_direct_coefficients_grow_with_fy() {
     for t in &ls.trends {
         println!(
             "{}: fit {:.3} -> {:.3} over F_Y {:.2}-{:.2} (sign {:+}, |.| grows {}), model {:.3} -> {:.3}, R^2 {:.4}",
-            t.name, t.fit_at_min_fy, t.fit_at_max_fy, t.fy_range[0], t.fy_range[1], t.slope_sign, t.grows_in_magnitude, t.model_at_min_fy, t.model_at_max_fy, t.fit.r_squared
+            t.name,
+            t.fit_at_min_fy,
+            t.fit_at_max_fy,
+            t.fy_range[0],
+            t.fy_range[1],
+            t.slope_sign,
+            t.grows_in_magnitude,
+            t.model_at_min_fy,
+            t.model_at_max_fy,
+            t.fit.r_squared
         );
     }
     // The paper's finding in Zhou's normalisation: the direct terms grow with F_Y, in the
@@ -191,7 +200,17 @@ fn relative_variation_grows_with_amplitude() {
             println!("  F {:>5.0} N: d {:.4} (predicted {:.4})", st.spec.amplitude_n, st.amplitude_d, st.excitation.predicted_d);
         }
         for f in &s.fits {
-            println!("  {}: d0 {:.4} b {:.3} a {:.3} R^2 {:.4}; RV({:.3}) {:+.2} %, |RV| monotone {}", f.name, f.fit.d0, f.fit.b, f.fit.a, f.fit.r_squared, s.max_d, 100.0 * f.rv_at_max_d, f.abs_rv_monotone);
+            println!(
+                "  {}: d0 {:.4} b {:.3} a {:.3} R^2 {:.4}; RV({:.3}) {:+.2} %, |RV| monotone {}",
+                f.name,
+                f.fit.d0,
+                f.fit.b,
+                f.fit.a,
+                f.fit.r_squared,
+                s.max_d,
+                100.0 * f.rv_at_max_d,
+                f.abs_rv_monotone
+            );
         }
         // The sweep spans the paper's range of d.
         assert!(s.steps.first().is_some_and(|st| st.amplitude_d < 0.008), "smallest d too large");
@@ -218,9 +237,18 @@ fn relative_variation_is_not_larger_at_high_fy_unlike_the_paper() {
     let c = quick_campaign();
     let f = &c.findings;
     for at in [&f.rv_at_common_d, &f.rv_at_d_005] {
-        println!("d = {:.3}: mean |RV| {:.2} % (se {:?}) at {} vs {:.2} % (se {:?}) at {}: {:?}; larger at high F_Y for {} of 8",
-            at.d, 100.0 * at.mean_abs_rv_high_fy, at.mean_abs_rv_high_fy_se, c.amplitude_study.high.label,
-            100.0 * at.mean_abs_rv_low_fy, at.mean_abs_rv_low_fy_se, c.amplitude_study.low.label, at.verdict, at.larger_at_high_fy);
+        println!(
+            "d = {:.3}: mean |RV| {:.2} % (se {:?}) at {} vs {:.2} % (se {:?}) at {}: {:?}; larger at high F_Y for {} of 8",
+            at.d,
+            100.0 * at.mean_abs_rv_high_fy,
+            at.mean_abs_rv_high_fy_se,
+            c.amplitude_study.high.label,
+            100.0 * at.mean_abs_rv_low_fy,
+            at.mean_abs_rv_low_fy_se,
+            c.amplitude_study.low.label,
+            at.verdict,
+            at.larger_at_high_fy
+        );
         for r in &at.coefficients {
             println!("    {}: {:+.2} % vs {:+.2} %", r.name, 100.0 * r.rv_high_fy, 100.0 * r.rv_low_fy);
         }
@@ -233,7 +261,12 @@ fn relative_variation_is_not_larger_at_high_fy_unlike_the_paper() {
     // And at the largest common d.
     assert_eq!(f.rv_at_common_d.verdict, Verdict::Smaller, "{:?}", f.rv_at_common_d);
     // Coefficient by coefficient, most are smaller at the high F_Y too.
-    assert!(f.rv_at_d_005.larger_at_high_fy <= 2 && f.rv_at_common_d.larger_at_high_fy <= 3, "{} and {} of 8 larger", f.rv_at_d_005.larger_at_high_fy, f.rv_at_common_d.larger_at_high_fy);
+    assert!(
+        f.rv_at_d_005.larger_at_high_fy <= 2 && f.rv_at_common_d.larger_at_high_fy <= 3,
+        "{} and {} of 8 larger",
+        f.rv_at_d_005.larger_at_high_fy,
+        f.rv_at_common_d.larger_at_high_fy
+    );
     assert!(!f.rv_faster_at_high_fy);
 }
 
@@ -241,18 +274,20 @@ fn relative_variation_is_not_larger_at_high_fy_unlike_the_paper() {
 fn most_sensitive_names_one_of_the_eight() {
     let c = quick_campaign();
     let f = &c.findings;
-    println!("most sensitive at d = {:.3}: {} (RV {:+.2} % at {}); per F_Y {:?}", f.common_d, f.most_sensitive, 100.0 * f.most_sensitive_rv, f.most_sensitive_at, f.most_sensitive_per_fy);
+    println!(
+        "most sensitive at d = {:.3}: {} (RV {:+.2} % at {}); per F_Y {:?}",
+        f.common_d,
+        f.most_sensitive,
+        100.0 * f.most_sensitive_rv,
+        f.most_sensitive_at,
+        f.most_sensitive_per_fy
+    );
     for n in &f.notes {
         println!("  {n}");
     }
     assert!(COEFFICIENT_NAMES.contains(&f.most_sensitive.as_str()), "{}", f.most_sensitive);
     // It is the largest |RV| in the comparison it names.
-    let largest = f
-        .rv_at_common_d
-        .coefficients
-        .iter()
-        .flat_map(|r| [r.rv_low_fy.abs(), r.rv_high_fy.abs()])
-        .fold(0.0, f64::max);
+    let largest = f.rv_at_common_d.coefficients.iter().flat_map(|r| [r.rv_low_fy.abs(), r.rv_high_fy.abs()]).fold(0.0, f64::max);
     assert_eq!(f.most_sensitive_rv.abs(), largest);
     assert!(f.most_sensitive_rv.abs() > 0.02, "a most-sensitive RV of {} is noise", f.most_sensitive_rv);
 }

@@ -35,7 +35,15 @@ fn columns_of(order: &[ChannelId]) -> [usize; CHANNEL_COUNT] {
 
 /// Runs a record's interleaved values through a fresh chain in blocks of `block` scans.
 /// (the rig's own calibration and schedule).
-fn run(values: &[f64], width: usize, units: RawUnits, columns: &[usize; CHANNEL_COUNT], rig: &RigConfig, cfg: &ConditioningConfig, block: usize) -> CausalOutput {
+fn run(
+    values: &[f64],
+    width: usize,
+    units: RawUnits,
+    columns: &[usize; CHANNEL_COUNT],
+    rig: &RigConfig,
+    cfg: &ConditioningConfig,
+    block: usize,
+) -> CausalOutput {
     let cal = &rig.daq.calibration();
     let mut chain = CausalChain::new(columns, width, units, cal.sample_rate_hz(), cal, &pipeline::mechanics_of(rig), cfg).unwrap();
     let mut out = CausalOutput::default();
@@ -47,7 +55,16 @@ fn run(values: &[f64], width: usize, units: RawUnits, columns: &[usize; CHANNEL_
 
 fn window(o: &CausalOutput, start: usize, len: usize, rate_hz: f64) -> WindowEstimate {
     let r = start..start + len;
-    let s = Signals { x_m: &o.x_m[r.clone()], y_m: &o.y_m[r.clone()], vx_m_s: &o.vx_m_s[r.clone()], vy_m_s: &o.vy_m_s[r.clone()], ax_m_s2: None, ay_m_s2: None, fx_n: &o.fx_n[r.clone()], fy_n: &o.fy_n[r] };
+    let s = Signals {
+        x_m: &o.x_m[r.clone()],
+        y_m: &o.y_m[r.clone()],
+        vx_m_s: &o.vx_m_s[r.clone()],
+        vy_m_s: &o.vy_m_s[r.clone()],
+        ax_m_s2: None,
+        ay_m_s2: None,
+        fx_n: &o.fx_n[r.clone()],
+        fy_n: &o.fy_n[r],
+    };
     let cfg = EstimatorConfig { window: len, hop: len, sample_rate_hz: rate_hz, signal_band_hz: Some(CUTOFF_HZ), ..EstimatorConfig::default() };
     estimator::estimate_window(&s, 0..len, &cfg).unwrap()
 }
@@ -92,7 +109,8 @@ fn a_synthetic_film_is_recovered_so_every_column_sees_the_same_delay() {
             let f3 = 50.0;
             // Film force, then the exciters' forces that make eq. 2 give it.
             let fx = -(k[(0, 0)] * x + k[(0, 1)] * y + c[(0, 0)] * vx + c[(0, 1)] * vy) + mech.housing_mass_kg * hax;
-            let fy = -(k[(1, 0)] * x + k[(1, 1)] * y + c[(1, 0)] * vx + c[(1, 1)] * vy) + mech.housing_mass_kg * hay - (f3 - mech.housing_mass_kg * mech.gravity_m_s2);
+            let fy = -(k[(1, 0)] * x + k[(1, 1)] * y + c[(1, 0)] * vx + c[(1, 1)] * vy) + mech.housing_mass_kg * hay
+                - (f3 - mech.housing_mass_kg * mech.gravity_m_s2);
             let det = a1.cos() * a2.sin() - a2.cos() * a1.sin();
             let f1 = (fx * a2.sin() - fy * a2.cos()) / det;
             let f2 = (a1.cos() * fy - a1.sin() * fx) / det;
@@ -147,7 +165,10 @@ fn the_output_does_not_depend_on_how_the_scans_are_cut() {
     let whole = run(&values, order.len(), RawUnits::Volts, &columns, &rig, &config(), rec.scans.len());
     assert!(whole.len() > 5_000);
     let bits = |o: &CausalOutput| -> Vec<u64> {
-        [&o.x_m, &o.y_m, &o.vx_m_s, &o.vy_m_s, &o.ax_m_s2, &o.ay_m_s2, &o.fx_n, &o.fy_n, &o.temperature_c, &o.static_load_n].iter().flat_map(|c| c.iter().map(|v| v.to_bits())).collect()
+        [&o.x_m, &o.y_m, &o.vx_m_s, &o.vy_m_s, &o.ax_m_s2, &o.ay_m_s2, &o.fx_n, &o.fy_n, &o.temperature_c, &o.static_load_n]
+            .iter()
+            .flat_map(|c| c.iter().map(|v| v.to_bits()))
+            .collect()
     };
     for block in [1, 7, 500, 1_024, 4_999] {
         let cut = run(&values, order.len(), RawUnits::Volts, &columns, &rig, &config(), block);
@@ -224,7 +245,16 @@ fn on_the_simulated_zhou_rig_the_causal_chain_meets_the_tolerances_beside_the_ze
     assert!(zero.valid.start <= start && start + len <= zero.valid.end);
     let z = {
         let r = start..start + len;
-        let s = Signals { x_m: &zero.x_m[r.clone()], y_m: &zero.y_m[r.clone()], vx_m_s: &zero.vx_m_s[r.clone()], vy_m_s: &zero.vy_m_s[r.clone()], ax_m_s2: None, ay_m_s2: None, fx_n: &zero.fx_n[r.clone()], fy_n: &zero.fy_n[r] };
+        let s = Signals {
+            x_m: &zero.x_m[r.clone()],
+            y_m: &zero.y_m[r.clone()],
+            vx_m_s: &zero.vx_m_s[r.clone()],
+            vy_m_s: &zero.vy_m_s[r.clone()],
+            ax_m_s2: None,
+            ay_m_s2: None,
+            fx_n: &zero.fx_n[r.clone()],
+            fy_n: &zero.fy_n[r],
+        };
         let cfg = EstimatorConfig { window: len, hop: len, sample_rate_hz: fs, signal_band_hz: Some(CUTOFF_HZ), ..EstimatorConfig::default() };
         estimator::estimate_window(&s, 0..len, &cfg).unwrap()
     };
@@ -237,7 +267,13 @@ fn on_the_simulated_zhou_rig_the_causal_chain_meets_the_tolerances_beside_the_ze
         println!("{label}: condition {:.1}, flags {:?}", e.condition_number, e.flags);
         for (name, m, t, se) in [("K", &coef.stiffness_n_m, &kt, &coef.stiffness_se), ("C", &coef.damping_n_s_m, &ct, &coef.damping_se)] {
             for (i, j, n) in [(0, 0, "xx"), (0, 1, "xy"), (1, 0, "yx"), (1, 1, "yy")] {
-                println!("  {name}{n}: {:>12.5e} truth {:>12.5e} error {:+.3} % (SE {:.3} %)", m[(i, j)], t[(i, j)], 100.0 * (m[(i, j)] - t[(i, j)]) / t[(i, j)].abs(), 100.0 * se[(i, j)] / t[(i, j)].abs());
+                println!(
+                    "  {name}{n}: {:>12.5e} truth {:>12.5e} error {:+.3} % (SE {:.3} %)",
+                    m[(i, j)],
+                    t[(i, j)],
+                    100.0 * (m[(i, j)] - t[(i, j)]) / t[(i, j)].abs(),
+                    100.0 * se[(i, j)] / t[(i, j)].abs()
+                );
             }
         }
         let (ek, ec) = (rel(&coef.stiffness_n_m, &kt), rel(&coef.damping_n_s_m, &ct));
@@ -267,7 +303,16 @@ fn at_the_rigs_own_noise_the_causal_chain_is_biased_and_flagged_as_the_zero_phas
     let (start, len) = (5_000usize, 50_000usize);
     let z = {
         let r = start..start + len;
-        let s = Signals { x_m: &zero.x_m[r.clone()], y_m: &zero.y_m[r.clone()], vx_m_s: &zero.vx_m_s[r.clone()], vy_m_s: &zero.vy_m_s[r.clone()], ax_m_s2: None, ay_m_s2: None, fx_n: &zero.fx_n[r.clone()], fy_n: &zero.fy_n[r] };
+        let s = Signals {
+            x_m: &zero.x_m[r.clone()],
+            y_m: &zero.y_m[r.clone()],
+            vx_m_s: &zero.vx_m_s[r.clone()],
+            vy_m_s: &zero.vy_m_s[r.clone()],
+            ax_m_s2: None,
+            ay_m_s2: None,
+            fx_n: &zero.fx_n[r.clone()],
+            fy_n: &zero.fy_n[r],
+        };
         let cfg = EstimatorConfig { window: len, hop: len, sample_rate_hz: fs, signal_band_hz: Some(CUTOFF_HZ), ..EstimatorConfig::default() };
         estimator::estimate_window(&s, 0..len, &cfg).unwrap()
     };
@@ -278,8 +323,16 @@ fn at_the_rigs_own_noise_the_causal_chain_is_biased_and_flagged_as_the_zero_phas
     for (label, e) in [("zero-phase", &z), ("causal", &c)] {
         let coef = e.result.as_ref().unwrap_or_else(|r| panic!("{label}: refused: {r}"));
         let (ek, ec) = (rel(&coef.stiffness_n_m, &kt), rel(&coef.damping_n_s_m, &ct));
-        let signed = |m: &Matrix2<f64>, t: &Matrix2<f64>| (0..4).map(|k| format!("{:+.2}", 100.0 * (m[(k / 2, k % 2)] - t[(k / 2, k % 2)]) / t[(k / 2, k % 2)].abs())).collect::<Vec<_>>().join(" ");
-        println!("{label} at the rig's own noise: K errors % [{}], C errors % [{}]; worst {:.2} / {:.2} %", signed(&coef.stiffness_n_m, &kt), signed(&coef.damping_n_s_m, &ct), 100.0 * ek, 100.0 * ec);
+        let signed = |m: &Matrix2<f64>, t: &Matrix2<f64>| {
+            (0..4).map(|k| format!("{:+.2}", 100.0 * (m[(k / 2, k % 2)] - t[(k / 2, k % 2)]) / t[(k / 2, k % 2)].abs())).collect::<Vec<_>>().join(" ")
+        };
+        println!(
+            "{label} at the rig's own noise: K errors % [{}], C errors % [{}]; worst {:.2} / {:.2} %",
+            signed(&coef.stiffness_n_m, &kt),
+            signed(&coef.damping_n_s_m, &ct),
+            100.0 * ek,
+            100.0 * ec
+        );
         let eiv: Vec<&String> = e.flags.iter().filter(|f| f.contains("errors in variables")).collect();
         println!("  errors-in-variables flags: {eiv:?}");
         worst.push((ek, ec, eiv.len()));

@@ -246,10 +246,13 @@ impl ScanByScan {
             })
         };
         let q = p - mh;
-        let v = derivative(&|i| {
-            let f = self.filtered.at(i);
-            [f[0], f[1], f[2], f[3]]
-        }, q);
+        let v = derivative(
+            &|i| {
+                let f = self.filtered.at(i);
+                [f[0], f[1], f[2], f[3]]
+            },
+            q,
+        );
         self.velocity.set(q, v);
         // Time index of the low-passed sample `r`: the first de-skewed one is `lookback`.
         let r = p - 2 * mh;
@@ -264,7 +267,18 @@ impl ScanByScan {
             out.first_index = time;
         }
         let (fx, fy) = (here[4] - self.d.mass * a[2], here[5] - self.d.mass * a[3]);
-        for (col, v) in [(&mut out.x_m, here[0]), (&mut out.y_m, here[1]), (&mut out.vx_m_s, vel[0]), (&mut out.vy_m_s, vel[1]), (&mut out.ax_m_s2, a[0]), (&mut out.ay_m_s2, a[1]), (&mut out.fx_n, fx), (&mut out.fy_n, fy), (&mut out.static_load_n, here[6]), (&mut out.temperature_c, here[7])] {
+        for (col, v) in [
+            (&mut out.x_m, here[0]),
+            (&mut out.y_m, here[1]),
+            (&mut out.vx_m_s, vel[0]),
+            (&mut out.vy_m_s, vel[1]),
+            (&mut out.ax_m_s2, a[0]),
+            (&mut out.ay_m_s2, a[1]),
+            (&mut out.fx_n, fx),
+            (&mut out.fy_n, fy),
+            (&mut out.static_load_n, here[6]),
+            (&mut out.temperature_c, here[7]),
+        ] {
             col.push(v);
         }
         let finite = [here[0], here[1], vel[0], vel[1], a[0], a[1], fx, fy].iter().all(|v| v.is_finite());
@@ -277,7 +291,9 @@ fn first_difference(a: &CausalOutput, b: &CausalOutput) -> Option<String> {
     if a.first_index != b.first_index {
         return Some(format!("first_index {} against {}", a.first_index, b.first_index));
     }
-    let columns = |o: &CausalOutput| [&o.x_m, &o.y_m, &o.vx_m_s, &o.vy_m_s, &o.ax_m_s2, &o.ay_m_s2, &o.fx_n, &o.fy_n, &o.temperature_c, &o.static_load_n].map(|c| c.clone());
+    let columns = |o: &CausalOutput| {
+        [&o.x_m, &o.y_m, &o.vx_m_s, &o.vy_m_s, &o.ax_m_s2, &o.ay_m_s2, &o.fx_n, &o.fy_n, &o.temperature_c, &o.static_load_n].map(|c| c.clone())
+    };
     let names = ["x_m", "y_m", "vx_m_s", "vy_m_s", "ax_m_s2", "ay_m_s2", "fx_n", "fy_n", "temperature_c", "static_load_n"];
     for ((name, x), y) in names.iter().zip(columns(a)).zip(columns(b)) {
         if x.len() != y.len() {
@@ -330,7 +346,8 @@ fn record(cal: &Calibration, units: RawUnits, scans: usize, extra: usize, seed: 
         let (f1, f2) = (17.0 + 3.0 * k as f64, 41.0 + 5.0 * k as f64);
         for i in 0..scans {
             let t = i as f64 / fs;
-            let v = mid + amp * (0.6 * (std::f64::consts::TAU * f1 * t).sin() + 0.3 * (std::f64::consts::TAU * f2 * t + 0.4).cos() + 0.1 * (2.0 * noise.next() - 1.0));
+            let v = mid
+                + amp * (0.6 * (std::f64::consts::TAU * f1 * t).sin() + 0.3 * (std::f64::consts::TAU * f2 * t + 0.4).cos() + 0.1 * (2.0 * noise.next() - 1.0));
             values[i * width + k] = v;
         }
     }
@@ -341,7 +358,12 @@ fn record(cal: &Calibration, units: RawUnits, scans: usize, extra: usize, seed: 
     }
     let at = |scan: usize, ch: ChannelId| scan * width + columns[ch.index()];
     let high = |ch: ChannelId| cal.channel(ch).unwrap().linear_range_v[1] + 1.0;
-    let mut bad = vec![(0, ChannelId::F1, high(ChannelId::F1)), (scans / 5, ChannelId::ProbeAX, f64::NAN), (scans / 3, ChannelId::F3, f64::INFINITY), (scans / 3, ChannelId::ProbeBY, -1e9)];
+    let mut bad = vec![
+        (0, ChannelId::F1, high(ChannelId::F1)),
+        (scans / 5, ChannelId::ProbeAX, f64::NAN),
+        (scans / 3, ChannelId::F3, f64::INFINITY),
+        (scans / 3, ChannelId::ProbeBY, -1e9),
+    ];
     bad.extend((0..40).map(|i| (scans / 2 + i, ChannelId::FrameY, high(ChannelId::FrameY))));
     bad.push((scans - 30, ChannelId::Temperature, f64::NEG_INFINITY));
     for (scan, ch, v) in bad {
@@ -373,7 +395,17 @@ fn cutting(scans: usize, fixed: Option<usize>, noise: &mut Noise) -> Vec<usize> 
 
 /// A chain on `isa` fed `values` in blocks of `sizes` scans.
 #[allow(clippy::too_many_arguments)] // the chain's design and the input, as the test varies them
-fn run_blocks(isa: Isa, columns: &[usize; CHANNEL_COUNT], width: usize, units: RawUnits, cal: &Calibration, mech: &Mechanics, config: &ConditioningConfig, values: &[f64], sizes: &[usize]) -> CausalOutput {
+fn run_blocks(
+    isa: Isa,
+    columns: &[usize; CHANNEL_COUNT],
+    width: usize,
+    units: RawUnits,
+    cal: &Calibration,
+    mech: &Mechanics,
+    config: &ConditioningConfig,
+    values: &[f64],
+    sizes: &[usize],
+) -> CausalOutput {
     simd::with_isa(isa, || {
         let mut chain = CausalChain::new(columns, width, units, cal.sample_rate_hz(), cal, mech, config).unwrap();
         let mut out = CausalOutput::default();
@@ -398,7 +430,12 @@ fn the_block_path_equals_the_scan_by_scan_chain_bit_for_bit() {
         (base.clone(), RawUnits::Volts, 12_000, 0),
         (ConditioningConfig { lowpass_order: 1, lowpass_cutoff_hz: 200.0, ..base.clone() }, RawUnits::Si, 6_000, 3),
         (ConditioningConfig { lowpass_order: 2, lowpass_cutoff_hz: 150.0, deskew: false, ..base.clone() }, RawUnits::Volts, 6_000, 1),
-        (ConditioningConfig { lowpass_order: 3, lowpass_cutoff_hz: 150.0, differentiator_half_length: 3, deskew_taps: 6, ..base.clone() }, RawUnits::Volts, 6_000, 0),
+        (
+            ConditioningConfig { lowpass_order: 3, lowpass_cutoff_hz: 150.0, differentiator_half_length: 3, deskew_taps: 6, ..base.clone() },
+            RawUnits::Volts,
+            6_000,
+            0,
+        ),
         (ConditioningConfig { lowpass_order: 5, lowpass_cutoff_hz: 300.0, differentiator_half_length: 8, ..base.clone() }, RawUnits::Si, 6_000, 6),
         (ConditioningConfig { lowpass_order: 6, lowpass_cutoff_hz: 400.0, deskew_taps: 2, ..base.clone() }, RawUnits::Volts, 6_000, 2),
     ];
@@ -446,7 +483,8 @@ fn the_comparison_sees_one_coefficient_changed_by_one_ulp() {
         out
     };
     type Coefficient = fn(&mut Design) -> &mut f64;
-    let coefficients: [(&str, Coefficient); 3] = [("de-skew tap", |d| &mut d.fronts[2].weights[1]), ("low-pass b1", |d| &mut d.sections[1].b[1]), ("differentiator c2", |d| &mut d.sg[1])];
+    let coefficients: [(&str, Coefficient); 3] =
+        [("de-skew tap", |d| &mut d.fronts[2].weights[1]), ("low-pass b1", |d| &mut d.sections[1].b[1]), ("differentiator c2", |d| &mut d.sg[1])];
     for (what, coefficient) in coefficients {
         let mut changed = design.clone();
         let v = coefficient(&mut changed);

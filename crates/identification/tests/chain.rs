@@ -148,26 +148,26 @@ fn fused_front_end_equals_the_stages_bit_for_bit() {
         }
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
         for (isa, c) in &by_isa {
-        for (name, fused, staged) in [
-            ("vx_m_s", &c.vx_m_s, &vx),
-            ("ax_m_s2", &c.ax_m_s2, &ax),
-            ("vy_m_s", &c.vy_m_s, &vy),
-            ("ay_m_s2", &c.ay_m_s2, &ay),
-            ("housing_ax_m_s2", &c.housing_ax_m_s2, &hax),
-            ("housing_ay_m_s2", &c.housing_ay_m_s2, &hay),
-            ("x_m", &c.x_m, &dynamic[0]),
-            ("y_m", &c.y_m, &dynamic[1]),
-            ("tilt_x_m", &c.tilt_x_m, &dynamic[2]),
-            ("tilt_y_m", &c.tilt_y_m, &dynamic[3]),
-            ("housing_x_m", &c.housing_x_m, &dynamic[4]),
-            ("housing_y_m", &c.housing_y_m, &dynamic[5]),
-            ("fx_n", &c.fx_n, &dynamic[6]),
-            ("fy_n", &c.fy_n, &dynamic[7]),
-            ("static_load_n", &c.static_load_n, &f3),
-            ("temperature_c", &c.temperature_c, &temperature),
-        ] {
-            assert!(bits(fused) == bits(staged), "{name} differs (n = {n}, {config:?}, {isa:?})");
-        }
+            for (name, fused, staged) in [
+                ("vx_m_s", &c.vx_m_s, &vx),
+                ("ax_m_s2", &c.ax_m_s2, &ax),
+                ("vy_m_s", &c.vy_m_s, &vy),
+                ("ay_m_s2", &c.ay_m_s2, &ay),
+                ("housing_ax_m_s2", &c.housing_ax_m_s2, &hax),
+                ("housing_ay_m_s2", &c.housing_ay_m_s2, &hay),
+                ("x_m", &c.x_m, &dynamic[0]),
+                ("y_m", &c.y_m, &dynamic[1]),
+                ("tilt_x_m", &c.tilt_x_m, &dynamic[2]),
+                ("tilt_y_m", &c.tilt_y_m, &dynamic[3]),
+                ("housing_x_m", &c.housing_x_m, &dynamic[4]),
+                ("housing_y_m", &c.housing_y_m, &dynamic[5]),
+                ("fx_n", &c.fx_n, &dynamic[6]),
+                ("fy_n", &c.fy_n, &dynamic[7]),
+                ("static_load_n", &c.static_load_n, &f3),
+                ("temperature_c", &c.temperature_c, &temperature),
+            ] {
+                assert!(bits(fused) == bits(staged), "{name} differs (n = {n}, {config:?}, {isa:?})");
+            }
         }
     }
 }

@@ -6,8 +6,8 @@ use std::f64::consts::PI;
 
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::{
-    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass,
-    range_check, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
+    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass, range_check, Conditioned, ConditioningConfig, Mechanics,
+    RawRecord, RawUnits,
 };
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -20,12 +20,7 @@ const FS: f64 = 5000.0;
 
 /// Least-squares fit of `c + sum_k A_k sin(2 pi f_k t + phi_k)` over `range`; returns `c` and
 /// `(A_k, phi_k)` per frequency.
-fn fit_sines(
-    t: &[f64],
-    y: &[f64],
-    freqs_hz: &[f64],
-    range: std::ops::Range<usize>,
-) -> (f64, Vec<(f64, f64)>) {
+fn fit_sines(t: &[f64], y: &[f64], freqs_hz: &[f64], range: std::ops::Range<usize>) -> (f64, Vec<(f64, f64)>) {
     let rows = range.len();
     let cols = 1 + 2 * freqs_hz.len();
     let a = DMatrix::from_fn(rows, cols, |r, c| {
@@ -42,10 +37,7 @@ fn fit_sines(
         }
     });
     let b = DVector::from_iterator(rows, y[range].iter().copied());
-    let sol = a
-        .svd(true, true)
-        .solve(&b, 1.0e-14)
-        .expect("SVD solve of a full-rank fit");
+    let sol = a.svd(true, true).solve(&b, 1.0e-14).expect("SVD solve of a full-rank fit");
     let per = (0..freqs_hz.len())
         .map(|k| {
             let (s, c) = (sol[1 + 2 * k], sol[2 + 2 * k]);
@@ -72,11 +64,7 @@ fn times(n: usize) -> Vec<f64> {
 }
 
 fn mechanics() -> Mechanics {
-    Mechanics {
-        housing_mass_kg: 60.0,
-        exciter_angles_deg: [45.0, 135.0],
-        gravity_m_s2: 9.81,
-    }
+    Mechanics { housing_mass_kg: 60.0, exciter_angles_deg: [45.0, 135.0], gravity_m_s2: 9.81 }
 }
 
 fn quiet_daq_config() -> DaqConfig {
@@ -143,10 +131,7 @@ impl Scenario {
         s.set(ChannelId::F1, eval(F1, t, 0));
         s.set(ChannelId::F2, eval(F2, t, 0));
         s.set(ChannelId::F3, 9000.0 + eval(F3, t, 0));
-        s.set(
-            ChannelId::Temperature,
-            40.0 + 0.5 * (2.0 * PI * 0.3 * t).sin(),
-        );
+        s.set(ChannelId::Temperature, 40.0 + 0.5 * (2.0 * PI * 0.3 * t).sin());
         s
     }
 
@@ -167,10 +152,7 @@ impl Scenario {
         let c = 45f64.to_radians().cos();
         let (f1, f2) = (eval(F1, t, 0), eval(F2, t, 0));
         let f3 = 9000.0 + eval(F3, t, 0);
-        [
-            c * f1 - c * f2 - m * eval(FRAME_X, t, 2),
-            c * f1 + c * f2 + f3 - m * self.mech.gravity_m_s2 - m * eval(FRAME_Y, t, 2),
-        ]
+        [c * f1 - c * f2 - m * eval(FRAME_X, t, 2), c * f1 + c * f2 + f3 - m * self.mech.gravity_m_s2 - m * eval(FRAME_Y, t, 2)]
     }
 
     /// A record in SI: channel k sampled at t_i + offset_k, as the multiplexer does.
@@ -180,24 +162,14 @@ impl Scenario {
             .iter()
             .map(|&ch| {
                 let off = cal.sample_offset_s(ch).unwrap(); // every scanned channel has one
-                (0..n)
-                    .map(|i| self.signals(i as f64 / FS + off).get(ch))
-                    .collect()
+                (0..n).map(|i| self.signals(i as f64 / FS + off).get(ch)).collect()
             })
             .collect();
-        RawRecord {
-            sample_rate_hz: FS,
-            start_time_s: 0.0,
-            channels,
-            units: RawUnits::Si,
-            columns,
-        }
+        RawRecord { sample_rate_hz: FS, start_time_s: 0.0, channels, units: RawUnits::Si, columns }
     }
 
     fn daq_scans(&self, daq: &mut Daq, n: u64) -> Vec<DaqScan> {
-        (0..n)
-            .map(|i| daq.scan(i, i as f64 / FS, &mut |t| self.signals(t)))
-            .collect()
+        (0..n).map(|i| daq.scan(i, i as f64 / FS, &mut |t| self.signals(t))).collect()
     }
 }
 
@@ -229,62 +201,32 @@ fn deskew_realigns_multiplexed_sine_at_80_hz() {
     println!("channel  offset_us   amp_err(deskew)  phase_err(deskew) rad   phase_err(raw) rad   w*offset rad");
     for (k, &ch) in ChannelId::ALL.iter().enumerate() {
         let offset = k as f64 * 10e-6;
-        let col: Vec<f64> = t
-            .iter()
-            .map(|&ti| 0.2 + amp * (w * (ti + offset) + phase).sin())
-            .collect();
+        let col: Vec<f64> = t.iter().map(|&ti| 0.2 + amp * (w * (ti + offset) + phase).sin()).collect();
         let aligned = deskew::align(ch, &col, offset, FS, 4).unwrap();
         let (_, fa) = fit_sines(&t, &aligned, &[f], interior.clone());
         let (_, fr) = fit_sines(&t, &col, &[f], interior.clone());
         let amp_err = fa[0].0 / amp - 1.0;
         let ph_err = wrap(fa[0].1 - phase);
         let raw_ph_err = wrap(fr[0].1 - phase);
-        println!(
-            "{:<12} {:>5.0} {:>14.2e} {:>18.2e} {:>22.6e} {:>16.6e}",
-            ch.name(),
-            offset * 1e6,
-            amp_err,
-            ph_err,
-            raw_ph_err,
-            w * offset
-        );
+        println!("{:<12} {:>5.0} {:>14.2e} {:>18.2e} {:>22.6e} {:>16.6e}", ch.name(), offset * 1e6, amp_err, ph_err, raw_ph_err, w * offset);
         worst = (worst.0.max(amp_err.abs()), worst.1.max(ph_err.abs()));
         // Without deskew the channel leads by exactly w * offset.
-        assert!(
-            (raw_ph_err - w * offset).abs() < 1e-9,
-            "{ch}: raw phase error {raw_ph_err}"
-        );
+        assert!((raw_ph_err - w * offset).abs() < 1e-9, "{ch}: raw phase error {raw_ph_err}");
         // The measured error is the filter's analytic error.
-        let (pa, pp) = deskew::FractionalDelay::for_offset(offset, FS, 4)
-            .unwrap()
-            .error_at(f, FS);
-        assert!(
-            (amp_err - pa).abs() < 1e-9 && (ph_err - pp).abs() < 1e-9,
-            "{ch}: {pa} {pp}"
-        );
+        let (pa, pp) = deskew::FractionalDelay::for_offset(offset, FS, 4).unwrap().error_at(f, FS);
+        assert!((amp_err - pa).abs() < 1e-9 && (ph_err - pp).abs() < 1e-9, "{ch}: {pa} {pp}");
     }
-    println!(
-        "worst over the ten channels: amplitude {:.2e}, phase {:.2e} rad",
-        worst.0, worst.1
-    );
+    println!("worst over the ten channels: amplitude {:.2e}, phase {:.2e} rad", worst.0, worst.1);
     assert!(worst.0 < 1e-4, "amplitude error {}", worst.0);
     assert!(worst.1 < 1e-5, "phase error {}", worst.1);
     // The module documentation's table for 4 taps.
-    assert!(
-        worst.0 < 3e-6 && worst.1 < 5e-8,
-        "documented 2.4e-6 / 3.6e-8 exceeded: {worst:?}"
-    );
+    assert!(worst.0 < 3e-6 && worst.1 < 5e-8, "documented 2.4e-6 / 3.6e-8 exceeded: {worst:?}");
 }
 
 #[test]
 fn deskew_error_table_matches_documentation() {
     // (taps, documented worst amplitude error, documented worst phase error), 80 Hz, 0..90 us.
-    let documented = [
-        (2, 1.3e-3, 1.6e-5),
-        (3, 2.1e-6, 6.1e-5),
-        (4, 2.4e-6, 3.6e-8),
-        (6, 5.0e-9, 7.9e-11),
-    ];
+    let documented = [(2, 1.3e-3, 1.6e-5), (3, 2.1e-6, 6.1e-5), (4, 2.4e-6, 3.6e-8), (6, 5.0e-9, 7.9e-11)];
     for (taps, doc_a, doc_p) in documented {
         let (mut wa, mut wp) = (0.0f64, 0.0f64);
         for k in 0..10 {
@@ -307,18 +249,11 @@ fn deskew_is_exact_for_polynomials_including_edges() {
     let col: Vec<f64> = (0..n).map(|i| p(i as f64)).collect();
     let d = deskew::FractionalDelay::new(delay, 4).unwrap();
     let out = d.apply(&col).unwrap();
-    let worst = (0..n)
-        .map(|i| (out[i] - p(i as f64 - delay)).abs())
-        .fold(0.0, f64::max);
-    println!(
-        "cubic through a 4-tap delay of {delay} samples: worst error {worst:.2e} (edges included)"
-    );
+    let worst = (0..n).map(|i| (out[i] - p(i as f64 - delay)).abs()).fold(0.0, f64::max);
+    println!("cubic through a 4-tap delay of {delay} samples: worst error {worst:.2e} (edges included)");
     assert!(worst < 1e-12);
     // Integer delays (including zero) are pure shifts.
-    let z = deskew::FractionalDelay::new(0.0, 4)
-        .unwrap()
-        .apply(&col)
-        .unwrap();
+    let z = deskew::FractionalDelay::new(0.0, 4).unwrap().apply(&col).unwrap();
     assert_eq!(z, col);
 }
 
@@ -342,24 +277,13 @@ fn condition_without_deskew_shows_the_multiplex_phase_error() {
         .map(|&ch| {
             let off = cal.sample_offset_s(ch).unwrap(); // scanned, so it has an offset
             let (c, a) = base(ch);
-            (0..n)
-                .map(|i| c + a * (w * (i as f64 / FS + off)).sin())
-                .collect()
+            (0..n).map(|i| c + a * (w * (i as f64 / FS + off)).sin()).collect()
         })
         .collect();
-    let raw = RawRecord {
-        sample_rate_hz: FS,
-        start_time_s: 0.0,
-        channels,
-        units: RawUnits::Si,
-        columns,
-    };
+    let raw = RawRecord { sample_rate_hz: FS, start_time_s: 0.0, channels, units: RawUnits::Si, columns };
     let mech = mechanics();
     let on = condition(&raw, &cal, &mech, &ConditioningConfig::default()).unwrap();
-    let off_cfg = ConditioningConfig {
-        deskew: false,
-        ..ConditioningConfig::default()
-    };
+    let off_cfg = ConditioningConfig { deskew: false, ..ConditioningConfig::default() };
     let off = condition(&raw, &cal, &mech, &off_cfg).unwrap();
     let t = &on.t_s;
     type Column = fn(&Conditioned) -> &Vec<f64>;
@@ -372,19 +296,10 @@ fn condition_without_deskew_shows_the_multiplex_phase_error() {
     for (name, get, offset) in cases {
         let (_, pon) = fit_sines(t, get(&on), &[f], on.valid.clone());
         let (_, poff) = fit_sines(t, get(&off), &[f], off.valid.clone());
-        println!(
-            "{name:<30} phase error: deskew on {:+.2e} rad, off {:+.6e} rad (w * offset = {:.6e})",
-            pon[0].1,
-            poff[0].1,
-            w * offset
-        );
+        println!("{name:<30} phase error: deskew on {:+.2e} rad, off {:+.6e} rad (w * offset = {:.6e})", pon[0].1, poff[0].1, w * offset);
         assert!(pon[0].1.abs() < 1e-5, "{name}: {}", pon[0].1);
         // The mean of two sines with phases 0 and w*20us has phase w*10us to O((w*10us)^3).
-        assert!(
-            (poff[0].1 - w * offset).abs() < 1e-7,
-            "{name}: {}",
-            poff[0].1
-        );
+        assert!((poff[0].1 - w * offset).abs() < 1e-7, "{name}: {}", poff[0].1);
     }
 }
 
@@ -400,14 +315,7 @@ fn lowpass_is_zero_phase_flat_in_band_and_kills_1_khz() {
     let freqs = [10.0, 40.0, 80.0, 1000.0];
     let amps = [1.0, 0.7, 0.5, 0.3];
     let phases = [0.1, 0.9, 2.0, -1.0];
-    let x: Vec<f64> = t
-        .iter()
-        .map(|&ti| {
-            3.0 + (0..4)
-                .map(|k| amps[k] * (2.0 * PI * freqs[k] * ti + phases[k]).sin())
-                .sum::<f64>()
-        })
-        .collect();
+    let x: Vec<f64> = t.iter().map(|&ti| 3.0 + (0..4).map(|k| amps[k] * (2.0 * PI * freqs[k] * ti + phases[k]).sin()).sum::<f64>()).collect();
     let y = lp.filtfilt(&x).unwrap();
     let trim = lp.settling_samples();
     let (c, fit) = fit_sines(&t, &y, &freqs, trim..n - trim);
@@ -416,24 +324,14 @@ fn lowpass_is_zero_phase_flat_in_band_and_kills_1_khz() {
     for k in 0..3 {
         let gain = fit[k].0 / amps[k];
         let ph = wrap(fit[k].1 - phases[k]);
-        println!(
-            "{:>5} Hz: gain {:.7} (theory {:.7}), phase {:+.1e} rad",
-            freqs[k],
-            gain,
-            lp.gain(freqs[k]),
-            ph
-        );
+        println!("{:>5} Hz: gain {:.7} (theory {:.7}), phase {:+.1e} rad", freqs[k], gain, lp.gain(freqs[k]), ph);
         assert!((gain - lp.gain(freqs[k])).abs() < 1e-7);
         assert!(ph.abs() < 1e-9, "phase at {} Hz: {ph}", freqs[k]);
     }
     // Documented: 0.999367 at 80 Hz (droop 6.3e-4, no ripple), -122 dB at 1 kHz.
     assert!((lp.gain(80.0) - 0.999367).abs() < 1e-6);
     let g1k = fit[3].0 / amps[3];
-    println!(
-        "1000 Hz: gain {g1k:.2e} ({:.1} dB), theory {:.2e}",
-        20.0 * g1k.log10(),
-        lp.gain(1000.0)
-    );
+    println!("1000 Hz: gain {g1k:.2e} ({:.1} dB), theory {:.2e}", 20.0 * g1k.log10(), lp.gain(1000.0));
     assert!(g1k < 2e-6, "1 kHz not attenuated: {g1k}");
     assert!((lp.gain(1000.0) - 8.4e-7).abs() < 0.05e-7);
     // Monotonic passband (Butterworth: no ripple).
@@ -453,11 +351,7 @@ fn lowpass_edges_keep_constants_and_ramps() {
     let ec = yc.iter().map(|v| (v + 7.25).abs()).fold(0.0, f64::max);
     let ramp: Vec<f64> = (0..n).map(|i| 2.0 + 0.01 * i as f64).collect();
     let yr = lp.filtfilt(&ramp).unwrap();
-    let er = yr
-        .iter()
-        .zip(&ramp)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0, f64::max);
+    let er = yr.iter().zip(&ramp).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     println!("constant: worst error {ec:.2e}; ramp 2 .. 12: worst error {er:.2e} (edges included)");
     assert!(ec < 1e-12);
     assert!(er < 1e-6);
@@ -472,16 +366,9 @@ fn lowpass_many_columns_equal_one_by_one_bit_for_bit() {
     // The four-lane path must be a pure speed-up: 7 columns = one group of 4, one of 2, one of 1.
     let lp = lowpass::Butterworth::design(5, 150.0, FS).unwrap();
     let n = 777;
-    let cols: Vec<Vec<f64>> = (0..7)
-        .map(|k| {
-            (0..n)
-                .map(|i| (k as f64 + 1.0) * ((i * (k + 3)) as f64 * 0.01).sin() + k as f64)
-                .collect()
-        })
-        .collect();
+    let cols: Vec<Vec<f64>> = (0..7).map(|k| (0..n).map(|i| (k as f64 + 1.0) * ((i * (k + 3)) as f64 * 0.01).sin() + k as f64).collect()).collect();
     let mut many = cols.clone();
-    lp.filtfilt_many_in_place(&mut many, &mut Vec::new())
-        .unwrap();
+    lp.filtfilt_many_in_place(&mut many, &mut Vec::new()).unwrap();
     for (k, (m, c)) in many.iter().zip(&cols).enumerate() {
         let one = lp.filtfilt(c).unwrap();
         assert_eq!(m, &one, "column {k}");
@@ -490,9 +377,7 @@ fn lowpass_many_columns_equal_one_by_one_bit_for_bit() {
     println!("7 columns of {n} samples: four-lane result identical to one-by-one");
     let mut ragged = cols.clone();
     ragged[5].pop();
-    let err = lp
-        .filtfilt_many_in_place(&mut ragged, &mut Vec::new())
-        .unwrap_err();
+    let err = lp.filtfilt_many_in_place(&mut ragged, &mut Vec::new()).unwrap_err();
     println!("{err}");
     assert!(bad_input(err).0.contains("column 5"));
 }
@@ -506,9 +391,7 @@ fn lowpass_eight_lane_transposed_path_equals_one_by_one_on_random_data() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     for (order, n) in [(4, 1237), (5, 70), (4, 9)] {
         let lp = lowpass::Butterworth::design(order, 230.0, FS).unwrap();
-        let cols: Vec<Vec<f64>> = (0..11)
-            .map(|k| (0..n).map(|_| rng.random_range(-1.0..1.0) * 10f64.powi(k - 5)).collect())
-            .collect();
+        let cols: Vec<Vec<f64>> = (0..11).map(|k| (0..n).map(|_| rng.random_range(-1.0..1.0) * 10f64.powi(k - 5)).collect()).collect();
         let mut many = cols.clone();
         lp.filtfilt_many_in_place(&mut many, &mut Vec::new()).unwrap();
         for (k, (m, c)) in many.iter().zip(&cols).enumerate() {
@@ -562,15 +445,7 @@ fn differentiator_velocity_and_acceleration_within_1e3_at_80_hz() {
     let freqs = [5.0, 20.0, 50.0, 80.0];
     let amps = [30e-6, 10e-6, 5e-6, 4e-6];
     let phases = [0.0, 1.0, -0.5, 2.5];
-    let x: Vec<f64> = t
-        .iter()
-        .map(|&ti| {
-            -50e-6
-                + (0..4)
-                    .map(|k| amps[k] * (2.0 * PI * freqs[k] * ti + phases[k]).sin())
-                    .sum::<f64>()
-        })
-        .collect();
+    let x: Vec<f64> = t.iter().map(|&ti| -50e-6 + (0..4).map(|k| amps[k] * (2.0 * PI * freqs[k] * ti + phases[k]).sin()).sum::<f64>()).collect();
     let v = sg.apply(&x).unwrap();
     let a = sg.apply(&v).unwrap();
     let range = 2 * m..n - 2 * m;
@@ -591,23 +466,13 @@ fn differentiator_velocity_and_acceleration_within_1e3_at_80_hz() {
         );
         assert!((gv - predicted).abs() < 1e-9);
         assert!((ga - ((1.0 + predicted).powi(2) - 1.0)).abs() < 1e-8);
-        assert!(
-            gv.abs() < 1e-3 && ga.abs() < 1e-3,
-            "{} Hz: {gv} {ga}",
-            freqs[k]
-        );
-        assert!(
-            pv.abs() < 1e-9 && pa.abs() < 1e-9,
-            "not zero-phase at {} Hz: {pv} {pa}",
-            freqs[k]
-        );
+        assert!(gv.abs() < 1e-3 && ga.abs() < 1e-3, "{} Hz: {gv} {ga}", freqs[k]);
+        assert!(pv.abs() < 1e-9 && pa.abs() < 1e-9, "not zero-phase at {} Hz: {pv} {pa}", freqs[k]);
     }
     // Exact antisymmetry is what makes it zero-phase: the interior response is j * real.
     // Documented table: M = 2, 4, 5, 8.
     for (mm, doc) in [(2, -3.4e-6), (4, -6.7e-5), (5, -1.6e-4), (8, -9.8e-4)] {
-        let e = differentiate::SavitzkyGolayDerivative::new(mm, FS)
-            .unwrap()
-            .gain_error(80.0);
+        let e = differentiate::SavitzkyGolayDerivative::new(mm, FS).unwrap().gain_error(80.0);
         println!("M = {mm}: gain error at 80 Hz {e:+.3e} (doc {doc:+.1e})");
         assert!((e / doc - 1.0).abs() < 0.05);
     }
@@ -624,11 +489,7 @@ fn differentiator_is_exact_for_quartics_including_edges() {
     let fs = n as f64;
     let sgn = differentiate::SavitzkyGolayDerivative::new(5, fs).unwrap();
     let d = sgn.apply(&x).unwrap();
-    let worst = ts
-        .iter()
-        .zip(&d)
-        .map(|(&s, &v)| (v - dp(s)).abs())
-        .fold(0.0, f64::max);
+    let worst = ts.iter().zip(&d).map(|(&s, &v)| (v - dp(s)).abs()).fold(0.0, f64::max);
     println!("quartic: worst derivative error {worst:.2e} (edges included)");
     assert!(worst < 1e-9);
     // Antisymmetric interior weights.
@@ -663,10 +524,7 @@ fn conditioned_kinematics_are_consistent_derivatives() {
             lp.gain(freqs[k])
         );
         assert!(ev.abs() < 1e-3 && ea.abs() < 1e-3);
-        assert!(
-            ev_abs.abs() < 1e-3 + (1.0 - lp.gain(freqs[k]))
-                && ea_abs.abs() < 1e-3 + (1.0 - lp.gain(freqs[k]))
-        );
+        assert!(ev_abs.abs() < 1e-3 + (1.0 - lp.gain(freqs[k])) && ea_abs.abs() < 1e-3 + (1.0 - lp.gain(freqs[k])));
         assert!(wrap(fv[k].1 - fy[k].1 - PI / 2.0).abs() < 1e-6);
         assert!(wrap(fa[k].1 - fy[k].1 - PI).abs() < 1e-6);
     }
@@ -693,13 +551,8 @@ fn range_check_agrees_with_calibration_within_linear_range() {
             0.5 * (lo + hi),
             -10.0,
         ];
-        let expected: Vec<bool> = volts
-            .iter()
-            .map(|&v| !cal.within_linear_range(ch, v).unwrap())
-            .collect();
-        let v = range_check::check(ch, &volts, RawUnits::Volts, &cal)
-            .unwrap()
-            .expect("violations");
+        let expected: Vec<bool> = volts.iter().map(|&v| !cal.within_linear_range(ch, v).unwrap()).collect();
+        let v = range_check::check(ch, &volts, RawUnits::Volts, &cal).unwrap().expect("violations");
         println!("{ch}: {v}");
         assert_eq!(v.channel, ch);
         assert_eq!(v.index, expected.iter().position(|&b| b).unwrap());
@@ -711,14 +564,10 @@ fn range_check_agrees_with_calibration_within_linear_range() {
         let mut off_margin = volts.clone();
         off_margin.remove(3);
         let si = calibrate::to_si(ch, &off_margin, &cal).unwrap();
-        let w = range_check::check(ch, &si, RawUnits::Si, &cal)
-            .unwrap()
-            .expect("violations");
+        let w = range_check::check(ch, &si, RawUnits::Si, &cal).unwrap().expect("violations");
         assert_eq!((w.index, w.count), (v.index, v.count - 1));
         // In range: nothing.
-        assert!(range_check::check(ch, &volts[..3], RawUnits::Volts, &cal)
-            .unwrap()
-            .is_none());
+        assert!(range_check::check(ch, &volts[..3], RawUnits::Volts, &cal).unwrap().is_none());
     }
 }
 
@@ -750,30 +599,15 @@ fn range_check_reports_probe_leaving_its_linear_range_and_record_is_refused() {
     assert_eq!(v.channel, ChannelId::ProbeBY);
     // The first scan whose probe_b_y reading within_linear_range rejects ...
     let col = raw.column(ChannelId::ProbeBY).unwrap();
-    let first = col
-        .iter()
-        .position(|&x| !cal.within_linear_range(ChannelId::ProbeBY, x).unwrap())
-        .unwrap();
+    let first = col.iter().position(|&x| !cal.within_linear_range(ChannelId::ProbeBY, x).unwrap()).unwrap();
     assert_eq!(v.index, first);
     // ... and that is where the true signal crosses -200 um (sampled 30 us after the scan start).
     let t_cross = (PI + (140.0f64 / 150.0).asin()) / (2.0 * PI * f) - 30e-6;
-    println!(
-        "first violation at scan {} (t = {:.4} s), analytic crossing {:.5} s",
-        v.index,
-        v.index as f64 / FS,
-        t_cross
-    );
-    assert!(
-        (v.index as f64 / FS - t_cross).abs() <= 1.0 / FS,
-        "{} vs {t_cross}",
-        v.index
-    );
+    println!("first violation at scan {} (t = {:.4} s), analytic crossing {:.5} s", v.index, v.index as f64 / FS, t_cross);
+    assert!((v.index as f64 / FS - t_cross).abs() <= 1.0 / FS, "{} vs {t_cross}", v.index);
     assert!((v.value_si + 200e-6).abs() < 2.0 * cal.resolution_si(ChannelId::ProbeBY).unwrap());
     assert_eq!(v.range_si, [-200e-6, 200e-6]);
-    let count = col
-        .iter()
-        .filter(|&&x| !cal.within_linear_range(ChannelId::ProbeBY, x).unwrap())
-        .count();
+    let count = col.iter().filter(|&&x| !cal.within_linear_range(ChannelId::ProbeBY, x).unwrap()).count();
     assert_eq!(v.count, count);
     // The record is not silently usable.
     let (what, reason) = bad_input(c.require_in_range().unwrap_err());
@@ -789,9 +623,7 @@ fn eq2_stage_equals_analytic_film_force() {
     let sc = Scenario::new();
     let n = 2000;
     let t = times(n);
-    let col = |terms: Terms, c: f64, d: u32| -> Vec<f64> {
-        t.iter().map(|&ti| c + eval(terms, ti, d)).collect()
-    };
+    let col = |terms: Terms, c: f64, d: u32| -> Vec<f64> { t.iter().map(|&ti| c + eval(terms, ti, d)).collect() };
     let (f1, f2, f3) = (col(F1, 0.0, 0), col(F2, 0.0, 0), col(F3, 9000.0, 0));
     let (hax, hay) = (col(FRAME_X, 0.0, 2), col(FRAME_Y, 0.0, 2));
     let (fx, fy) = film_force::eq2(&f1, &f2, &f3, &hax, &hay, &sc.mech).unwrap();
@@ -804,18 +636,11 @@ fn eq2_stage_equals_analytic_film_force() {
     println!("eq. 2 stage against analytic: worst |dF| = {worst:.2e} N");
     assert!(worst < 1e-9);
     // Orientation: f1 alone pushes along (cos 45, sin 45); f2 alone along (cos 135, sin 135).
-    let one =
-        |a: f64, b: f64| film_force::eq2(&[a], &[b], &[0.0], &[0.0], &[0.0], &sc.mech).unwrap();
+    let one = |a: f64, b: f64| film_force::eq2(&[a], &[b], &[0.0], &[0.0], &[0.0], &sc.mech).unwrap();
     let mg = sc.mech.housing_mass_kg * sc.mech.gravity_m_s2;
     let (x1, y1) = one(100.0, 0.0);
     let (x2, y2) = one(0.0, 100.0);
-    println!(
-        "f1 = 100 N -> ({:.3}, {:.3}) N; f2 = 100 N -> ({:.3}, {:.3}) N (gravity removed)",
-        x1[0],
-        y1[0] + mg,
-        x2[0],
-        y2[0] + mg
-    );
+    println!("f1 = 100 N -> ({:.3}, {:.3}) N; f2 = 100 N -> ({:.3}, {:.3}) N (gravity removed)", x1[0], y1[0] + mg, x2[0], y2[0] + mg);
     let h = 100.0 * 0.5f64.sqrt();
     assert!((x1[0] - h).abs() < 1e-12 && (y1[0] + mg - h).abs() < 1e-9);
     assert!((x2[0] + h).abs() < 1e-12 && (y2[0] + mg - h).abs() < 1e-9);
@@ -845,17 +670,11 @@ fn report_force_error(label: &str, sc: &Scenario, c: &Conditioned, tol_dynamic: 
     let k = v.len() as f64;
     let mean = |j: usize| analytic[v.clone()].iter().map(|f| f[j]).sum::<f64>() / k;
     let stat = [mean(0), mean(1)];
-    let fx_dyn_err = rms(v
-        .clone()
-        .map(|i| (c.fx_n[i] - c.static_force_n[0]) - (analytic[i][0] - stat[0])));
-    let fy_dyn_err = rms(v
-        .clone()
-        .map(|i| (c.fy_n[i] - c.static_force_n[1]) - (analytic[i][1] - stat[1])));
+    let fx_dyn_err = rms(v.clone().map(|i| (c.fx_n[i] - c.static_force_n[0]) - (analytic[i][0] - stat[0])));
+    let fy_dyn_err = rms(v.clone().map(|i| (c.fy_n[i] - c.static_force_n[1]) - (analytic[i][1] - stat[1])));
     let fx_dyn = rms(v.clone().map(|i| analytic[i][0] - stat[0]));
     let fy_dyn = rms(v.clone().map(|i| analytic[i][1] - stat[1]));
-    let total_err = rms(v
-        .clone()
-        .map(|i| (c.fx_n[i] - analytic[i][0]).hypot(c.fy_n[i] - analytic[i][1])));
+    let total_err = rms(v.clone().map(|i| (c.fx_n[i] - analytic[i][0]).hypot(c.fy_n[i] - analytic[i][1])));
     let total = rms(v.clone().map(|i| analytic[i][0].hypot(analytic[i][1])));
     let rel = (fx_dyn_err / fx_dyn).max(fy_dyn_err / fy_dyn);
     println!(
@@ -870,9 +689,7 @@ fn report_force_error(label: &str, sc: &Scenario, c: &Conditioned, tol_dynamic: 
     );
     assert!(rel < tol_dynamic, "{label}: dynamic error {rel}");
     assert!(total_err / total < tol_dynamic);
-    assert!(
-        (c.static_force_n[0] - stat[0]).abs() < 1.0 && (c.static_force_n[1] - stat[1]).abs() < 2.0
-    );
+    assert!((c.static_force_n[0] - stat[0]).abs() < 1.0 && (c.static_force_n[1] - stat[1]).abs() < 2.0);
     rel
 }
 
@@ -910,27 +727,15 @@ fn end_to_end_daq_record_recovers_film_force_within_1_percent() {
             .sum::<f64>()
             / k as f64;
         let predicted = sigma * mean_g2.sqrt();
-        println!(
-            "{name}: rms error {err:.3e} ({:.2e} of rms {scale:.3e}); probe noise through the chain predicts {predicted:.3e}",
-            err / scale
-        );
-        assert!(
-            *err < 1.3 * predicted + 1e-3 * scale,
-            "{name}: {err} vs noise {predicted}"
-        );
+        println!("{name}: rms error {err:.3e} ({:.2e} of rms {scale:.3e}); probe noise through the chain predicts {predicted:.3e}", err / scale);
+        assert!(*err < 1.3 * predicted + 1e-3 * scale, "{name}: {err} vs noise {predicted}");
     }
-    let tilt = rms(c
-        .valid
-        .clone()
-        .map(|i| c.tilt_x_m[i] - eval(TILT_X, c.t_s[i], 0)));
+    let tilt = rms(c.valid.clone().map(|i| c.tilt_x_m[i] - eval(TILT_X, c.t_s[i], 0)));
     println!("tilt_x rms error {tilt:.2e} m");
     assert!(tilt < 0.1e-6);
 
     // The same record without deskew: the skew biases the film force.
-    let off = ConditioningConfig {
-        deskew: false,
-        ..ConditioningConfig::default()
-    };
+    let off = ConditioningConfig { deskew: false, ..ConditioningConfig::default() };
     let c_off = condition(&raw, cal, &sc.mech, &off).unwrap();
     let rel_off = report_force_error("DAQ record, default noise, deskew OFF", &sc, &c_off, 0.05);
     println!("deskew reduces the dynamic force error from {rel_off:.3e} to {rel:.3e}");
@@ -943,14 +748,7 @@ fn kinematics_errors(sc: &Scenario, c: &Conditioned) -> ([(&'static str, f64, f6
     let v = c.valid.clone();
     let mut out = [("", 0.0, 0.0); 3];
     let mut worst = 0.0f64;
-    for (d, (name, col_x, col_y)) in [
-        ("r", &c.x_m, &c.y_m),
-        ("r'", &c.vx_m_s, &c.vy_m_s),
-        ("r''", &c.ax_m_s2, &c.ay_m_s2),
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    for (d, (name, col_x, col_y)) in [("r", &c.x_m, &c.y_m), ("r'", &c.vx_m_s, &c.vy_m_s), ("r''", &c.ax_m_s2, &c.ay_m_s2)].into_iter().enumerate() {
         let d = d as u32;
         // The static y offset of r: -60 um of end A, -0.75 um from end B sitting 1.5 um lower.
         let dc = if d == 0 { -60.75e-6 } else { 0.0 };
@@ -977,19 +775,10 @@ fn end_to_end_noise_free_daq_kinematics_and_force() {
     let sc = Scenario::new();
     let scans = sc.daq_scans(&mut daq, 10_000);
     let raw = RawRecord::from_scans(&scans, FS).unwrap();
-    let c = condition(
-        &raw,
-        daq.calibration(),
-        &sc.mech,
-        &ConditioningConfig::default(),
-    )
-    .unwrap();
+    let c = condition(&raw, daq.calibration(), &sc.mech, &ConditioningConfig::default()).unwrap();
     let (kin, worst) = kinematics_errors(&sc, &c);
     for (name, err, scale) in kin {
-        println!(
-            "{name}: rms error {err:.3e} of rms {scale:.3e} ({:.2e})",
-            err / scale
-        );
+        println!("{name}: rms error {err:.3e} of rms {scale:.3e} ({:.2e})", err / scale);
     }
     assert!(worst < 2e-3, "kinematics error {worst}");
     report_force_error("DAQ record, no noise, deskew on", &sc, &c, 2e-3);
@@ -1010,12 +799,7 @@ fn volts_and_si_records_condition_alike() {
     }
     let a = condition(&raw, cal, &sc.mech, &ConditioningConfig::default()).unwrap();
     let b = condition(&si, cal, &sc.mech, &ConditioningConfig::default()).unwrap();
-    let d = a
-        .fy_n
-        .iter()
-        .zip(&b.fy_n)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
+    let d = a.fy_n.iter().zip(&b.fy_n).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
     println!("volts vs SI record: worst fy difference {d:.2e} N");
     assert!(d < 1e-9);
     assert_eq!(a.valid, b.valid);
@@ -1065,11 +849,7 @@ fn condition_into_reuses_buffers_and_equals_condition() {
     condition_into(&short, &cal, &sc.mech, &cfg, &mut out).unwrap();
     let fresh = condition(&short, &cal, &sc.mech, &cfg).unwrap();
     let reused = buffers(&out) == before;
-    println!(
-        "reused output: {} samples, valid {:?}; same 17 allocations: {reused}",
-        out.len(),
-        out.valid
-    );
+    println!("reused output: {} samples, valid {:?}; same 17 allocations: {reused}", out.len(), out.valid);
     assert_eq!(out, fresh);
     assert!(reused);
     // On error the output is left empty, never half-written.
@@ -1104,11 +884,7 @@ fn small_si_record() -> (RawRecord, Calibration) {
 #[test]
 fn overflow_in_the_filters_is_refused() {
     let mut cfg = quiet_daq_config();
-    let probe = cfg
-        .channels
-        .iter_mut()
-        .find(|c| c.channel == ChannelId::ProbeAX)
-        .unwrap(); // zhou2004 has every channel
+    let probe = cfg.channels.iter_mut().find(|c| c.channel == ChannelId::ProbeAX).unwrap(); // zhou2004 has every channel
     probe.sensitivity_v_per_unit = 1.0e-305;
     probe.offset_v = 0.0;
     probe.linear_range = [-5.0e304, 5.0e304];
@@ -1147,8 +923,8 @@ fn an_in_range_reading_that_overflows_in_the_conversion_is_refused_by_name() {
     let mut json = serde_json::to_value(daq.calibration()).unwrap(); // a Calibration serialises
     let channels = json["channels"].as_array_mut().unwrap(); // a list of channel records
     let by = channels.iter_mut().find(|c| c["channel"] == serde_json::json!(ChannelId::ProbeBY)).unwrap(); // every channel is there
-    // 1 V reads as 1e308 m; the linear range is widened to +-4 V, so +2 V is in range and
-    // converts to infinity.
+                                                                                                           // 1 V reads as 1e308 m; the linear range is widened to +-4 V, so +2 V is in range and
+                                                                                                           // converts to infinity.
     by["sensitivity_v_per_unit"] = serde_json::json!(1.0e-308);
     by["offset_v"] = serde_json::json!(0.0);
     by["linear_range_v"] = serde_json::json!([-4.0, 4.0]);
@@ -1166,11 +942,7 @@ fn an_in_range_reading_that_overflows_in_the_conversion_is_refused_by_name() {
 #[test]
 fn nan_sample_is_refused_naming_channel_and_index() {
     let (mut raw, cal) = small_si_record();
-    let k = raw
-        .channels
-        .iter()
-        .position(|&c| c == ChannelId::F2)
-        .unwrap();
+    let k = raw.channels.iter().position(|&c| c == ChannelId::F2).unwrap();
     raw.columns[k][123] = f64::NAN;
     let err = condition(&raw, &cal, &mechanics(), &ConditioningConfig::default()).unwrap_err();
     println!("{err}");
@@ -1246,68 +1018,29 @@ fn zero_sample_rate_and_cutoff_above_nyquist_are_refused() {
     let err = condition(&zero, &cal, &mechanics(), &ConditioningConfig::default()).unwrap_err();
     println!("{err}");
     assert_eq!(invalid_field(err).0, "sample_rate_hz");
-    assert_eq!(
-        invalid_field(ConditioningConfig::default().validate(0.0).unwrap_err()).0,
-        "sample_rate_hz"
-    );
+    assert_eq!(invalid_field(ConditioningConfig::default().validate(0.0).unwrap_err()).0, "sample_rate_hz");
     assert!(RawRecord::from_scans(&[], 0.0).is_err());
 
-    let high = ConditioningConfig {
-        lowpass_cutoff_hz: 3000.0,
-        ..ConditioningConfig::default()
-    };
+    let high = ConditioningConfig { lowpass_cutoff_hz: 3000.0, ..ConditioningConfig::default() };
     let err = condition(&raw, &cal, &mechanics(), &high).unwrap_err();
     println!("{err}");
     let (field, reason) = invalid_field(err);
     assert_eq!(field, "conditioning.lowpass_cutoff_hz");
-    assert!(
-        reason.contains("Nyquist") && reason.contains("2500"),
-        "{reason}"
-    );
-    let at = ConditioningConfig {
-        lowpass_cutoff_hz: 2500.0,
-        ..ConditioningConfig::default()
-    };
+    assert!(reason.contains("Nyquist") && reason.contains("2500"), "{reason}");
+    let at = ConditioningConfig { lowpass_cutoff_hz: 2500.0, ..ConditioningConfig::default() };
     assert!(at.validate(FS).is_err());
 
     for (cfg, field) in [
-        (
-            ConditioningConfig {
-                lowpass_order: 0,
-                ..Default::default()
-            },
-            "conditioning.lowpass_order",
-        ),
-        (
-            ConditioningConfig {
-                differentiator_half_length: 1,
-                ..Default::default()
-            },
-            "conditioning.differentiator_half_length",
-        ),
-        (
-            ConditioningConfig {
-                deskew_taps: 1,
-                ..Default::default()
-            },
-            "conditioning.deskew_taps",
-        ),
-        (
-            ConditioningConfig {
-                lowpass_cutoff_hz: f64::NAN,
-                ..Default::default()
-            },
-            "conditioning.lowpass_cutoff_hz",
-        ),
+        (ConditioningConfig { lowpass_order: 0, ..Default::default() }, "conditioning.lowpass_order"),
+        (ConditioningConfig { differentiator_half_length: 1, ..Default::default() }, "conditioning.differentiator_half_length"),
+        (ConditioningConfig { deskew_taps: 1, ..Default::default() }, "conditioning.deskew_taps"),
+        (ConditioningConfig { lowpass_cutoff_hz: f64::NAN, ..Default::default() }, "conditioning.lowpass_cutoff_hz"),
     ] {
         let err = cfg.validate(FS).unwrap_err();
         println!("{err}");
         assert_eq!(invalid_field(err).0, field);
     }
-    let bad_mech = Mechanics {
-        housing_mass_kg: 0.0,
-        ..mechanics()
-    };
+    let bad_mech = Mechanics { housing_mass_kg: 0.0, ..mechanics() };
     let err = condition(&raw, &cal, &bad_mech, &ConditioningConfig::default()).unwrap_err();
     println!("{err}");
     assert_eq!(invalid_field(err).0, "mechanics.housing_mass_kg");
@@ -1320,14 +1053,8 @@ fn from_scans_refuses_gaps_and_mixed_channel_orders() {
     let sc = Scenario::new();
     let mut scans = sc.daq_scans(&mut daq, 10);
     let ok = RawRecord::from_scans(&scans, FS).unwrap();
-    assert_eq!(
-        (ok.len(), ok.channels.len(), ok.units),
-        (10, 10, RawUnits::Volts)
-    );
-    assert_eq!(
-        ok.column(ChannelId::F3).unwrap()[4],
-        scans[4].volts_of(ChannelId::F3).unwrap()
-    );
+    assert_eq!((ok.len(), ok.channels.len(), ok.units), (10, 10, RawUnits::Volts));
+    assert_eq!(ok.column(ChannelId::F3).unwrap()[4], scans[4].volts_of(ChannelId::F3).unwrap());
     let mut gap = scans.clone();
     gap.remove(5);
     let err = RawRecord::from_scans(&gap, FS).unwrap_err();
@@ -1343,16 +1070,7 @@ fn from_scans_refuses_gaps_and_mixed_channel_orders() {
 fn config_defaults_and_file_form() {
     let d = ConditioningConfig::default();
     println!("{d:?}");
-    assert_eq!(
-        (
-            d.lowpass_cutoff_hz,
-            d.lowpass_order,
-            d.differentiator_half_length,
-            d.deskew,
-            d.deskew_taps
-        ),
-        (200.0, 4, 5, true, 4)
-    );
+    assert_eq!((d.lowpass_cutoff_hz, d.lowpass_order, d.differentiator_half_length, d.deskew, d.deskew_taps), (200.0, 4, 5, true, 4));
     d.validate(FS).unwrap();
     let text = toml::to_string(&d).unwrap();
     assert_eq!(toml::from_str::<ConditioningConfig>(&text).unwrap(), d);

@@ -6,8 +6,7 @@ use std::f64::consts::PI;
 
 use nalgebra::{DMatrix, Matrix2};
 use oilfilm_identification::estimator::{
-    estimate_window, estimate_windows, frequency_domain, Coefficients, EstimatorConfig, ModelOrder, Refusal,
-    Signals, Solver, WindowEstimate,
+    estimate_window, estimate_windows, frequency_domain, Coefficients, EstimatorConfig, ModelOrder, Refusal, Signals, Solver, WindowEstimate,
 };
 use oilfilm_identification::IdentificationError;
 use rand::{RngExt, SeedableRng};
@@ -342,7 +341,15 @@ fn coverage_of_hac_intervals_under_coloured_noise() {
         let bias = (mean - truth[j]) / mse;
         println!(
             "{:>4} {:>12.5e} {:>12.5e} {:>10.3e} {:>10.3e} {:>10.3} {:>9.3} {:>9.3} {:>9.3}",
-            names[j], truth[j], mean, mse, sd, bias, mse / sd, cover, naive
+            names[j],
+            truth[j],
+            mean,
+            mse,
+            sd,
+            bias,
+            mse / sd,
+            cover,
+            naive
         );
         assert!((0.90..=0.99).contains(&cover), "{}: coverage {cover}", names[j]);
         assert!(bias.abs() < 0.5, "{}: mean bias {bias} SE", names[j]);
@@ -738,5 +745,8 @@ fn spectral_standard_errors_match_the_scatter_of_blue_residuals_where_newey_west
         assert!((0.85..1.15).contains(&(sd / sp)), "{}: spectral SD/SE {:.2}", NAMES8[j], sd / sp);
         worst_nw = worst_nw.min(sd / nw);
     }
-    assert!(worst_nw < 0.8, "Newey-West no longer overstates the scatter of blue residuals (worst SD/SE {worst_nw:.2}): revisit the uncertainty module's documentation");
+    assert!(
+        worst_nw < 0.8,
+        "Newey-West no longer overstates the scatter of blue residuals (worst SD/SE {worst_nw:.2}): revisit the uncertainty module's documentation"
+    );
 }

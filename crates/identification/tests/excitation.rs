@@ -2,9 +2,7 @@
 
 use std::f64::consts::PI;
 
-use oilfilm_identification::excitation::{
-    AmplitudeStep, ExcitationPlan, Limits, LineSet, Waveform, MAX_HARMONIC,
-};
+use oilfilm_identification::excitation::{AmplitudeStep, ExcitationPlan, Limits, LineSet, Waveform, MAX_HARMONIC};
 use oilfilm_identification::IdentificationError;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -95,8 +93,7 @@ fn zero_phase_crest(w: &Waveform, period_s: f64) -> f64 {
     let (mut peak, mut sum2) = (0.0_f64, 0.0);
     for j in 0..m {
         let t = period_s * j as f64 / m as f64;
-        let v: f64 =
-            tones.iter().map(|k| k.amplitude_n * (2.0 * PI * k.frequency_hz * t).cos()).sum();
+        let v: f64 = tones.iter().map(|k| k.amplitude_n * (2.0 * PI * k.frequency_hz * t).cos()).sum();
         peak = peak.max(v.abs());
         sum2 += v * v;
     }
@@ -142,35 +139,19 @@ fn schroeder_multisine_has_a_low_crest_factor() {
 fn multisine_peak_is_the_true_peak_not_rms_times_root_two() {
     // 40 odd lines: crest about 1.69. rms 1000 N looks fine by rms*sqrt(2) = 1414 N < 1500 N,
     // but the actual waveform peaks near 1690 N.
-    let w = |rms_n| Waveform::Multisine {
-        band_hz: [1.0, 80.0],
-        period_s: 1.0,
-        rms_n,
-        line_set: LineSet::Odd,
-    };
-    let plan = ExcitationPlan {
-        exciters: [w(1000.0), Waveform::Off],
-        ramp_s: 0.0,
-        amplitude_steps: vec![],
-    };
+    let w = |rms_n| Waveform::Multisine { band_hz: [1.0, 80.0], period_s: 1.0, rms_n, line_set: LineSet::Odd };
+    let plan = ExcitationPlan { exciters: [w(1000.0), Waveform::Off], ramp_s: 0.0, amplitude_steps: vec![] };
     let err = plan.validate(&paper()).expect_err("true peak exceeds the limit");
     let text = err.to_string();
     assert!(matches!(err, IdentificationError::ExcitationLimit(_)), "{text}");
-    assert!(
-        text.contains("exciter 1") && text.contains("peak force") && text.contains("crest"),
-        "{text}"
-    );
+    assert!(text.contains("exciter 1") && text.contains("peak force") && text.contains("crest"), "{text}");
     // Check it against the signal itself, unclamped by a generous limit.
     let loose = Limits { max_force_n: 1e6, band_hz: [0.0, 80.0] };
     let [x, _] = samples(&plan, &loose, 0.0, 50_000.0, 50_000);
     let peak = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     assert!(peak > 1500.0 && peak > 1000.0 * 2f64.sqrt(), "peak {peak}");
 
-    let ok = ExcitationPlan {
-        exciters: [w(850.0), Waveform::Off],
-        ramp_s: 0.0,
-        amplitude_steps: vec![],
-    };
+    let ok = ExcitationPlan { exciters: [w(850.0), Waveform::Off], ramp_s: 0.0, amplitude_steps: vec![] };
     ok.validate(&paper()).expect("rms 850 N peaks below 1500 N");
 }
 
@@ -188,11 +169,7 @@ fn multisine_spectrum_has_energy_only_on_its_lines() {
             let f = k as f64;
             let mag = magnitude(dft(xs, fs, f));
             if lines.contains(&f) {
-                assert!(
-                    (mag - line_amplitude).abs() < 1e-9 * rms,
-                    "exciter {} line {f} Hz: {mag}",
-                    e + 1
-                );
+                assert!((mag - line_amplitude).abs() < 1e-9 * rms, "exciter {} line {f} Hz: {mag}", e + 1);
             } else {
                 assert!(mag < 1e-9 * rms, "exciter {} off-line {f} Hz: {mag}", e + 1);
             }
@@ -210,11 +187,7 @@ fn multisine_spectrum_has_energy_only_on_its_lines() {
 
 /// Instantaneous frequency from upward zero crossings (linearly interpolated).
 fn upward_crossings(x: &[f64], fs: f64, t0: f64) -> Vec<f64> {
-    x.windows(2)
-        .enumerate()
-        .filter(|(_, w)| w[0] < 0.0 && w[1] >= 0.0)
-        .map(|(j, w)| t0 + (j as f64 + w[0] / (w[0] - w[1])) / fs)
-        .collect()
+    x.windows(2).enumerate().filter(|(_, w)| w[0] < 0.0 && w[1] >= 0.0).map(|(j, w)| t0 + (j as f64 + w[0] / (w[0] - w[1])) / fs).collect()
 }
 
 #[test]
@@ -222,15 +195,7 @@ fn chirp_sweeps_from_start_to_end_and_repeats_without_a_jump() {
     for (start, end) in [(5.0, 60.0), (70.0, 10.0)] {
         let sweep = 8.0;
         let plan = ExcitationPlan {
-            exciters: [
-                Waveform::Chirp {
-                    start_hz: start,
-                    end_hz: end,
-                    sweep_s: sweep,
-                    amplitude_n: 100.0,
-                },
-                Waveform::Off,
-            ],
+            exciters: [Waveform::Chirp { start_hz: start, end_hz: end, sweep_s: sweep, amplitude_n: 100.0 }, Waveform::Off],
             ramp_s: 0.0,
             amplitude_steps: vec![],
         };
@@ -251,10 +216,7 @@ fn chirp_sweeps_from_start_to_end_and_repeats_without_a_jump() {
             }
             let measured = 1.0 / (pair[1] - pair[0]);
             let expected = start + (end - start) * tau / sweep;
-            assert!(
-                (measured - expected).abs() < 0.005 * expected.max(1.0),
-                "t {mid}: {measured} Hz vs {expected} Hz"
-            );
+            assert!((measured - expected).abs() < 0.005 * expected.max(1.0), "t {mid}: {measured} Hz vs {expected} Hz");
             checked += 1;
         }
         assert!(checked > 500, "{checked} cycles checked");
@@ -272,41 +234,16 @@ fn chirp_sweeps_from_start_to_end_and_repeats_without_a_jump() {
 
 /// Plans that must be refused, with words the refusal must contain.
 fn hostile_plans() -> Vec<(ExcitationPlan, Vec<&'static str>)> {
-    let sine = |frequency_hz, amplitude_n, phase_deg| Waveform::Sine {
-        frequency_hz,
-        amplitude_n,
-        phase_deg,
-    };
-    let ms = |band_hz, period_s, rms_n| Waveform::Multisine {
-        band_hz,
-        period_s,
-        rms_n,
-        line_set: LineSet::All,
-    };
-    let chirp = |start_hz, end_hz, sweep_s, amplitude_n| Waveform::Chirp {
-        start_hz,
-        end_hz,
-        sweep_s,
-        amplitude_n,
-    };
+    let sine = |frequency_hz, amplitude_n, phase_deg| Waveform::Sine { frequency_hz, amplitude_n, phase_deg };
+    let ms = |band_hz, period_s, rms_n| Waveform::Multisine { band_hz, period_s, rms_n, line_set: LineSet::All };
+    let chirp = |start_hz, end_hz, sweep_s, amplitude_n| Waveform::Chirp { start_hz, end_hz, sweep_s, amplitude_n };
     let ok = sine(20.0, 100.0, 0.0);
-    let one = |w: Waveform| ExcitationPlan {
-        exciters: [ok.clone(), w],
-        ramp_s: 0.5,
-        amplitude_steps: vec![],
-    };
-    let first = |w: Waveform| ExcitationPlan {
-        exciters: [w, ok.clone()],
-        ramp_s: 0.0,
-        amplitude_steps: vec![],
-    };
+    let one = |w: Waveform| ExcitationPlan { exciters: [ok.clone(), w], ramp_s: 0.5, amplitude_steps: vec![] };
+    let first = |w: Waveform| ExcitationPlan { exciters: [w, ok.clone()], ramp_s: 0.0, amplitude_steps: vec![] };
     let steps = |scale, dwell_s| ExcitationPlan {
         exciters: [sine(20.0, 1000.0, 0.0), ok.clone()],
         ramp_s: 0.5,
-        amplitude_steps: vec![
-            AmplitudeStep { scale: 0.5, dwell_s: 5.0 },
-            AmplitudeStep { scale, dwell_s },
-        ],
+        amplitude_steps: vec![AmplitudeStep { scale: 0.5, dwell_s: 5.0 }, AmplitudeStep { scale, dwell_s }],
     };
     let nan = f64::NAN;
     let inf = f64::INFINITY;
@@ -322,10 +259,7 @@ fn hostile_plans() -> Vec<(ExcitationPlan, Vec<&'static str>)> {
         (one(sine(120.0, 100.0, 0.0)), vec!["exciter 2", "frequency_hz", "outside the rig band"]),
         (one(sine(20.0, 100.0, nan)), vec!["exciters[1].phase_deg"]),
         (first(ms([1.0, 80.0], 1.0, 1e6)), vec!["exciter 1", "peak force", "crest"]),
-        (
-            one(ms([1.0, 200.0], 1.0, 10.0)),
-            vec!["exciter 2", "multisine line", "outside the rig band"],
-        ),
+        (one(ms([1.0, 200.0], 1.0, 10.0)), vec!["exciter 2", "multisine line", "outside the rig band"]),
         (one(ms([100.0, 200.0], 1.0, 10.0)), vec!["exciter 2", "outside the rig band"]),
         (first(ms([1.0, 80.0], nan, 10.0)), vec!["exciters[0].period_s"]),
         (first(ms([1.0, 80.0], -1.0, 10.0)), vec!["exciters[0].period_s"]),
@@ -337,10 +271,7 @@ fn hostile_plans() -> Vec<(ExcitationPlan, Vec<&'static str>)> {
         (first(ms([10.2, 10.8], 1.0, 3.0)), vec!["exciters[0].band_hz", "no harmonic"]),
         (one(chirp(5.0, 60.0, 10.0, inf)), vec!["exciters[1].amplitude_n"]),
         (one(chirp(5.0, 60.0, 0.0, 100.0)), vec!["exciters[1].sweep_s"]),
-        (
-            one(chirp(5.0, 1e6, 10.0, 100.0)),
-            vec!["exciter 2", "chirp end_hz", "outside the rig band"],
-        ),
+        (one(chirp(5.0, 1e6, 10.0, 100.0)), vec!["exciter 2", "chirp end_hz", "outside the rig band"]),
         (one(chirp(nan, 60.0, 10.0, 100.0)), vec!["exciters[1].start_hz"]),
         (one(chirp(5.0, 60.0, 10.0, 2000.0)), vec!["exciter 2", "peak force"]),
         (steps(2.0, 5.0), vec!["exciter 1", "peak force", "amplitude-step scale 2"]),
@@ -350,36 +281,16 @@ fn hostile_plans() -> Vec<(ExcitationPlan, Vec<&'static str>)> {
         (steps(1.0, 0.0), vec!["amplitude_steps[1].dwell_s"]),
         (steps(1.0, nan), vec!["amplitude_steps[1].dwell_s"]),
         (steps(1.0, 0.7), vec!["amplitude_steps[1].dwell_s", "ramp"]),
-        (
-            ExcitationPlan { ramp_s: nan, ..ExcitationPlan::two_tone(10.0, 20.0, 100.0) },
-            vec!["ramp_s"],
-        ),
-        (
-            ExcitationPlan { ramp_s: -1.0, ..ExcitationPlan::two_tone(10.0, 20.0, 100.0) },
-            vec!["ramp_s"],
-        ),
+        (ExcitationPlan { ramp_s: nan, ..ExcitationPlan::two_tone(10.0, 20.0, 100.0) }, vec!["ramp_s"]),
+        (ExcitationPlan { ramp_s: -1.0, ..ExcitationPlan::two_tone(10.0, 20.0, 100.0) }, vec!["ramp_s"]),
     ]
 }
 
 /// Force setpoints at many times: over 100 s densely enough to hit every peak of an 80 Hz
 /// sine, plus hostile times.
 fn assert_force_within(plan: &ExcitationPlan, limits: &Limits, what: &str) {
-    let max = if limits.max_force_n.is_finite() && limits.max_force_n > 0.0 {
-        limits.max_force_n
-    } else {
-        0.0
-    };
-    let specials = [
-        -1.0,
-        -0.0,
-        f64::NAN,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        1e12,
-        1e300,
-        f64::MAX,
-        f64::MIN_POSITIVE,
-    ];
+    let max = if limits.max_force_n.is_finite() && limits.max_force_n > 0.0 { limits.max_force_n } else { 0.0 };
+    let specials = [-1.0, -0.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e12, 1e300, f64::MAX, f64::MIN_POSITIVE];
     let times = (0..40_000).map(|j| j as f64 * 0.0025 + 1.3e-5).chain(specials);
     for t in times {
         for (e, f) in plan.force_at(t, limits).into_iter().enumerate() {
@@ -401,9 +312,7 @@ fn hostile_plans_are_refused_with_their_exciter_and_field_named_and_force_at_sti
     }
     // A 1e9 N sine hits the clamp exactly, not beyond.
     let plan = ExcitationPlan::paper_sine(20.0, 1e9);
-    let peak = (0..10_000)
-        .map(|j| plan.force_at(2.0 + j as f64 * 1e-4, &limits)[0].abs())
-        .fold(0.0, f64::max);
+    let peak = (0..10_000).map(|j| plan.force_at(2.0 + j as f64 * 1e-4, &limits)[0].abs()).fold(0.0, f64::max);
     assert_eq!(peak, limits.max_force_n);
 }
 
@@ -433,25 +342,7 @@ fn hostile_limits_are_refused_and_give_zero_force() {
 #[test]
 fn random_hostile_plans_never_escape_the_clamp() {
     let mut rng = ChaCha8Rng::seed_from_u64(0x0f11_f11e);
-    let pool = [
-        f64::NAN,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        -1.0,
-        0.0,
-        -0.0,
-        1e-300,
-        1e300,
-        0.01,
-        0.5,
-        1.0,
-        10.0,
-        79.9,
-        80.0,
-        200.0,
-        1499.0,
-        1e6,
-    ];
+    let pool = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0, 0.0, -0.0, 1e-300, 1e300, 0.01, 0.5, 1.0, 10.0, 79.9, 80.0, 200.0, 1499.0, 1e6];
     let pick = |rng: &mut ChaCha8Rng| {
         if rng.random_range(0..3) == 0 {
             rng.random_range(-100.0..2000.0)
@@ -464,40 +355,25 @@ fn random_hostile_plans_never_escape_the_clamp() {
     for case in 0..300 {
         let waveform = |rng: &mut ChaCha8Rng| match rng.random_range(0..4) {
             0 => Waveform::Off,
-            1 => Waveform::Sine {
-                frequency_hz: pick(rng),
-                amplitude_n: pick(rng),
-                phase_deg: pick(rng),
-            },
+            1 => Waveform::Sine { frequency_hz: pick(rng), amplitude_n: pick(rng), phase_deg: pick(rng) },
             2 => Waveform::Multisine {
                 band_hz: [pick(rng), pick(rng)],
                 // Bounded periods keep the line count (and the test time) small.
-                period_s: [f64::NAN, -1.0, 0.0, 0.01, 0.5, 1.0, 1e9, f64::INFINITY]
-                    [rng.random_range(0..8)],
+                period_s: [f64::NAN, -1.0, 0.0, 0.01, 0.5, 1.0, 1e9, f64::INFINITY][rng.random_range(0..8)],
                 rms_n: pick(rng),
                 line_set: [LineSet::All, LineSet::Odd, LineSet::Even][rng.random_range(0..3)],
             },
-            _ => Waveform::Chirp {
-                start_hz: pick(rng),
-                end_hz: pick(rng),
-                sweep_s: pick(rng),
-                amplitude_n: pick(rng),
-            },
+            _ => Waveform::Chirp { start_hz: pick(rng), end_hz: pick(rng), sweep_s: pick(rng), amplitude_n: pick(rng) },
         };
         let exciters = [waveform(&mut rng), waveform(&mut rng)];
-        let amplitude_steps = (0..rng.random_range(0..3))
-            .map(|_| AmplitudeStep { scale: pick(&mut rng), dwell_s: pick(&mut rng) })
-            .collect();
+        let amplitude_steps = (0..rng.random_range(0..3)).map(|_| AmplitudeStep { scale: pick(&mut rng), dwell_s: pick(&mut rng) }).collect();
         let plan = ExcitationPlan { exciters, ramp_s: pick(&mut rng), amplitude_steps };
         let valid = plan.validate(&limits).is_ok();
         refused += usize::from(!valid);
         for j in 0..2000 {
             let t = j as f64 * 0.0137;
             for f in plan.force_at(t, &limits) {
-                assert!(
-                    f.is_finite() && f.abs() <= limits.max_force_n,
-                    "case {case}: {plan:?} at {t}: {f}"
-                );
+                assert!(f.is_finite() && f.abs() <= limits.max_force_n, "case {case}: {plan:?} at {t}: {f}");
             }
         }
         if valid {
@@ -536,11 +412,7 @@ fn amplitude_steps_ramp_between_levels_and_end_at_zero() {
     let mut previous = 0.0;
     for j in 0..13_000 {
         let s = plan.scale_at(j as f64 * dt);
-        assert!(
-            (s - previous).abs() <= PI / 2.0 * dt / plan.ramp_s * 1.0001 + 1e-15,
-            "jump at {}",
-            j as f64 * dt
-        );
+        assert!((s - previous).abs() <= PI / 2.0 * dt / plan.ramp_s * 1.0001 + 1e-15, "jump at {}", j as f64 * dt);
         assert!(s <= 1.0);
         previous = s;
     }
@@ -551,28 +423,17 @@ fn amplitude_steps_ramp_between_levels_and_end_at_zero() {
 fn plans_round_trip_through_toml_and_unknown_keys_are_refused() {
     let plan = ExcitationPlan {
         exciters: [
-            Waveform::Multisine {
-                band_hz: [0.5, 79.5],
-                period_s: 2.0,
-                rms_n: 123.456,
-                line_set: LineSet::Odd,
-            },
+            Waveform::Multisine { band_hz: [0.5, 79.5], period_s: 2.0, rms_n: 123.456, line_set: LineSet::Odd },
             Waveform::Chirp { start_hz: 1.0, end_hz: 80.0, sweep_s: 10.0, amplitude_n: 0.1 + 0.2 },
         ],
         ramp_s: 0.75,
-        amplitude_steps: vec![
-            AmplitudeStep { scale: 0.3, dwell_s: 5.0 },
-            AmplitudeStep { scale: 1.0, dwell_s: 7.5 },
-        ],
+        amplitude_steps: vec![AmplitudeStep { scale: 0.3, dwell_s: 5.0 }, AmplitudeStep { scale: 1.0, dwell_s: 7.5 }],
     };
     for plan in [
         plan,
         ExcitationPlan::paper_sine(33.3, 987.6),
         ExcitationPlan {
-            exciters: [
-                Waveform::Off,
-                Waveform::Sine { frequency_hz: 1.0 / 3.0, amplitude_n: 1.0, phase_deg: -45.0 },
-            ],
+            exciters: [Waveform::Off, Waveform::Sine { frequency_hz: 1.0 / 3.0, amplitude_n: 1.0, phase_deg: -45.0 }],
             ramp_s: 0.0,
             amplitude_steps: vec![],
         },
@@ -595,10 +456,7 @@ fn plans_round_trip_through_toml_and_unknown_keys_are_refused() {
         rms_n = 50.0
     "#;
     let plan: ExcitationPlan = toml::from_str(hand).expect("hand-written plan");
-    assert_eq!(
-        plan.exciters[0],
-        Waveform::Sine { frequency_hz: 30.0, amplitude_n: 100.0, phase_deg: 0.0 }
-    );
+    assert_eq!(plan.exciters[0], Waveform::Sine { frequency_hz: 30.0, amplitude_n: 100.0, phase_deg: 0.0 });
     assert!(matches!(plan.exciters[1], Waveform::Multisine { line_set: LineSet::All, .. }));
     assert!(plan.amplitude_steps.is_empty());
     plan.validate(&paper()).expect("valid");
@@ -609,23 +467,15 @@ fn plans_round_trip_through_toml_and_unknown_keys_are_refused() {
         (hand.replace("rms_n = 50.0", "rms_n = 50.0\ncrest = 1.5"), "crest"),
         (hand.replace("kind = \"sine\"", "kind = \"square\""), "square"),
         (hand.replace("period_s = 1.0", "period_s = 1.0\nline_set = \"prime\""), "prime"),
-        (
-            format!("{hand}\n[[amplitude_steps]]\nscale = 1.0\ndwell_s = 2.0\nrepeat = 3\n"),
-            "repeat",
-        ),
+        (format!("{hand}\n[[amplitude_steps]]\nscale = 1.0\ndwell_s = 2.0\nrepeat = 3\n"), "repeat"),
     ];
     for (text, word) in bad {
-        let err =
-            toml::from_str::<ExcitationPlan>(&text).expect_err(&format!("must refuse `{word}`"));
+        let err = toml::from_str::<ExcitationPlan>(&text).expect_err(&format!("must refuse `{word}`"));
         assert!(err.to_string().contains(word), "{err}");
     }
-    let limits: Limits =
-        toml::from_str("max_force_n = 1500.0\nband_hz = [0.0, 80.0]\n").expect("limits");
+    let limits: Limits = toml::from_str("max_force_n = 1500.0\nband_hz = [0.0, 80.0]\n").expect("limits");
     assert_eq!(limits, paper());
-    assert!(toml::from_str::<Limits>(
-        "max_force_n = 1500.0\nband_hz = [0.0, 80.0]\nmin_force_n = 0.0\n"
-    )
-    .is_err());
+    assert!(toml::from_str::<Limits>("max_force_n = 1500.0\nband_hz = [0.0, 80.0]\nmin_force_n = 0.0\n").is_err());
 }
 
 #[test]
@@ -650,20 +500,14 @@ fn excessive_multisine_lengths_are_refused_not_attempted() {
     for j in 0..1000 {
         sum += longest.force_at(2.0 + j as f64 * 2e-4, &paper())[0];
     }
-    println!(
-        "force_at with {} lines: {:?} per call ({sum:.1})",
-        lines[0].len(),
-        started.elapsed() / 1000
-    );
+    println!("force_at with {} lines: {:?} per call ({sum:.1})", lines[0].len(), started.elapsed() / 1000);
 
     let f_max = 80.0;
     let period_s = (MAX_HARMONIC as f64 + 1.0) / f_max;
-    let w =
-        Waveform::Multisine { band_hz: [1.0, f_max], period_s, rms_n: 1.0, line_set: LineSet::All };
+    let w = Waveform::Multisine { band_hz: [1.0, f_max], period_s, rms_n: 1.0, line_set: LineSet::All };
     assert!(w.lines_hz().is_empty());
     assert!(w.peak_force_n().is_nan());
-    let plan =
-        ExcitationPlan { exciters: [w, Waveform::Off], ramp_s: 0.0, amplitude_steps: vec![] };
+    let plan = ExcitationPlan { exciters: [w, Waveform::Off], ramp_s: 0.0, amplitude_steps: vec![] };
     assert!(plan.validate(&paper()).is_err());
     assert_eq!(plan.force_at(1.0, &paper()), [0.0, 0.0]);
 }

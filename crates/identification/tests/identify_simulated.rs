@@ -32,7 +32,9 @@ fn rel(a: &Matrix2<f64>, b: &Matrix2<f64>) -> Matrix2<f64> {
 }
 
 fn report(label: &str, rec: &SimulatedRecord, id: &Identification) -> (f64, f64) {
-    let (k, c) = id.mean_coefficients().unwrap_or_else(|| panic!("{label}: no window solved: {:?}", id.windows.iter().map(|w| w.estimate.result.as_ref().err()).collect::<Vec<_>>()));
+    let (k, c) = id
+        .mean_coefficients()
+        .unwrap_or_else(|| panic!("{label}: no window solved: {:?}", id.windows.iter().map(|w| w.estimate.result.as_ref().err()).collect::<Vec<_>>()));
     let kt = rec.truth.coefficients.stiffness_n_m;
     let ct = rec.truth.coefficients.damping_n_s_m;
     let (rk, rc) = (rel(&k, &kt), rel(&c, &ct));
@@ -43,7 +45,10 @@ fn report(label: &str, rec: &SimulatedRecord, id: &Identification) -> (f64, f64)
         }
     }
     if let Some(w) = id.windows.first() {
-        println!("  condition {:.1}, rank {}, residual rms {:?} N, flags {:?}", w.estimate.condition_number, w.estimate.rank, w.estimate.residual_rms_n, w.estimate.flags);
+        println!(
+            "  condition {:.1}, rank {}, residual rms {:?} N, flags {:?}",
+            w.estimate.condition_number, w.estimate.rank, w.estimate.residual_rms_n, w.estimate.flags
+        );
     }
     (rk.abs().max(), rc.abs().max())
 }
@@ -103,7 +108,10 @@ fn a_single_sine_beside_the_bellows_ripple_is_refused_at_the_rigs_own_noise() {
     assert!(!id.windows.is_empty());
     for w in &id.windows {
         let lines = &w.estimate.frequencies_hz;
-        assert!(lines.iter().any(|f| (f - 3.0).abs() < 0.1) && lines.iter().any(|f| (f - 37.0).abs() < 0.1), "the ripple and the sine are both found: {lines:?}");
+        assert!(
+            lines.iter().any(|f| (f - 3.0).abs() < 0.1) && lines.iter().any(|f| (f - 37.0).abs() < 0.1),
+            "the ripple and the sine are both found: {lines:?}"
+        );
         let refusal = w.estimate.result.as_ref().expect_err("one strong frequency cannot identify eight coefficients");
         println!("refused: {refusal}");
         match refusal {
@@ -158,7 +166,10 @@ fn adapting_the_band_to_the_excitation_tames_errors_in_variables_at_the_rigs_own
         Err(refusal) => println!("fixed 200 Hz band: refused: {refusal}"),
         Ok(_) => {
             let (ek_f, ec_f) = report("fixed 200 Hz band", &rec, &f);
-            assert!(ek_f > 3.0 * ek_a && ec_f > ec_a, "the fixed band should show the errors-in-variables bias: K {ek_f:.3} vs {ek_a:.3}, C {ec_f:.3} vs {ec_a:.3}");
+            assert!(
+                ek_f > 3.0 * ek_a && ec_f > ec_a,
+                "the fixed band should show the errors-in-variables bias: K {ek_f:.3} vs {ek_a:.3}, C {ec_f:.3} vs {ec_a:.3}"
+            );
         }
     }
 }
@@ -183,7 +194,10 @@ fn a_multisine_band_limits_to_its_exciter_lines_even_when_no_single_line_stands_
     assert!((a.lowpass_cutoff_hz - 1.5 * 80.0).abs() < 1e-9, "cutoff {} follows the 80 Hz top line", a.lowpass_cutoff_hz);
     let (ek_a, ec_a) = report("multisine, band from the exciter forces", &rec, &a);
     let (ek_f, ec_f) = report("multisine, fixed 200 Hz band", &rec, &f);
-    assert!(ek_a < 0.7 * ek_f && ec_a < 0.7 * ec_f, "the adapted band must cut the errors-in-variables bias: K {ek_a:.3} vs {ek_f:.3}, C {ec_a:.3} vs {ec_f:.3}");
+    assert!(
+        ek_a < 0.7 * ek_f && ec_a < 0.7 * ec_f,
+        "the adapted band must cut the errors-in-variables bias: K {ek_a:.3} vs {ek_f:.3}, C {ec_a:.3} vs {ec_f:.3}"
+    );
 }
 
 #[test]

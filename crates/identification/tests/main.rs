@@ -1,10 +1,6 @@
 //! Every integration test of `oilfilm-identification` in one binary: one link and one optimised
 //! build of the shared generics instead of one per file (the suite's build time).
 
-mod simulated_rig;
-mod volts_record;
-#[path = "../../../tests/support/json_difference.rs"]
-mod json_difference;
 mod ascii;
 mod campaign;
 mod causal;
@@ -15,8 +11,12 @@ mod coverage;
 mod estimator;
 mod excitation;
 mod identify_simulated;
+#[path = "../../../tests/support/json_difference.rs"]
+mod json_difference;
 mod rv_vs_load_film;
 mod same_bits_on_every_isa;
 mod se_decimation;
+mod simulated_rig;
 mod skew;
 mod stream;
+mod volts_record;

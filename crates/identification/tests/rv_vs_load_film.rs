@@ -78,7 +78,8 @@ fn study(rig: &RigConfig, load_parameter: f64, speed_rpm: f64, shape: Shape, at:
             Shape::ForceDriven => {
                 let w = 2.0 * PI * freqs[j];
                 let m = rig.housing.mass_kg;
-                let dynamic: Matrix2<Complex<f64>> = Matrix2::from_fn(|r, col| Complex::new(k[(r, col)] - if r == col { w * w * m } else { 0.0 }, w * damping[(r, col)]));
+                let dynamic: Matrix2<Complex<f64>> =
+                    Matrix2::from_fn(|r, col| Complex::new(k[(r, col)] - if r == col { w * w * m } else { 0.0 }, w * damping[(r, col)]));
                 let x = dynamic.try_inverse().expect("invertible") * Vector2::new(Complex::new(0.0, -angle.cos()), Complex::new(0.0, -angle.sin()));
                 -x
             }
@@ -87,7 +88,10 @@ fn study(rig: &RigConfig, load_parameter: f64, speed_rpm: f64, shape: Shape, at:
     });
     // The two tones share the period 1 / gcd(f1, f2).
     let period = 1.0 / (0.08 * running_hz);
-    assert!(((ratios[0] / 0.08).round() - ratios[0] / 0.08).abs() < 1e-9 && ((ratios[1] / 0.08).round() - ratios[1] / 0.08).abs() < 1e-9, "the test assumes the campaign's ratios 0.4 and 0.64");
+    assert!(
+        ((ratios[0] / 0.08).round() - ratios[0] / 0.08).abs() < 1e-9 && ((ratios[1] / 0.08).round() - ratios[1] / 0.08).abs() < 1e-9,
+        "the test assumes the campaign's ratios 0.4 and 0.64"
+    );
     let sample = |t: f64| -> [f64; 4] {
         let mut out = [0.0; 4];
         for (j, p) in phasors.iter().enumerate() {
@@ -171,7 +175,10 @@ fn mean_abs(v: &[f64; 8]) -> f64 {
 }
 
 fn print(p: &Point, at: &[f64]) {
-    println!("{} (eccentricity {:.3}): radial rms fraction of the orbit {:.2}, mean shift at d 0.12 {:.4} c", p.label, p.eccentricity, p.radial_fraction, p.shift);
+    println!(
+        "{} (eccentricity {:.3}): radial rms fraction of the orbit {:.2}, mean shift at d 0.12 {:.4} c",
+        p.label, p.eccentricity, p.radial_fraction, p.shift
+    );
     println!("  {:>5} {}", "d", COEFFICIENT_NAMES.iter().map(|n| format!("{n:>8}")).collect::<String>());
     for (d, rv) in at.iter().zip(&p.rv) {
         println!("  {d:>5.2} {} | mean |RV| {:.2} %", rv.iter().map(|x| format!("{:>+7.2}%", 100.0 * x)).collect::<String>(), 100.0 * mean_abs(rv));
@@ -212,7 +219,12 @@ fn film_rv_is_smaller_at_the_high_load_parameter_for_force_driven_and_line_orbit
                 }
                 // Why: the exciters drive the journal mostly across the line of centres, and
                 // the more so the stiffer (more loaded) the film.
-                assert!(high.radial_fraction < 0.75 * low.radial_fraction && low.radial_fraction < 0.7, "radial fractions {} {}", low.radial_fraction, high.radial_fraction);
+                assert!(
+                    high.radial_fraction < 0.75 * low.radial_fraction && low.radial_fraction < 0.7,
+                    "radial fractions {} {}",
+                    low.radial_fraction,
+                    high.radial_fraction
+                );
                 // The static load, held by the bellows, moves the mean position by O(d^2).
                 assert!(low.shift > 1e-3 && low.shift < 0.01 && high.shift > 1e-3 && high.shift < 0.01, "shifts {} {}", low.shift, high.shift);
             }

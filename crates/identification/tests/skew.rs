@@ -32,8 +32,28 @@ fn de_skew_removes_the_apparent_added_mass_that_multiplex_skew_creates() {
     let (ma, mb) = (a.added_mass_kg.unwrap(), b.added_mass_kg.unwrap());
     let (sa, sb) = (a.added_mass_se.unwrap(), b.added_mass_se.unwrap());
     let ct = rec.truth.coefficients.damping_n_s_m;
-    println!("apparent added mass with de-skew    [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])", ma[(0, 0)], ma[(0, 1)], ma[(1, 0)], ma[(1, 1)], sa[(0, 0)], sa[(0, 1)], sa[(1, 0)], sa[(1, 1)]);
-    println!("apparent added mass without de-skew [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])", mb[(0, 0)], mb[(0, 1)], mb[(1, 0)], mb[(1, 1)], sb[(0, 0)], sb[(0, 1)], sb[(1, 0)], sb[(1, 1)]);
+    println!(
+        "apparent added mass with de-skew    [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])",
+        ma[(0, 0)],
+        ma[(0, 1)],
+        ma[(1, 0)],
+        ma[(1, 1)],
+        sa[(0, 0)],
+        sa[(0, 1)],
+        sa[(1, 0)],
+        sa[(1, 1)]
+    );
+    println!(
+        "apparent added mass without de-skew [{:.2} {:.2}; {:.2} {:.2}] kg (SE [{:.2} {:.2}; {:.2} {:.2}])",
+        mb[(0, 0)],
+        mb[(0, 1)],
+        mb[(1, 0)],
+        mb[(1, 1)],
+        sb[(0, 0)],
+        sb[(0, 1)],
+        sb[(1, 0)],
+        sb[(1, 1)]
+    );
     // The force channels (f1, f2, f3 at 60-80 us, frame probes at 40-50 us) lag the bearing
     // probes (0-30 us) by tau ~ 50 us: apparent mass ~ C tau.
     let tau = 50e-6;

@@ -41,11 +41,7 @@ pub struct CdrError {
 impl CdrError {
     /// Prefix the field path with the enclosing field's name (for nested messages).
     pub fn within(mut self, outer: &str) -> Self {
-        self.field = if self.field.is_empty() {
-            outer.to_string()
-        } else {
-            format!("{outer}.{}", self.field)
-        };
+        self.field = if self.field.is_empty() { outer.to_string() } else { format!("{outer}.{}", self.field) };
         self
     }
 }
@@ -74,11 +70,7 @@ impl CdrWriter {
     pub fn with_capacity(bytes: usize) -> Self {
         let mut buf = Vec::with_capacity(bytes.max(4));
         buf.extend_from_slice(&ENCAPSULATION_CDR_LE);
-        Self {
-            buf,
-            padding: None,
-            calculator: 0,
-        }
+        Self { buf, padding: None, calculator: 0 }
     }
 
     /// Pad with zeros so that the next byte's offset (after the header) is a multiple of
@@ -152,34 +144,19 @@ pub struct CdrReader<'a> {
 impl<'a> CdrReader<'a> {
     /// Checks the encapsulation header (little-endian plain CDR only).
     pub fn new(buf: &'a [u8]) -> Result<Self, CdrError> {
-        let err = |what: String| CdrError {
-            field: String::new(),
-            offset: 0,
-            what,
-        };
+        let err = |what: String| CdrError { field: String::new(), offset: 0, what };
         if buf.len() < 4 {
-            return Err(err(format!(
-                "{} bytes: shorter than the 4-byte encapsulation header",
-                buf.len()
-            )));
+            return Err(err(format!("{} bytes: shorter than the 4-byte encapsulation header", buf.len())));
         }
         match [buf[0], buf[1]] {
             [0x00, 0x01] => Ok(Self { buf, pos: 4 }),
-            [0x00, 0x00] => Err(err(
-                "big-endian CDR (encapsulation 00 00) is not supported".into()
-            )),
-            [a, b] => Err(err(format!(
-                "encapsulation {a:02x} {b:02x} is not plain little-endian CDR (00 01)"
-            ))),
+            [0x00, 0x00] => Err(err("big-endian CDR (encapsulation 00 00) is not supported".into())),
+            [a, b] => Err(err(format!("encapsulation {a:02x} {b:02x} is not plain little-endian CDR (00 01)"))),
         }
     }
 
     pub fn error(&self, field: &str, what: impl Into<String>) -> CdrError {
-        CdrError {
-            field: field.to_string(),
-            offset: self.pos,
-            what: what.into(),
-        }
+        CdrError { field: field.to_string(), offset: self.pos, what: what.into() }
     }
 
     pub fn remaining(&self) -> usize {
@@ -218,10 +195,7 @@ impl<'a> CdrReader<'a> {
     pub fn len(&mut self, field: &str, min_element_bytes: usize) -> Result<usize, CdrError> {
         let n = u32::from_le_bytes(self.primitive::<4>(field)?) as usize;
         if n.saturating_mul(min_element_bytes.max(1)) > self.remaining() {
-            return Err(self.error(
-                field,
-                format!("count {n} exceeds the {} bytes left", self.remaining()),
-            ));
+            return Err(self.error(field, format!("count {n} exceeds the {} bytes left", self.remaining())));
         }
         Ok(n)
     }
@@ -230,28 +204,16 @@ impl<'a> CdrReader<'a> {
         let start = self.pos;
         let n = self.len(field, 1)?;
         if n == 0 {
-            return Err(CdrError {
-                field: field.into(),
-                offset: start,
-                what: "string length 0 (it must count the NUL)".into(),
-            });
+            return Err(CdrError { field: field.into(), offset: start, what: "string length 0 (it must count the NUL)".into() });
         }
         let b = self.take(n, field)?;
         let (text, nul) = b.split_at(n - 1);
         if nul != [0] {
-            return Err(CdrError {
-                field: field.into(),
-                offset: start,
-                what: "string is not NUL-terminated".into(),
-            });
+            return Err(CdrError { field: field.into(), offset: start, what: "string is not NUL-terminated".into() });
         }
         match std::str::from_utf8(text) {
             Ok(s) => Ok(s.to_string()),
-            Err(e) => Err(CdrError {
-                field: field.into(),
-                offset: start,
-                what: format!("string is not UTF-8: {e}"),
-            }),
+            Err(e) => Err(CdrError { field: field.into(), offset: start, what: format!("string is not UTF-8: {e}") }),
         }
     }
 
@@ -263,10 +225,7 @@ impl<'a> CdrReader<'a> {
     /// 4-byte boundary that some DDS writers add), nothing more.
     pub fn finish(self) -> Result<(), CdrError> {
         if self.remaining() > 3 {
-            return Err(self.error(
-                "",
-                format!("{} bytes left after the last field", self.remaining()),
-            ));
+            return Err(self.error("", format!("{} bytes left after the last field", self.remaining())));
         }
         Ok(())
     }
@@ -394,10 +353,7 @@ macro_rules! bulk_element {
 bulk_element!(u8, i8, u16, i16, u32, i32, u64, i64, f32, f64);
 
 fn element_error(e: CdrError, field: &str, i: usize) -> CdrError {
-    CdrError {
-        field: format!("{field}[{i}]"),
-        ..e
-    }
+    CdrError { field: format!("{field}[{i}]"), ..e }
 }
 
 impl<T: CdrElement> CdrField for Vec<T> {
@@ -476,11 +432,7 @@ pub fn encode_with_padding<M: RosMessage>(msg: &M) -> Layout {
     msg.write(&mut w);
     let padding = w.padding.take().unwrap_or_default();
     let fastcdr_length = w.fastcdr_length();
-    Layout {
-        bytes: w.finish(),
-        padding,
-        fastcdr_length,
-    }
+    Layout { bytes: w.finish(), padding, fastcdr_length }
 }
 
 /// Deserialise a message, ignoring bytes after its last field (rclpy's buffers can carry a

@@ -17,9 +17,7 @@ pub mod cdr;
 pub mod spec;
 pub mod type_hash;
 
-pub use cdr::{
-    decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage,
-};
+pub use cdr::{decode, decode_exact, encode, encode_with_padding, CdrError, CdrField, Layout, RosMessage};
 
 /// Declares a message struct and derives its CDR form and field table, in field order.
 ///
@@ -118,32 +116,20 @@ impl Time {
         }
         let whole = seconds.floor();
         if whole < f64::from(i32::MIN) {
-            return Self {
-                sec: i32::MIN,
-                nanosec: 0,
-            };
+            return Self { sec: i32::MIN, nanosec: 0 };
         }
         if whole > f64::from(i32::MAX) {
-            return Self {
-                sec: i32::MAX,
-                nanosec: 999_999_999,
-            };
+            return Self { sec: i32::MAX, nanosec: 999_999_999 };
         }
         let ns = ((seconds - whole) * 1e9).round();
         // Rounding can reach a whole second.
         if ns >= 1e9 {
             match (whole as i32).checked_add(1) {
                 Some(sec) => Self { sec, nanosec: 0 },
-                None => Self {
-                    sec: i32::MAX,
-                    nanosec: 999_999_999,
-                },
+                None => Self { sec: i32::MAX, nanosec: 999_999_999 },
             }
         } else {
-            Self {
-                sec: whole as i32,
-                nanosec: ns as u32,
-            }
+            Self { sec: whole as i32, nanosec: ns as u32 }
         }
     }
 
@@ -329,16 +315,11 @@ impl DaqFrame {
                     return Err(format!("{} volts_per_count for {width} channel_names", self.volts_per_count.len()));
                 }
                 match self.volts_per_count.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-                    Some(c) => Err(format!(
-                        "volts_per_count[{c}] (channel `{}`) = {}: must be finite and > 0",
-                        self.channel_names[c], self.volts_per_count[c]
-                    )),
+                    Some(c) => Err(format!("volts_per_count[{c}] (channel `{}`) = {}: must be finite and > 0", self.channel_names[c], self.volts_per_count[c])),
                     None => Ok(()),
                 }
             }
-            other => Err(format!(
-                "units = {other} is none of UNITS_SI (0), UNITS_VOLTS (1), UNITS_COUNTS (2)"
-            )),
+            other => Err(format!("units = {other} is none of UNITS_SI (0), UNITS_VOLTS (1), UNITS_COUNTS (2)")),
         }
     }
 
@@ -562,10 +543,5 @@ pub fn type_description_hash(type_name: &str) -> Result<String, String> {
 }
 
 /// Which of our topics' types a name is, for tools (`pkg/msg/Type`).
-pub const MESSAGE_TYPES: &[&str] = &[
-    ExciterCommand::TYPE_NAME,
-    DaqFrame::TYPE_NAME,
-    ConditionedFrame::TYPE_NAME,
-    CoefficientEstimate::TYPE_NAME,
-    RigStatus::TYPE_NAME,
-];
+pub const MESSAGE_TYPES: &[&str] =
+    &[ExciterCommand::TYPE_NAME, DaqFrame::TYPE_NAME, ConditionedFrame::TYPE_NAME, CoefficientEstimate::TYPE_NAME, RigStatus::TYPE_NAME];

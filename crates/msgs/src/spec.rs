@@ -36,10 +36,8 @@ pub struct SpecError {
 }
 
 /// The primitive types of .msg files.
-pub const PRIMITIVES: &[&str] = &[
-    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32",
-    "uint32", "int64", "uint64", "string", "wstring",
-];
+pub const PRIMITIVES: &[&str] =
+    &["bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "string", "wstring"];
 
 /// The base type of a field type: `float64[4]` -> `float64`, `string<=8[]` -> `string`.
 pub fn base_type(ty: &str) -> &str {
@@ -52,10 +50,7 @@ pub fn parse_msg(text: &str, package: &str) -> Result<MsgSpec, SpecError> {
     let mut spec = MsgSpec::default();
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
-        let err = |what: String| SpecError {
-            line: line_no,
-            what,
-        };
+        let err = |what: String| SpecError { line: line_no, what };
         let trimmed = raw.trim();
         if trimmed.is_empty() || trimmed.starts_with('#') {
             continue;
@@ -67,49 +62,29 @@ pub fn parse_msg(text: &str, package: &str) -> Result<MsgSpec, SpecError> {
             return Err(err(format!("`{trimmed}`: a type without a name")));
         }
         let base = base_type(ty);
-        let ty = if PRIMITIVES.contains(&base) || base.contains('/') {
-            ty.to_string()
-        } else {
-            format!("{package}/{ty}")
-        };
+        let ty = if PRIMITIVES.contains(&base) || base.contains('/') { ty.to_string() } else { format!("{package}/{ty}") };
         // A constant: NAME=value (a string constant's value is the rest of the line).
-        let name_end = rest
-            .find(|c: char| c == '=' || c.is_whitespace() || c == '#')
-            .unwrap_or(rest.len());
+        let name_end = rest.find(|c: char| c == '=' || c.is_whitespace() || c == '#').unwrap_or(rest.len());
         let name = &rest[..name_end];
         let after = rest[name_end..].trim_start();
         if name.is_empty() || !name.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
             return Err(err(format!("`{trimmed}`: bad name")));
         }
         if !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(err(format!(
-                "`{name}`: names are letters, digits and underscores"
-            )));
+            return Err(err(format!("`{name}`: names are letters, digits and underscores")));
         }
         if let Some(v) = after.strip_prefix('=') {
-            let value = if base == "string" || base == "wstring" {
-                v.trim().to_string()
-            } else {
-                strip_comment(v).trim().to_string()
-            };
+            let value = if base == "string" || base == "wstring" { v.trim().to_string() } else { strip_comment(v).trim().to_string() };
             if value.is_empty() {
                 return Err(err(format!("constant `{name}` has no value")));
             }
-            spec.constants.push(ConstantSpec {
-                name: name.into(),
-                ty,
-                value,
-            });
+            spec.constants.push(ConstantSpec { name: name.into(), ty, value });
         } else {
             if name.chars().any(|c| c.is_ascii_uppercase()) {
                 return Err(err(format!("field `{name}`: field names are lower case")));
             }
             let default = strip_comment(after).trim();
-            spec.fields.push(FieldSpec {
-                name: name.into(),
-                ty,
-                default: (!default.is_empty()).then(|| default.to_string()),
-            });
+            spec.fields.push(FieldSpec { name: name.into(), ty, default: (!default.is_empty()).then(|| default.to_string()) });
         }
     }
     Ok(spec)
@@ -135,13 +110,8 @@ pub enum SchemaNaming {
 /// a line of 80 `=` and a line `MSG: <type>`, joined by newlines (the order rosbag2 uses).
 ///
 /// `lookup(package, type)` returns a type's .msg text.
-pub fn schema_text<'a>(
-    root: &str,
-    naming: SchemaNaming,
-    lookup: &dyn Fn(&str, &str) -> Option<&'a str>,
-) -> Result<String, String> {
-    let (pkg, ty) =
-        split_type(root).ok_or_else(|| format!("`{root}` is not pkg/Type or pkg/msg/Type"))?;
+pub fn schema_text<'a>(root: &str, naming: SchemaNaming, lookup: &dyn Fn(&str, &str) -> Option<&'a str>) -> Result<String, String> {
+    let (pkg, ty) = split_type(root).ok_or_else(|| format!("`{root}` is not pkg/Type or pkg/msg/Type"))?;
     let mut seen = HashSet::new();
     let mut out = String::new();
     append(pkg, ty, naming, lookup, &mut seen, &mut out, 0)?;
@@ -172,15 +142,9 @@ fn append<'a>(
     let text = lookup(pkg, ty).ok_or_else(|| format!("no definition for {pkg}/msg/{ty}"))?;
     out.push_str(text);
     let spec = parse_msg(text, pkg).map_err(|e| format!("{pkg}/msg/{ty}.msg line {e}"))?;
-    let deps: BTreeSet<String> = spec
-        .fields
-        .iter()
-        .map(|f| base_type(&f.ty).to_string())
-        .filter(|b| !PRIMITIVES.contains(&b.as_str()))
-        .collect();
+    let deps: BTreeSet<String> = spec.fields.iter().map(|f| base_type(&f.ty).to_string()).filter(|b| !PRIMITIVES.contains(&b.as_str())).collect();
     for dep in deps {
-        let (dp, dt) =
-            split_type(&dep).ok_or_else(|| format!("`{dep}` in {pkg}/msg/{ty} is not pkg/Type"))?;
+        let (dp, dt) = split_type(&dep).ok_or_else(|| format!("`{dep}` in {pkg}/msg/{ty} is not pkg/Type"))?;
         if !seen.insert(format!("{dp}/{dt}")) {
             continue;
         }

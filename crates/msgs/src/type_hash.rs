@@ -177,7 +177,11 @@ fn json_description(d: &TypeDescription, out: &mut String) {
         out.push_str("{\"name\": ");
         json_string(name, out);
         // Writing to a String cannot fail.
-        let _ = write!(out, ", \"type\": {{\"type_id\": {}, \"capacity\": {}, \"string_capacity\": {}, \"nested_type_name\": ", t.type_id, t.capacity, t.string_capacity);
+        let _ = write!(
+            out,
+            ", \"type\": {{\"type_id\": {}, \"capacity\": {}, \"string_capacity\": {}, \"nested_type_name\": ",
+            t.type_id, t.capacity, t.string_capacity
+        );
         json_string(&t.nested_type_name, out);
         out.push_str("}}");
     }

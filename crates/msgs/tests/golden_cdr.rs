@@ -7,9 +7,7 @@ use std::fmt::Debug;
 use std::path::PathBuf;
 
 use oilfilm_msgs::cdr::{decode, decode_exact, encode, encode_with_padding, RosMessage};
-use oilfilm_msgs::{
-    Clock, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header, RigStatus, Time,
-};
+use oilfilm_msgs::{Clock, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, Header, RigStatus, Time};
 use serde::de::DeserializeOwned;
 
 fn fixture_dir() -> PathBuf {
@@ -18,10 +16,7 @@ fn fixture_dir() -> PathBuf {
 
 fn unhex(s: &str) -> Vec<u8> {
     assert!(s.len().is_multiple_of(2), "odd hex length");
-    (0..s.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).expect("hex"))
-        .collect()
+    (0..s.len()).step_by(2).map(|i| u8::from_str_radix(&s[i..i + 2], 16).expect("hex")).collect()
 }
 
 /// Compare every fixture case of `T`; returns the number of cases.
@@ -57,19 +52,10 @@ fn check<T: RosMessage + DeserializeOwned + PartialEq + Debug>(file: &str) -> us
                 assert_eq!(a, b, "{file}/{name}: byte {i} differs (ours {a:02x}, rclpy {b:02x}); padding at {padding:?}");
             }
         }
-        assert_eq!(
-            encode(&value),
-            ours,
-            "{file}/{name}: encode and encode_with_padding disagree"
-        );
-        let back: T = decode(&golden)
-            .unwrap_or_else(|e| panic!("{file}/{name}: decoding rclpy's bytes: {e}"));
-        assert_eq!(
-            back, value,
-            "{file}/{name}: rclpy's bytes decode to another value"
-        );
-        let again: T = decode_exact(&ours)
-            .unwrap_or_else(|e| panic!("{file}/{name}: decoding our bytes: {e}"));
+        assert_eq!(encode(&value), ours, "{file}/{name}: encode and encode_with_padding disagree");
+        let back: T = decode(&golden).unwrap_or_else(|e| panic!("{file}/{name}: decoding rclpy's bytes: {e}"));
+        assert_eq!(back, value, "{file}/{name}: rclpy's bytes decode to another value");
+        let again: T = decode_exact(&ours).unwrap_or_else(|e| panic!("{file}/{name}: decoding our bytes: {e}"));
         assert_eq!(again, value, "{file}/{name}: round trip");
     }
     cases.len()
@@ -80,9 +66,7 @@ trait OrFixturePanic<T> {
 }
 impl<T> OrFixturePanic<T> for Result<T, serde_json::Error> {
     fn or_fixture_panic(self, file: &str, case: &str) -> T {
-        self.unwrap_or_else(|e| {
-            panic!("{file}/{case}: the fixture's value does not fit the Rust type: {e}")
-        })
+        self.unwrap_or_else(|e| panic!("{file}/{case}: the fixture's value does not fit the Rust type: {e}"))
     }
 }
 
@@ -122,10 +106,7 @@ fn clock_matches_rclpy() {
 /// rclpy: Header(stamp=Time(sec=1, nanosec=2), frame_id="ab") serialises to this.
 #[test]
 fn header_matches_rclpy() {
-    let h = Header {
-        stamp: Time { sec: 1, nanosec: 2 },
-        frame_id: "ab".into(),
-    };
+    let h = Header { stamp: Time { sec: 1, nanosec: 2 }, frame_id: "ab".into() };
     assert_eq!(encode(&h), unhex("00010000010000000200000003000000616200"));
 }
 
@@ -134,13 +115,7 @@ fn header_matches_rclpy() {
 /// would insert 4 bytes before y_m's count.
 #[test]
 fn empty_float64_sequence_takes_no_padding() {
-    let empty = ConditionedFrame {
-        header: Header {
-            stamp: Time { sec: 0, nanosec: 0 },
-            frame_id: String::new(),
-        },
-        ..Default::default()
-    };
+    let empty = ConditionedFrame { header: Header { stamp: Time { sec: 0, nanosec: 0 }, frame_id: String::new() }, ..Default::default() };
     let mut want = vec![0x00, 0x01, 0x00, 0x00];
     want.extend([0, 0, 0, 0, 0, 0, 0, 0]); // stamp (offsets 0..8)
     want.extend([1, 0, 0, 0, 0]); // frame_id "" = length 1 (the NUL), NUL (8..13)
@@ -153,16 +128,10 @@ fn empty_float64_sequence_takes_no_padding() {
     want.extend([0; 8]); // bearing_temperature_degc (80..88)
     want.extend([0; 4]); // flags: its count (88..92)
     assert_eq!(encode(&empty), want);
-    assert_eq!(
-        decode_exact::<ConditionedFrame>(&want).expect("decode"),
-        empty
-    );
+    assert_eq!(decode_exact::<ConditionedFrame>(&want).expect("decode"), empty);
 
     // One element: now the element is aligned to 8 after its count.
-    let one = ConditionedFrame {
-        x_m: vec![1.0],
-        ..empty.clone()
-    };
+    let one = ConditionedFrame { x_m: vec![1.0], ..empty.clone() };
     let layout = encode_with_padding(&empty);
     // What rclpy would return: Fast-CDR's calculator counts 4 bytes of alignment for x_m's
     // absent elements, shifting the rest, and so on: the data stays 84 bytes.
@@ -178,15 +147,8 @@ fn empty_float64_sequence_takes_no_padding() {
 
 #[test]
 fn float_sequence_of_nan_round_trips() {
-    let e = CoefficientEstimate {
-        stiffness_n_m: [f64::NAN; 4],
-        excitation_frequencies_hz: vec![f64::NAN, f64::INFINITY],
-        ..Default::default()
-    };
+    let e = CoefficientEstimate { stiffness_n_m: [f64::NAN; 4], excitation_frequencies_hz: vec![f64::NAN, f64::INFINITY], ..Default::default() };
     let back: CoefficientEstimate = decode(&encode(&e)).expect("decode");
     assert!(back.stiffness_n_m.iter().all(|v| v.is_nan()));
-    assert!(
-        back.excitation_frequencies_hz[0].is_nan()
-            && back.excitation_frequencies_hz[1].is_infinite()
-    );
+    assert!(back.excitation_frequencies_hz[0].is_nan() && back.excitation_frequencies_hz[1].is_infinite());
 }

@@ -5,10 +5,7 @@ use oilfilm_msgs::{CoefficientEstimate, DaqFrame, Header, RigStatus, Time};
 
 fn sample_daq() -> DaqFrame {
     DaqFrame {
-        header: Header {
-            stamp: Time { sec: 3, nanosec: 4 },
-            frame_id: "oilfilm_bearing".into(),
-        },
+        header: Header { stamp: Time { sec: 3, nanosec: 4 }, frame_id: "oilfilm_bearing".into() },
         sequence: 5,
         channel_names: vec!["f1".into(), "f2".into()],
         channel_units: vec!["N".into(), "N".into()],
@@ -22,13 +19,7 @@ fn sample_daq() -> DaqFrame {
 
 /// The same frame with counts: both appended fields present.
 fn sample_counts() -> DaqFrame {
-    DaqFrame {
-        units: DaqFrame::UNITS_COUNTS,
-        values: Vec::new(),
-        volts_per_count: vec![3.0e-4, 3.0e-4],
-        counts: vec![-7, 12_000],
-        ..sample_daq()
-    }
+    DaqFrame { units: DaqFrame::UNITS_COUNTS, values: Vec::new(), volts_per_count: vec![3.0e-4, 3.0e-4], counts: vec![-7, 12_000], ..sample_daq() }
 }
 
 oilfilm_msgs::ros_message! {
@@ -139,11 +130,23 @@ fn extend_columns_appends_the_samples_of_the_picked_channels() {
     let scans = 600;
     let names: Vec<String> = ["xa", "ya", "f1"].iter().map(|s| s.to_string()).collect();
     let counts: Vec<i16> = (0..scans * width).map(|i| ((i * 7919) % 65_536) as i32 - 32_768).map(|q| q as i16).collect();
-    let base = DaqFrame { channel_names: names.clone(), channel_units: vec!["V".into(); width], channel_offsets_s: vec![0.0; width], scan_count: scans as u32, ..sample_counts() };
+    let base = DaqFrame {
+        channel_names: names.clone(),
+        channel_units: vec!["V".into(); width],
+        channel_offsets_s: vec![0.0; width],
+        scan_count: scans as u32,
+        ..sample_counts()
+    };
     let frames = [
         DaqFrame { units: DaqFrame::UNITS_COUNTS, counts: counts.clone(), volts_per_count: vec![3.0e-4; width], ..base.clone() },
         DaqFrame { units: DaqFrame::UNITS_COUNTS, counts: counts.clone(), volts_per_count: vec![3.0e-4, 1.0e-3, 7.0e-5], ..base.clone() },
-        DaqFrame { units: DaqFrame::UNITS_VOLTS, counts: Vec::new(), volts_per_count: Vec::new(), values: counts.iter().map(|&q| f64::from(q) * 0.37).collect(), ..base.clone() },
+        DaqFrame {
+            units: DaqFrame::UNITS_VOLTS,
+            counts: Vec::new(),
+            volts_per_count: Vec::new(),
+            values: counts.iter().map(|&q| f64::from(q) * 0.37).collect(),
+            ..base.clone()
+        },
     ];
     for frame in &frames {
         let mut buf = Vec::new();
@@ -154,7 +157,12 @@ fn extend_columns_appends_the_samples_of_the_picked_channels() {
         for (k, &c) in picks.iter().enumerate() {
             let want: Vec<f64> = all[c..].iter().step_by(width).copied().collect();
             let got = if k == 0 { &columns[k][1..] } else { &columns[k][..] };
-            assert_eq!(got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), "units {} channel {c}", frame.units);
+            assert_eq!(
+                got.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                want.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "units {} channel {c}",
+                frame.units
+            );
         }
         assert_eq!(columns[0][0], -1.0, "appended after what the column held");
         let e = frame.extend_columns(&[0, 3], &mut columns).expect_err("no channel 3");
@@ -211,10 +219,7 @@ fn errors_name_the_field() {
     let e = decode::<DaqFrame>(&bytes).expect_err("zero-length string");
     assert_eq!(e.field, "header.frame_id", "{e}");
 
-    let s = RigStatus {
-        message: "x".into(),
-        ..Default::default()
-    };
+    let s = RigStatus { message: "x".into(), ..Default::default() };
     let mut bytes = encode(&s);
     let nul = bytes.len() - 1;
     bytes[nul] = b'y';
@@ -234,10 +239,7 @@ fn header_and_trailing_bytes_are_checked() {
     let bytes = encode(&RigStatus::default());
     let mut be = bytes.clone();
     be[1] = 0x00;
-    assert!(decode::<RigStatus>(&be)
-        .expect_err("big endian")
-        .to_string()
-        .contains("big-endian"));
+    assert!(decode::<RigStatus>(&be).expect_err("big endian").to_string().contains("big-endian"));
     let mut long = bytes.clone();
     long.extend([0, 0, 0]);
     decode_exact::<RigStatus>(&long).expect("3 bytes of trailing padding are accepted");
@@ -248,34 +250,10 @@ fn header_and_trailing_bytes_are_checked() {
 
 #[test]
 fn time_from_seconds() {
-    assert_eq!(
-        Time::from_seconds(1.5),
-        Time {
-            sec: 1,
-            nanosec: 500_000_000
-        }
-    );
-    assert_eq!(
-        Time::from_seconds(-1.7),
-        Time {
-            sec: -2,
-            nanosec: 300_000_000
-        }
-    );
+    assert_eq!(Time::from_seconds(1.5), Time { sec: 1, nanosec: 500_000_000 });
+    assert_eq!(Time::from_seconds(-1.7), Time { sec: -2, nanosec: 300_000_000 });
     assert_eq!(Time::from_seconds(f64::NAN), Time::default());
     assert_eq!(Time::from_seconds(1e12).sec, i32::MAX);
-    assert_eq!(
-        Time::from_seconds(0.9999999999),
-        Time { sec: 1, nanosec: 0 }
-    );
-    assert!(
-        (Time {
-            sec: -2,
-            nanosec: 300_000_000
-        }
-        .as_seconds()
-            + 1.7)
-            .abs()
-            < 1e-12
-    );
+    assert_eq!(Time::from_seconds(0.9999999999), Time { sec: 1, nanosec: 0 });
+    assert!((Time { sec: -2, nanosec: 300_000_000 }.as_seconds() + 1.7).abs() < 1e-12);
 }

@@ -52,7 +52,9 @@ fn array_sequence_and_string_kinds_get_their_ids() {
     let text = "float64[4] a\nfloat64[] b\nuint8[<=3] c\nstring<=8 d\nstring<=8[2] e\nbool[] f\nbyte g\nchar h\n";
     let lookup = |p: &str, t: &str| (p == "x" && t == "T").then_some(text);
     let json = hashable_json("x/msg/T", &lookup).unwrap();
-    for (name, id, cap, scap) in [("a", 59, 4, 0), ("b", 155, 0, 0), ("c", 99, 3, 0), ("d", 21, 0, 8), ("e", 69, 2, 8), ("f", 159, 0, 0), ("g", 16, 0, 0), ("h", 3, 0, 0)] {
+    for (name, id, cap, scap) in
+        [("a", 59, 4, 0), ("b", 155, 0, 0), ("c", 99, 3, 0), ("d", 21, 0, 8), ("e", 69, 2, 8), ("f", 159, 0, 0), ("g", 16, 0, 0), ("h", 3, 0, 0)]
+    {
         let want = format!(r#"{{"name": "{name}", "type": {{"type_id": {id}, "capacity": {cap}, "string_capacity": {scap}, "nested_type_name": ""}}}}"#);
         assert!(json.contains(&want), "{name}: {want} not in {json}");
     }

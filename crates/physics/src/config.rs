@@ -138,10 +138,8 @@ impl RigConfig {
 
     /// Parses and validates a rig file. `origin` names it in errors (a path, usually).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, PhysicsError> {
-        let config: Self = toml::from_str(text).map_err(|e| PhysicsError::ConfigParse {
-            origin: format!(" {origin}"),
-            message: e.to_string().trim_end().to_string(),
-        })?;
+        let config: Self =
+            toml::from_str(text).map_err(|e| PhysicsError::ConfigParse { origin: format!(" {origin}"), message: e.to_string().trim_end().to_string() })?;
         config.validate()?;
         Ok(config)
     }
@@ -173,7 +171,10 @@ impl RigConfig {
             return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("must be [low, high] with 0 <= low < high, got [{f_lo:?}, {f_hi:?}]")));
         }
         if f_hi >= 0.5 * self.daq.sample_rate_hz {
-            return Err(PhysicsError::invalid("housing.exciter_band_hz", format!("upper edge {f_hi:?} Hz must stay below the DAQ's Nyquist frequency {:?} Hz", 0.5 * self.daq.sample_rate_hz)));
+            return Err(PhysicsError::invalid(
+                "housing.exciter_band_hz",
+                format!("upper edge {f_hi:?} Hz must stay below the DAQ's Nyquist frequency {:?} Hz", 0.5 * self.daq.sample_rate_hz),
+            ));
         }
         positive("housing.exciter_max_slew_n_per_s", h.exciter_max_slew_n_per_s)?;
         positive("housing.gravity_m_s2", h.gravity_m_s2)?;
@@ -199,7 +200,10 @@ impl RigConfig {
         self.oil.viscosity_pa_s(o.bearing_temperature_c).map_err(|e| PhysicsError::invalid("operating.bearing_temperature_c", e.to_string()))?;
         let j = &self.journal;
         if !j.orbit_amplitude_m.is_finite() || j.orbit_amplitude_m < 0.0 || j.orbit_amplitude_m >= 0.5 * self.bearing.clearance_m {
-            return Err(PhysicsError::invalid("journal.orbit_amplitude_m", format!("must lie in [0, c/2) = [0, {:e}) m, got {:?}", 0.5 * self.bearing.clearance_m, j.orbit_amplitude_m)));
+            return Err(PhysicsError::invalid(
+                "journal.orbit_amplitude_m",
+                format!("must lie in [0, c/2) = [0, {:e}) m, got {:?}", 0.5 * self.bearing.clearance_m, j.orbit_amplitude_m),
+            ));
         }
         finite("journal.orbit_phase_deg", j.orbit_phase_deg)?;
         self.daq.validate("daq")?;

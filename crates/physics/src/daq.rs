@@ -143,12 +143,7 @@ impl ChannelId {
     /// SI unit of the channel's physical value: `"m"`, `"N"` or `"degC"`.
     pub const fn unit(self) -> &'static str {
         match self {
-            ChannelId::ProbeAX
-            | ChannelId::ProbeAY
-            | ChannelId::ProbeBX
-            | ChannelId::ProbeBY
-            | ChannelId::FrameX
-            | ChannelId::FrameY => "m",
+            ChannelId::ProbeAX | ChannelId::ProbeAY | ChannelId::ProbeBX | ChannelId::ProbeBY | ChannelId::FrameX | ChannelId::FrameY => "m",
             ChannelId::F1 | ChannelId::F2 | ChannelId::F3 => "N",
             ChannelId::Temperature => "degC",
         }
@@ -156,19 +151,12 @@ impl ChannelId {
 
     /// Parses a snake_case channel name; anything else is [`PhysicsError::UnknownChannel`].
     pub fn parse(name: &str) -> Result<Self, PhysicsError> {
-        Self::ALL
-            .iter()
-            .copied()
-            .find(|c| c.name() == name)
-            .ok_or_else(|| PhysicsError::UnknownChannel(name.to_string()))
+        Self::ALL.iter().copied().find(|c| c.name() == name).ok_or_else(|| PhysicsError::UnknownChannel(name.to_string()))
     }
 
     /// One of the four probes measuring the journal relative to the bearing.
     pub fn is_bearing_probe(self) -> bool {
-        matches!(
-            self,
-            ChannelId::ProbeAX | ChannelId::ProbeAY | ChannelId::ProbeBX | ChannelId::ProbeBY
-        )
+        matches!(self, ChannelId::ProbeAX | ChannelId::ProbeAY | ChannelId::ProbeBX | ChannelId::ProbeBY)
     }
 
     /// One of the two framework probes measuring the housing's absolute displacement.
@@ -188,11 +176,7 @@ impl ChannelId {
 
     /// Comma-separated list of all names, for error messages.
     pub fn all_names() -> String {
-        Self::ALL
-            .iter()
-            .map(|c| c.name())
-            .collect::<Vec<_>>()
-            .join(", ")
+        Self::ALL.iter().map(|c| c.name()).collect::<Vec<_>>().join(", ")
     }
 }
 
@@ -220,10 +204,7 @@ pub struct PhysicalSignals {
 impl PhysicalSignals {
     /// All values zero, shaft angle zero.
     pub fn zero() -> Self {
-        Self {
-            values: [0.0; CHANNEL_COUNT],
-            shaft_angle_rad: 0.0,
-        }
+        Self { values: [0.0; CHANNEL_COUNT], shaft_angle_rad: 0.0 }
     }
 
     /// The value of one channel.
@@ -351,13 +332,7 @@ impl DaqConfig {
             noise_rms: PROBE_NOISE_M,
             linear_range: [-PROBE_LINEAR_M, PROBE_LINEAR_M],
         };
-        let exciter_force = |channel| ChannelConfig {
-            channel,
-            sensitivity_v_per_unit: 4.0e-3,
-            offset_v: 0.0,
-            noise_rms: 1.0,
-            linear_range: [-2000.0, 2000.0],
-        };
+        let exciter_force = |channel| ChannelConfig { channel, sensitivity_v_per_unit: 4.0e-3, offset_v: 0.0, noise_rms: 1.0, linear_range: [-2000.0, 2000.0] };
         Self {
             sample_rate_hz: 5000.0,
             channel_interval_s: 10.0e-6,
@@ -372,20 +347,8 @@ impl DaqConfig {
                 probe(ChannelId::FrameY),
                 exciter_force(ChannelId::F1),
                 exciter_force(ChannelId::F2),
-                ChannelConfig {
-                    channel: ChannelId::F3,
-                    sensitivity_v_per_unit: 0.6e-3,
-                    offset_v: -7.5,
-                    noise_rms: 5.0,
-                    linear_range: [-1000.0, 25000.0],
-                },
-                ChannelConfig {
-                    channel: ChannelId::Temperature,
-                    sensitivity_v_per_unit: 0.15,
-                    offset_v: -7.5,
-                    noise_rms: 0.05,
-                    linear_range: [0.0, 100.0],
-                },
+                ChannelConfig { channel: ChannelId::F3, sensitivity_v_per_unit: 0.6e-3, offset_v: -7.5, noise_rms: 5.0, linear_range: [-1000.0, 25000.0] },
+                ChannelConfig { channel: ChannelId::Temperature, sensitivity_v_per_unit: 0.15, offset_v: -7.5, noise_rms: 0.05, linear_range: [0.0, 100.0] },
             ],
         }
     }
@@ -395,89 +358,51 @@ impl DaqConfig {
     pub fn validate(&self, prefix: &str) -> Result<(), PhysicsError> {
         let f = |rest: &str| field_path(prefix, rest);
         if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
-            return Err(PhysicsError::invalid(
-                f("sample_rate_hz"),
-                format!("must be finite and > 0, got {:?}", self.sample_rate_hz),
-            ));
+            return Err(PhysicsError::invalid(f("sample_rate_hz"), format!("must be finite and > 0, got {:?}", self.sample_rate_hz)));
         }
         if !(self.channel_interval_s.is_finite() && self.channel_interval_s >= 0.0) {
-            return Err(PhysicsError::invalid(
-                f("channel_interval_s"),
-                format!("must be finite and >= 0, got {:?}", self.channel_interval_s),
-            ));
+            return Err(PhysicsError::invalid(f("channel_interval_s"), format!("must be finite and >= 0, got {:?}", self.channel_interval_s)));
         }
         if !(8..=24).contains(&self.adc_bits) {
-            return Err(PhysicsError::invalid(
-                f("adc_bits"),
-                format!("must be in 8..=24, got {:?}", self.adc_bits),
-            ));
+            return Err(PhysicsError::invalid(f("adc_bits"), format!("must be in 8..=24, got {:?}", self.adc_bits)));
         }
         if !(self.full_scale_v.is_finite() && self.full_scale_v > 0.0) {
-            return Err(PhysicsError::invalid(
-                f("full_scale_v"),
-                format!("must be finite and > 0, got {:?}", self.full_scale_v),
-            ));
+            return Err(PhysicsError::invalid(f("full_scale_v"), format!("must be finite and > 0, got {:?}", self.full_scale_v)));
         }
         let mut seen: [Option<usize>; CHANNEL_COUNT] = [None; CHANNEL_COUNT];
         for (i, ch) in self.channels.iter().enumerate() {
             let cf = |rest: &str| f(&format!("channels[{i}].{rest}"));
             if let Some(first) = seen[ch.channel.index()] {
-                return Err(PhysicsError::invalid(
-                    cf("channel"),
-                    format!("`{}` is already scanned as channels[{first}]", ch.channel),
-                ));
+                return Err(PhysicsError::invalid(cf("channel"), format!("`{}` is already scanned as channels[{first}]", ch.channel)));
             }
             seen[ch.channel.index()] = Some(i);
             let s = ch.sensitivity_v_per_unit;
             if !(s.is_finite() && s != 0.0) {
-                return Err(PhysicsError::invalid(
-                    cf("sensitivity_v_per_unit"),
-                    format!("must be finite and non-zero, got {s:?}"),
-                ));
+                return Err(PhysicsError::invalid(cf("sensitivity_v_per_unit"), format!("must be finite and non-zero, got {s:?}")));
             }
             if !ch.offset_v.is_finite() {
-                return Err(PhysicsError::invalid(
-                    cf("offset_v"),
-                    format!("must be finite, got {:?}", ch.offset_v),
-                ));
+                return Err(PhysicsError::invalid(cf("offset_v"), format!("must be finite, got {:?}", ch.offset_v)));
             }
             if !(ch.noise_rms.is_finite() && ch.noise_rms >= 0.0) {
-                return Err(PhysicsError::invalid(
-                    cf("noise_rms"),
-                    format!("must be finite and >= 0, got {:?}", ch.noise_rms),
-                ));
+                return Err(PhysicsError::invalid(cf("noise_rms"), format!("must be finite and >= 0, got {:?}", ch.noise_rms)));
             }
             let [lo, hi] = ch.linear_range;
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(PhysicsError::invalid(
-                    cf("linear_range"),
-                    format!("must be finite [min, max] with min < max, got [{lo:?}, {hi:?}]"),
-                ));
+                return Err(PhysicsError::invalid(cf("linear_range"), format!("must be finite [min, max] with min < max, got [{lo:?}, {hi:?}]")));
             }
             let [vlo, vhi] = ch.linear_range_v();
             if !(vlo < self.full_scale_v && vhi > -self.full_scale_v) {
                 return Err(PhysicsError::invalid(
                     cf("linear_range"),
-                    format!(
-                        "maps to [{vlo}, {vhi}] V, entirely outside the ADC span +-{} V (check offset_v and sensitivity)",
-                        self.full_scale_v
-                    ),
+                    format!("maps to [{vlo}, {vhi}] V, entirely outside the ADC span +-{} V (check offset_v and sensitivity)", self.full_scale_v),
                 ));
             }
         }
-        let missing: Vec<&str> = ChannelId::ALL
-            .iter()
-            .filter(|c| seen[c.index()].is_none())
-            .map(|c| c.name())
-            .collect();
+        let missing: Vec<&str> = ChannelId::ALL.iter().filter(|c| seen[c.index()].is_none()).map(|c| c.name()).collect();
         if !missing.is_empty() {
             return Err(PhysicsError::invalid(
                 f("channels"),
-                format!(
-                    "missing channel(s) {}; all ten must be scanned ({})",
-                    missing.join(", "),
-                    ChannelId::all_names()
-                ),
+                format!("missing channel(s) {}; all ten must be scanned ({})", missing.join(", "), ChannelId::all_names()),
             ));
         }
         let scan_span = self.channel_interval_s * (self.channels.len() as f64 - 1.0);
@@ -577,10 +502,7 @@ pub struct Calibration {
 impl Calibration {
     /// The calibration record of one channel.
     pub fn channel(&self, channel: ChannelId) -> Result<&ChannelCalibration, PhysicsError> {
-        self.channels
-            .iter()
-            .find(|c| c.channel == channel)
-            .ok_or_else(|| PhysicsError::UnknownChannel(channel.name().to_string()))
+        self.channels.iter().find(|c| c.channel == channel).ok_or_else(|| PhysicsError::UnknownChannel(channel.name().to_string()))
     }
 
     /// All channel records, in scan order.
@@ -606,11 +528,7 @@ impl Calibration {
     /// at a range edge reads within half an LSB of it after quantisation, so readings within
     /// half an LSB of an edge (or beyond) count as **out of range**; a genuinely linear value
     /// that close to the edge is lost too, which is the conservative side.
-    pub fn within_linear_range(
-        &self,
-        channel: ChannelId,
-        volts: f64,
-    ) -> Result<bool, PhysicsError> {
+    pub fn within_linear_range(&self, channel: ChannelId, volts: f64) -> Result<bool, PhysicsError> {
         let [lo, hi] = self.linear_range_v(channel)?;
         let margin = 0.5 * self.lsb_v;
         Ok(volts > lo + margin && volts < hi - margin)
@@ -666,10 +584,7 @@ impl Calibration {
             return Err(PhysicsError::invalid("schedule.sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz:?}")));
         }
         if schedule.len() != self.channels.len() {
-            return Err(PhysicsError::invalid(
-                "schedule",
-                format!("names {} channels; the calibration has {}", schedule.len(), self.channels.len()),
-            ));
+            return Err(PhysicsError::invalid("schedule", format!("names {} channels; the calibration has {}", schedule.len(), self.channels.len())));
         }
         let period = 1.0 / sample_rate_hz;
         let mut channels = Vec::with_capacity(schedule.len());
@@ -776,11 +691,7 @@ impl Daq {
                 let ch = ChannelId::parse(&d.channel).map_err(|_| {
                     PhysicsError::invalid(
                         "effects.channel_delay.channel",
-                        format!(
-                            "unknown DAQ channel `{}`; expected one of {}",
-                            d.channel,
-                            ChannelId::all_names()
-                        ),
+                        format!("unknown DAQ channel `{}`; expected one of {}", d.channel, ChannelId::all_names()),
                     )
                 })?;
                 Some((ch, d.delay_s))
@@ -792,11 +703,7 @@ impl Daq {
                 let ch = ChannelId::parse(&s.channel).map_err(|_| {
                     PhysicsError::invalid(
                         "effects.probe_saturation.channel",
-                        format!(
-                            "unknown DAQ channel `{}`; expected one of {}",
-                            s.channel,
-                            ChannelId::all_names()
-                        ),
+                        format!("unknown DAQ channel `{}`; expected one of {}", s.channel, ChannelId::all_names()),
                     )
                 })?;
                 if !ch.is_displacement_probe() {
@@ -881,12 +788,7 @@ impl Daq {
     /// (the caller interpolates its simulation); it is called once per channel, in scan order.
     /// The result depends only on the configuration, effects, seed, `scan_index`,
     /// `scan_start_s` and what `signals` returns.
-    pub fn scan(
-        &mut self,
-        scan_index: u64,
-        scan_start_s: f64,
-        signals: &mut dyn FnMut(f64) -> PhysicalSignals,
-    ) -> DaqScan {
+    pub fn scan(&mut self, scan_index: u64, scan_start_s: f64, signals: &mut dyn FnMut(f64) -> PhysicalSignals) -> DaqScan {
         let mut rng = self.base_rng.clone();
         rng.set_stream(scan_index);
         rng.set_word_pos(0);
@@ -911,9 +813,7 @@ impl Daq {
             let code = if value.is_finite() {
                 // Sensor linearity: hard clip (finite value and lo < hi, so no NaN games).
                 let sensed = value.max(slot.sensor_lo).min(slot.sensor_hi);
-                let amp = (slot.offset_v + slot.sensitivity * sensed)
-                    .max(-self.full_scale_v)
-                    .min(self.full_scale_v);
+                let amp = (slot.offset_v + slot.sensitivity * sensed).max(-self.full_scale_v).min(self.full_scale_v);
                 let raw = (amp / self.lsb_v).round();
                 // `raw` is finite and within +-2^(bits-1) (+1 at most), so the cast is exact.
                 (raw as i64).clamp(self.code_min as i64, self.code_max as i64) as i32
@@ -929,13 +829,7 @@ impl Daq {
             volts.push(code as f64 * self.lsb_v);
             channels.push(slot.channel);
         }
-        DaqScan {
-            scan_index,
-            scan_start_s,
-            counts,
-            volts,
-            channels,
-        }
+        DaqScan { scan_index, scan_start_s, counts, volts, channels }
     }
 
     /// How far before `scan_start_s` [`Daq::scan`] may ask `signals` (the injected channel

@@ -68,26 +68,15 @@ pub fn lund(
     load_n: f64,
 ) -> DimensionlessCoefficients {
     let c = geometry.clearance_m;
-    DimensionlessCoefficients {
-        stiffness: stiffness_n_m * (c / load_n),
-        damping: damping_n_s_m * (c * running.omega_rad_s / load_n),
-    }
+    DimensionlessCoefficients { stiffness: stiffness_n_m * (c / load_n), damping: damping_n_s_m * (c * running.omega_rad_s / load_n) }
 }
 
 /// Zhou's groups `K = k psi^3 / (mu omega L)`, `D = d psi^3 / (mu L)` (frame unchanged).
-pub fn zhou(
-    stiffness_n_m: &Matrix2<f64>,
-    damping_n_s_m: &Matrix2<f64>,
-    geometry: &BearingGeometry,
-    running: &Running,
-) -> DimensionlessCoefficients {
+pub fn zhou(stiffness_n_m: &Matrix2<f64>, damping_n_s_m: &Matrix2<f64>, geometry: &BearingGeometry, running: &Running) -> DimensionlessCoefficients {
     let psi3 = geometry.relative_clearance().powi(3);
     let mu = running.viscosity_pa_s;
     let l = geometry.length_m;
-    DimensionlessCoefficients {
-        stiffness: stiffness_n_m * (psi3 / (mu * running.omega_rad_s * l)),
-        damping: damping_n_s_m * (psi3 / (mu * l)),
-    }
+    DimensionlessCoefficients { stiffness: stiffness_n_m * (psi3 / (mu * running.omega_rad_s * l)), damping: damping_n_s_m * (psi3 / (mu * l)) }
 }
 
 #[cfg(test)]

@@ -48,12 +48,7 @@ impl BearingGeometry {
     /// horizontal diameter is assumed (the commonest industrial layout, and the one the
     /// Lund & Thomsen tables describe).
     pub fn zhou2004() -> Self {
-        Self {
-            diameter_m: 0.152,
-            length_m: 0.0883,
-            clearance_m: 0.114e-3,
-            kind: BearingKind::TwoAxialGroove { groove_arc_deg: 20.0, groove_centre_deg: 0.0 },
-        }
+        Self { diameter_m: 0.152, length_m: 0.0883, clearance_m: 0.114e-3, kind: BearingKind::TwoAxialGroove { groove_arc_deg: 20.0, groove_centre_deg: 0.0 } }
     }
 
     pub fn radius_m(&self) -> f64 {
@@ -92,10 +87,7 @@ impl BearingGeometry {
     pub fn validate(&self, prefix: &str) -> Result<(), PhysicsError> {
         let positive = |name: &str, v: f64| -> Result<(), PhysicsError> {
             if !v.is_finite() || v <= 0.0 {
-                return Err(PhysicsError::invalid(
-                    format!("{prefix}.{name}"),
-                    format!("must be a positive finite length in metres, got {v:?}"),
-                ));
+                return Err(PhysicsError::invalid(format!("{prefix}.{name}"), format!("must be a positive finite length in metres, got {v:?}")));
             }
             Ok(())
         };
@@ -105,25 +97,15 @@ impl BearingGeometry {
         if self.clearance_m >= 0.05 * self.radius_m() {
             return Err(PhysicsError::invalid(
                 format!("{prefix}.clearance_m"),
-                format!(
-                    "{} m is not a thin film against radius {} m (Reynolds lubrication needs c/R << 1)",
-                    self.clearance_m,
-                    self.radius_m()
-                ),
+                format!("{} m is not a thin film against radius {} m (Reynolds lubrication needs c/R << 1)", self.clearance_m, self.radius_m()),
             ));
         }
         if let BearingKind::TwoAxialGroove { groove_arc_deg, groove_centre_deg } = self.kind {
             if !groove_arc_deg.is_finite() || !(0.0..90.0).contains(&groove_arc_deg) {
-                return Err(PhysicsError::invalid(
-                    format!("{prefix}.kind.groove_arc_deg"),
-                    format!("must lie in [0, 90) degrees, got {groove_arc_deg:?}"),
-                ));
+                return Err(PhysicsError::invalid(format!("{prefix}.kind.groove_arc_deg"), format!("must lie in [0, 90) degrees, got {groove_arc_deg:?}")));
             }
             if !groove_centre_deg.is_finite() {
-                return Err(PhysicsError::invalid(
-                    format!("{prefix}.kind.groove_centre_deg"),
-                    format!("must be finite, got {groove_centre_deg:?}"),
-                ));
+                return Err(PhysicsError::invalid(format!("{prefix}.kind.groove_centre_deg"), format!("must be finite, got {groove_centre_deg:?}")));
             }
         }
         Ok(())

@@ -74,12 +74,7 @@ impl Oil {
         let density = 870.0;
         let expansion = TYPICAL_THERMAL_EXPANSION_PER_C;
         let (a, b) = walther_through(density, expansion, (20.0, 48.65e-3), (30.0, 28.25e-3));
-        Self {
-            name: "turbine oil 22#".to_string(),
-            density_kg_m3: density,
-            thermal_expansion_per_c: expansion,
-            law: ViscosityLaw::Walther { a, b },
-        }
+        Self { name: "turbine oil 22#".to_string(), density_kg_m3: density, thermal_expansion_per_c: expansion, law: ViscosityLaw::Walther { a, b } }
     }
 
     /// An oil with a Walther law through two (temperature C, dynamic viscosity Pa s) points,
@@ -87,12 +82,7 @@ impl Oil {
     ///
     /// Both points must lie in [`VALID_RANGE_C`] at different temperatures, and the viscosity
     /// must fall as the temperature rises.
-    pub fn from_two_points(
-        name: impl Into<String>,
-        density_kg_m3: f64,
-        point_1: (f64, f64),
-        point_2: (f64, f64),
-    ) -> Result<Self, PhysicsError> {
+    pub fn from_two_points(name: impl Into<String>, density_kg_m3: f64, point_1: (f64, f64), point_2: (f64, f64)) -> Result<Self, PhysicsError> {
         let expansion = TYPICAL_THERMAL_EXPANSION_PER_C;
         check_density("oil.density_kg_m3", density_kg_m3)?;
         let points = checked_points(&[point_1, point_2])?;
@@ -106,12 +96,7 @@ impl Oil {
             }
         }
         let (a, b) = walther_through(density_kg_m3, expansion, points[0], points[1]);
-        let oil = Self {
-            name: name.into(),
-            density_kg_m3,
-            thermal_expansion_per_c: expansion,
-            law: ViscosityLaw::Walther { a, b },
-        };
+        let oil = Self { name: name.into(), density_kg_m3, thermal_expansion_per_c: expansion, law: ViscosityLaw::Walther { a, b } };
         oil.validate("oil")?;
         Ok(oil)
     }
@@ -138,10 +123,7 @@ impl Oil {
         if !(a.is_finite() && b.is_finite() && c.is_finite()) || b <= 0.0 || c <= -VALID_RANGE_C.0 {
             return Err(PhysicsError::invalid(
                 "oil viscosity points",
-                format!(
-                    "no Vogel law with b > 0 and c > {} C passes through these three points (got a = {a:e} Pa s, b = {b} C, c = {c} C)",
-                    -VALID_RANGE_C.0
-                ),
+                format!("no Vogel law with b > 0 and c > {} C passes through these three points (got a = {a:e} Pa s, b = {b} C, c = {c} C)", -VALID_RANGE_C.0),
             ));
         }
         let oil = Self {
@@ -157,10 +139,7 @@ impl Oil {
     /// Parses an oil from TOML (the fields of [`Oil`], the law as a `[law]` table with a `law`
     /// key) and validates it.
     pub fn from_toml_str(text: &str) -> Result<Self, PhysicsError> {
-        let oil: Self = toml::from_str(text).map_err(|e| PhysicsError::ConfigParse {
-            origin: " (oil)".to_string(),
-            message: e.to_string(),
-        })?;
+        let oil: Self = toml::from_str(text).map_err(|e| PhysicsError::ConfigParse { origin: " (oil)".to_string(), message: e.to_string() })?;
         oil.validate("oil")?;
         Ok(oil)
     }
@@ -172,10 +151,7 @@ impl Oil {
         check_temperature(temperature_c)?;
         let mu = self.viscosity_unchecked(temperature_c);
         if !mu.is_finite() || mu <= 0.0 {
-            return Err(PhysicsError::invalid(
-                "oil.law",
-                format!("gives viscosity {mu} Pa s at {temperature_c} C for oil `{}`", self.name),
-            ));
+            return Err(PhysicsError::invalid("oil.law", format!("gives viscosity {mu} Pa s at {temperature_c} C for oil `{}`", self.name)));
         }
         Ok(mu)
     }
@@ -191,16 +167,10 @@ impl Oil {
     /// constant-viscosity oil.
     pub fn temperature_for_viscosity_c(&self, viscosity_pa_s: f64) -> Result<f64, PhysicsError> {
         if !viscosity_pa_s.is_finite() || viscosity_pa_s <= 0.0 {
-            return Err(PhysicsError::invalid(
-                "viscosity",
-                format!("must be positive and finite to find its temperature, got {viscosity_pa_s:?} Pa s"),
-            ));
+            return Err(PhysicsError::invalid("viscosity", format!("must be positive and finite to find its temperature, got {viscosity_pa_s:?} Pa s")));
         }
         if let ViscosityLaw::Constant { .. } = self.law {
-            return Err(PhysicsError::invalid(
-                "oil.law",
-                format!("oil `{}` has a constant viscosity: no temperature corresponds to a viscosity", self.name),
-            ));
+            return Err(PhysicsError::invalid("oil.law", format!("oil `{}` has a constant viscosity: no temperature corresponds to a viscosity", self.name)));
         }
         let (mut cold, mut hot) = VALID_RANGE_C;
         let mu_cold = self.viscosity_pa_s(cold)?;
@@ -208,10 +178,7 @@ impl Oil {
         if !(mu_hot <= viscosity_pa_s && viscosity_pa_s <= mu_cold) {
             return Err(PhysicsError::invalid(
                 "viscosity",
-                format!(
-                    "{viscosity_pa_s} Pa s is outside what oil `{}` reaches between {cold} C ({mu_cold} Pa s) and {hot} C ({mu_hot} Pa s)",
-                    self.name
-                ),
+                format!("{viscosity_pa_s} Pa s is outside what oil `{}` reaches between {cold} C ({mu_cold} Pa s) and {hot} C ({mu_hot} Pa s)", self.name),
             ));
         }
         for _ in 0..200 {
@@ -271,10 +238,7 @@ impl Oil {
         match self.law {
             ViscosityLaw::Constant { viscosity_pa_s } => {
                 if !viscosity_pa_s.is_finite() || viscosity_pa_s <= 0.0 {
-                    return Err(PhysicsError::invalid(
-                        field("viscosity_pa_s"),
-                        format!("must be positive and finite, got {viscosity_pa_s:?}"),
-                    ));
+                    return Err(PhysicsError::invalid(field("viscosity_pa_s"), format!("must be positive and finite, got {viscosity_pa_s:?}")));
                 }
             }
             ViscosityLaw::Walther { a, b } => {
@@ -282,10 +246,7 @@ impl Oil {
                     return Err(PhysicsError::invalid(field("a"), format!("must be finite, got {a:?}")));
                 }
                 if !b.is_finite() || b <= 0.0 {
-                    return Err(PhysicsError::invalid(
-                        field("b"),
-                        format!("must be positive (viscosity falls with temperature) and finite, got {b:?}"),
-                    ));
+                    return Err(PhysicsError::invalid(field("b"), format!("must be positive (viscosity falls with temperature) and finite, got {b:?}")));
                 }
             }
             ViscosityLaw::Vogel { a_pa_s, b_c, c_c } => {
@@ -293,18 +254,12 @@ impl Oil {
                     return Err(PhysicsError::invalid(field("a_pa_s"), format!("must be positive and finite, got {a_pa_s:?}")));
                 }
                 if !b_c.is_finite() || b_c <= 0.0 {
-                    return Err(PhysicsError::invalid(
-                        field("b_c"),
-                        format!("must be positive (viscosity falls with temperature) and finite, got {b_c:?}"),
-                    ));
+                    return Err(PhysicsError::invalid(field("b_c"), format!("must be positive (viscosity falls with temperature) and finite, got {b_c:?}")));
                 }
                 if !c_c.is_finite() || c_c <= -VALID_RANGE_C.0 {
                     return Err(PhysicsError::invalid(
                         field("c_c"),
-                        format!(
-                            "must exceed {} C so that T + c stays positive down to {} C, got {c_c:?}",
-                            -VALID_RANGE_C.0, VALID_RANGE_C.0
-                        ),
+                        format!("must exceed {} C so that T + c stays positive down to {} C, got {c_c:?}", -VALID_RANGE_C.0, VALID_RANGE_C.0),
                     ));
                 }
             }
@@ -342,10 +297,7 @@ fn density_at(density_15: f64, expansion: f64, temperature_c: f64) -> f64 {
 
 fn check_density(field: &str, density: f64) -> Result<(), PhysicsError> {
     if !density.is_finite() || !(500.0..=2500.0).contains(&density) {
-        return Err(PhysicsError::invalid(
-            field,
-            format!("must be a liquid lubricant's density at 15 C, 500 to 2500 kg/m^3, got {density:?}"),
-        ));
+        return Err(PhysicsError::invalid(field, format!("must be a liquid lubricant's density at 15 C, 500 to 2500 kg/m^3, got {density:?}")));
     }
     Ok(())
 }
@@ -368,10 +320,7 @@ fn checked_points(points: &[(f64, f64)]) -> Result<Vec<(f64, f64)>, PhysicsError
     for (i, &(t, mu)) in points.iter().enumerate() {
         let field = format!("oil viscosity point {}", i + 1);
         if !t.is_finite() || !(VALID_RANGE_C.0..=VALID_RANGE_C.1).contains(&t) {
-            return Err(PhysicsError::invalid(
-                field,
-                format!("temperature {t} C must lie in {} C to {} C", VALID_RANGE_C.0, VALID_RANGE_C.1),
-            ));
+            return Err(PhysicsError::invalid(field, format!("temperature {t} C must lie in {} C to {} C", VALID_RANGE_C.0, VALID_RANGE_C.1)));
         }
         if !mu.is_finite() || mu <= 0.0 {
             return Err(PhysicsError::invalid(field, format!("viscosity must be positive and finite, got {mu:?} Pa s")));

@@ -62,12 +62,7 @@ impl Default for EquilibriumOptions {
 }
 
 /// Finds the static equilibrium under `load_on_journal_n` and the coefficients about it.
-pub fn solve(
-    film: &mut dyn Film,
-    running: &Running,
-    load_on_journal_n: Vector2<f64>,
-    options: &EquilibriumOptions,
-) -> Result<OperatingPoint, PhysicsError> {
+pub fn solve(film: &mut dyn Film, running: &Running, load_on_journal_n: Vector2<f64>, options: &EquilibriumOptions) -> Result<OperatingPoint, PhysicsError> {
     let geometry = *film.geometry();
     let c = geometry.clearance_m;
     let load_n = load_on_journal_n.norm();

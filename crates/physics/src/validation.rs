@@ -60,7 +60,10 @@ pub fn parse_table(name: &'static str, slenderness: f64, text: &str) -> Result<T
         }
         let fields: Vec<&str> = line.split(',').collect();
         if fields.len() != 10 {
-            return Err(PhysicsError::ConfigParse { origin: format!(" {name} line {line_no}"), message: format!("expected 10 fields, found {}", fields.len()) });
+            return Err(PhysicsError::ConfigParse {
+                origin: format!(" {name} line {line_no}"),
+                message: format!("expected 10 fields, found {}", fields.len()),
+            });
         }
         let mut v = [0.0; 10];
         for (k, f) in fields.iter().enumerate() {

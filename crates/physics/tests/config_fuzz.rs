@@ -16,7 +16,22 @@ use rand_chacha::ChaCha8Rng;
 
 const SEED: u64 = 0x2169_f11e;
 
-const EXTREMES: [&str; 14] = ["1e308", "-1e308", "-1", "0", "-0.0", "nan", "inf", "5e-324", "1e-320", "99999999999999999999", "9223372036854775807", "-9223372036854775808", "1e9", "\"x\""];
+const EXTREMES: [&str; 14] = [
+    "1e308",
+    "-1e308",
+    "-1",
+    "0",
+    "-0.0",
+    "nan",
+    "inf",
+    "5e-324",
+    "1e-320",
+    "99999999999999999999",
+    "9223372036854775807",
+    "-9223372036854775808",
+    "1e9",
+    "\"x\"",
+];
 
 fn corpus() -> Vec<String> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/config");

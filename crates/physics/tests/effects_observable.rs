@@ -114,7 +114,13 @@ fn relaxation_stiffens_and_added_mass_softens_the_recorded_film_across_the_band(
     // Change of Re Hxx from f_lo to f_hi, per record kind.
     let change = |c: &RigConfig| -> f64 {
         let (lo, hi) = (recorded_stiffness(c, f_lo), recorded_stiffness(c, f_hi));
-        println!("  Re Hxx {:.4e} -> {:.4e} N/m, Im Hxx / w {:.4e} -> {:.4e} N s/m", lo[(0, 0)].re, hi[(0, 0)].re, lo[(0, 0)].im / (TWO_PI * f_lo), hi[(0, 0)].im / (TWO_PI * f_hi));
+        println!(
+            "  Re Hxx {:.4e} -> {:.4e} N/m, Im Hxx / w {:.4e} -> {:.4e} N s/m",
+            lo[(0, 0)].re,
+            hi[(0, 0)].re,
+            lo[(0, 0)].im / (TWO_PI * f_lo),
+            hi[(0, 0)].im / (TWO_PI * f_hi)
+        );
         hi[(0, 0)].re - lo[(0, 0)].re
     };
     println!("no effect:");
@@ -134,13 +140,27 @@ fn relaxation_stiffens_and_added_mass_softens_the_recorded_film_across_the_band(
     let (rel_relax, rel_mass) = ((d_relax - d_null) / k_film, (d_mass - d_null) / k_film);
     println!(
         "Re Hxx change {f_lo}->{f_hi} Hz in % of Kxx {k_film:.4e}: none {:+.2}, film_relaxation {:+.2} (model {:+.2}), fluid_inertia {:+.2} (model {:+.2})",
-        100.0 * d_null / k_film, 100.0 * (d_relax / k_film), 100.0 * (d_null + expect_relax) / k_film, 100.0 * d_mass / k_film, 100.0 * (d_null + expect_mass) / k_film
+        100.0 * d_null / k_film,
+        100.0 * (d_relax / k_film),
+        100.0 * (d_null + expect_relax) / k_film,
+        100.0 * d_mass / k_film,
+        100.0 * (d_null + expect_mass) / k_film
     );
     // Without an effect the recorded stiffness barely depends on frequency.
     assert!(d_null.abs() < 0.02 * k_film, "the null record's stiffness moved {:.2}% of Kxx", 100.0 * d_null / k_film);
     // Each effect's change, net of the null record's, is what its model says, within 1% of K.
-    assert!((d_relax - d_null - expect_relax).abs() < 0.01 * k_film, "relaxation: {:.2}% of K against a model {:.2}%", 100.0 * rel_relax, 100.0 * expect_relax / k_film);
-    assert!((d_mass - d_null - expect_mass).abs() < 0.01 * k_film, "added mass: {:.2}% of K against a model {:.2}%", 100.0 * rel_mass, 100.0 * expect_mass / k_film);
+    assert!(
+        (d_relax - d_null - expect_relax).abs() < 0.01 * k_film,
+        "relaxation: {:.2}% of K against a model {:.2}%",
+        100.0 * rel_relax,
+        100.0 * expect_relax / k_film
+    );
+    assert!(
+        (d_mass - d_null - expect_mass).abs() < 0.01 * k_film,
+        "added mass: {:.2}% of K against a model {:.2}%",
+        100.0 * rel_mass,
+        100.0 * expect_mass / k_film
+    );
     // The separating evidence: opposite signs, each well beyond the null record's change.
     assert!(rel_relax > 0.08 && rel_mass < -0.08, "relaxation must stiffen ({rel_relax:+.3}) and added mass soften ({rel_mass:+.3}) the film across the band");
 }

@@ -25,7 +25,11 @@ fn coefficient_difference(slenderness: f64, eps_target: f64) -> (f64, f64, f64) 
     let (mut lo, mut hi) = (1.0_f64, 1e7_f64);
     for _ in 0..200 {
         let mid = (lo * hi).sqrt();
-        if short_point_eps(mid) < eps_target { lo = mid } else { hi = mid }
+        if short_point_eps(mid) < eps_target {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     let w = (lo * hi).sqrt();
     let mut short = ShortBearing::new(g).unwrap();
@@ -40,7 +44,11 @@ fn coefficient_difference(slenderness: f64, eps_target: f64) -> (f64, f64, f64) 
     let coef = ((kb - ka).abs().max() / ka.norm()).max((cb - ca).abs().max() / ca.norm());
     println!(
         "L/D {slenderness:<5} eps short {:.4} finite {:.4} | attitude short {:.2} finite {:.2} deg | worst coefficient difference {:.2} % of the matrix norm",
-        a.eccentricity, b.eccentricity, a.attitude_deg, b.attitude_deg, 100.0 * coef
+        a.eccentricity,
+        b.eccentricity,
+        a.attitude_deg,
+        b.attitude_deg,
+        100.0 * coef
     );
     ((a.eccentricity - b.eccentricity).abs(), (a.attitude_deg - b.attitude_deg).abs(), coef)
 }

@@ -71,13 +71,12 @@ const CENTRE_OFFSET: (f64, f64) = (0.037, -0.021);
 
 fn build_fixture(kind: Kind) -> Fixture {
     let mut inner = new_film(kind);
-    let inner_point = solve(inner.as_mut(), &running(), load(), &EquilibriumOptions::default())
-        .unwrap_or_else(|e| panic!("{kind:?} equilibrium at the Zhou point: {e}"));
+    let inner_point =
+        solve(inner.as_mut(), &running(), load(), &EquilibriumOptions::default()).unwrap_or_else(|e| panic!("{kind:?} equilibrium at the Zhou point: {e}"));
     let c = geometry().clearance_m;
     let centre = (inner_point.journal.x_m + CENTRE_OFFSET.0 * c, inner_point.journal.y_m + CENTRE_OFFSET.1 * c);
     let start = Instant::now();
-    let map = FilmMap::build(new_film(kind), centre.0, centre.1, MapSpec::default())
-        .unwrap_or_else(|e| panic!("{kind:?} map: {e}"));
+    let map = FilmMap::build(new_film(kind), centre.0, centre.1, MapSpec::default()).unwrap_or_else(|e| panic!("{kind:?} map: {e}"));
     let build_s = start.elapsed().as_secs_f64();
     println!(
         "{kind:?}: inner equilibrium eps {:.4}, attitude {:.2} deg; default map {:?}: {} inner solves in {:.2} s",
@@ -128,13 +127,10 @@ fn homogeneity(kind: Kind) -> f64 {
         let base = (157.0, 0.03, 40.0);
         let f_base = {
             let (omega, mu, rho) = base;
-            film.force(&realise(ex, ey, omega, rho, alpha), &Running { omega_rad_s: omega, viscosity_pa_s: mu }).unwrap()
-                / (mu * rho)
+            film.force(&realise(ex, ey, omega, rho, alpha), &Running { omega_rad_s: omega, viscosity_pa_s: mu }).unwrap() / (mu * rho)
         };
-        for (omega, mu, rho) in [(157.0, 0.03, 400.0), (20.0, 0.03, 40.0), (900.0, 0.03, 40.0), (157.0, 0.004, 40.0), (600.0, 0.1, 3.0)]
-        {
-            let f = film.force(&realise(ex, ey, omega, rho, alpha), &Running { omega_rad_s: omega, viscosity_pa_s: mu }).unwrap()
-                / (mu * rho);
+        for (omega, mu, rho) in [(157.0, 0.03, 400.0), (20.0, 0.03, 40.0), (900.0, 0.03, 40.0), (157.0, 0.004, 40.0), (600.0, 0.1, 3.0)] {
+            let f = film.force(&realise(ex, ey, omega, rho, alpha), &Running { omega_rad_s: omega, viscosity_pa_s: mu }).unwrap() / (mu * rho);
             worst = worst.max((f - f_base).norm() / f_base.norm());
         }
     }
@@ -248,10 +244,7 @@ fn check_box(kind: Kind, samples: usize, jacobian_max: f64) {
             e.force_max, e.force_rms, e.jacobian_max, e.jacobian_rms
         );
         if roughness {
-            println!(
-                "    the inner film's own Jacobian vs its +-1e-3 c secant: max {:.2e} rms {:.2e}",
-                e.roughness_max, e.roughness_rms
-            );
+            println!("    the inner film's own Jacobian vs its +-1e-3 c secant: max {:.2e} rms {:.2e}", e.roughness_max, e.roughness_rms);
         }
         assert!(e.force_max < FORCE_MAX && e.force_rms < FORCE_RMS, "{kind:?} {label}: force error over the documented bound");
         let bound = if squeeze <= 0.1 { jacobian_max } else { 3.0 * jacobian_max };
@@ -350,10 +343,9 @@ fn check_equilibrium(kind: Kind, coefficient_bound: f64) {
     }
     let xy = |k: usize| if k == 0 { 'x' } else { 'y' };
     let mut worst = 0.0f64;
-    for (name, a, b) in [
-        ("K", inner.coefficients.stiffness_n_m, mapped.coefficients.stiffness_n_m),
-        ("C", inner.coefficients.damping_n_s_m, mapped.coefficients.damping_n_s_m),
-    ] {
+    for (name, a, b) in
+        [("K", inner.coefficients.stiffness_n_m, mapped.coefficients.stiffness_n_m), ("C", inner.coefficients.damping_n_s_m, mapped.coefficients.damping_n_s_m)]
+    {
         for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
             let rel = (b[(i, j)] - a[(i, j)]).abs() / a[(i, j)].abs();
             println!("    {name}{}{}: inner {:+.5e} map {:+.5e} rel diff {rel:.2e}", xy(i), xy(j), a[(i, j)], b[(i, j)]);

@@ -178,7 +178,14 @@ fn the_film_becomes_frequency_dependent_as_documented() {
         let (h_off, _) = measured_stiffness(&off, f, 20.0);
         let element = model_stiffness(&Matrix2::zeros(), &Matrix2::zeros(), Some(relax), f);
         let err = rel_err(&(h[i] - h_off), &element);
-        println!("{f:5.1} Hz: element measured {:.4e}{:+.4e}i N/m, expected {:.4e}{:+.4e}i, error {:.3}%", (h[i] - h_off)[(0, 0)].re, (h[i] - h_off)[(0, 0)].im, element[(0, 0)].re, element[(0, 0)].im, 100.0 * err);
+        println!(
+            "{f:5.1} Hz: element measured {:.4e}{:+.4e}i N/m, expected {:.4e}{:+.4e}i, error {:.3}%",
+            (h[i] - h_off)[(0, 0)].re,
+            (h[i] - h_off)[(0, 0)].im,
+            element[(0, 0)].re,
+            element[(0, 0)].im,
+            100.0 * err
+        );
         assert!(err < 0.01, "{f} Hz: the element's own complex stiffness is {:.3}% off", 100.0 * err);
     }
 
@@ -228,8 +235,20 @@ fn record_hash(config: &RigConfig, seconds: f64) -> u64 {
         }
         let tr = &s.truth;
         for v in [
-            tr.t_s, tr.housing_m.x, tr.housing_m.y, tr.housing_m_s.x, tr.housing_m_s.y, tr.relative_m.x, tr.relative_m.y, tr.relative_m_s.x, tr.relative_m_s.y,
-            tr.film_force_n.x, tr.film_force_n.y, tr.bellows_n, tr.temperature_c, tr.viscosity_pa_s,
+            tr.t_s,
+            tr.housing_m.x,
+            tr.housing_m.y,
+            tr.housing_m_s.x,
+            tr.housing_m_s.y,
+            tr.relative_m.x,
+            tr.relative_m.y,
+            tr.relative_m_s.x,
+            tr.relative_m_s.y,
+            tr.film_force_n.x,
+            tr.film_force_n.y,
+            tr.bellows_n,
+            tr.temperature_c,
+            tr.viscosity_pa_s,
         ] {
             mix(&mut h, v.to_bits());
         }
@@ -254,7 +273,10 @@ fn without_the_effect_records_are_unchanged_bit_for_bit() {
     // (commit 08c752a, x86_64 Linux). Without the effect the integrator runs the same
     // four-unknown arithmetic, so they must not move. A deliberate change to the rig's
     // numerics (or a platform whose libm rounds sin/exp differently) must re-derive them.
-    let cases = [("zhou2004, finite tabulated film", RigConfig::zhou2004().unwrap(), 0x7600_e206_7e6a_e0ca_u64), ("short film with every rig effect", every_rig_effect(), 0x6d6a_d790_7beb_9bde)];
+    let cases = [
+        ("zhou2004, finite tabulated film", RigConfig::zhou2004().unwrap(), 0x7600_e206_7e6a_e0ca_u64),
+        ("short film with every rig effect", every_rig_effect(), 0x6d6a_d790_7beb_9bde),
+    ];
     for (label, config, before) in cases {
         assert!(config.effects.film_relaxation.is_none());
         let now = record_hash(&config, 0.4);
@@ -313,4 +335,3 @@ fn film_relaxation_loads_from_toml_and_bad_values_name_the_field() {
     let err = Rig::new(&c, 0.0, 0.0).expect_err("NaN tau").to_string();
     assert!(err.contains("effects.film_relaxation.time_constant_s"), "{err}");
 }
-

@@ -80,10 +80,7 @@ fn tolerance(reference: f64) -> f64 {
 const KNOWN_DEVIATIONS: [(f64, f64, usize, f64); 1] = [(0.5, 0.244, 2, 0.025)];
 
 fn known_deviation(row: &Row, i: usize) -> Option<f64> {
-    KNOWN_DEVIATIONS
-        .iter()
-        .find(|&&(ld, s, c, _)| ld == row.slenderness && s == row.sommerfeld && c == i)
-        .map(|&(_, _, _, allowed)| allowed)
+    KNOWN_DEVIATIONS.iter().find(|&&(ld, s, c, _)| ld == row.slenderness && s == row.sommerfeld && c == i).map(|&(_, _, _, allowed)| allowed)
 }
 
 #[test]
@@ -242,4 +239,3 @@ fn grid_convergence_study() {
         println!("L/D {:.1} S {:.3}: {:.4} {:.3}{v}", row.slenderness, row.sommerfeld, f.eps, f.attitude_deg);
     }
 }
-

@@ -73,7 +73,7 @@ fn phasor(t: &[f64], signal: &[f64], f: f64) -> C64 {
     let det = cc * ss - cs * cs;
     let a = (yc * ss - ys * cs) / det; // cos coefficient
     let b = (ys * cc - yc * cs) / det; // sin coefficient
-    // a cos + b sin = Re((a - i b) e^{i w t})
+                                       // a cos + b sin = Re((a - i b) e^{i w t})
     C64::new(a, -b)
 }
 
@@ -161,12 +161,7 @@ fn detrend(t: &[f64], values: &[f64]) -> Vec<f64> {
 fn fit_kc(samples: &[RigSample]) -> (Matrix2<f64>, Matrix2<f64>, f64) {
     let t: Vec<f64> = samples.iter().map(|s| s.t_s).collect();
     let col = |f: &dyn Fn(&RigSample) -> f64| detrend(&t, &samples.iter().map(f).collect::<Vec<_>>());
-    let cols = [
-        col(&|s| s.relative_m.x),
-        col(&|s| s.relative_m.y),
-        col(&|s| s.relative_m_s.x),
-        col(&|s| s.relative_m_s.y),
-    ];
+    let cols = [col(&|s| s.relative_m.x), col(&|s| s.relative_m.y), col(&|s| s.relative_m_s.x), col(&|s| s.relative_m_s.y)];
     let fx = col(&|s| s.film_force_n.x);
     let fy = col(&|s| s.film_force_n.y);
     let rows = samples.len();
@@ -296,7 +291,8 @@ fn thermal_drift_makes_the_film_follow_the_oil_law() {
     let (_, c_tail, _) = fit_kc(tail);
     let mut film = config.film().unwrap();
     let running = oilfilm_physics::film::Running { viscosity_pa_s: config.oil.viscosity_pa_s(temp_end - 0.2 * rate).unwrap(), ..config.running().unwrap() };
-    let op_end = oilfilm_physics::operating_point::solve(film.as_mut(), &running, Vector2::new(0.0, -config.operating.bearing_load_n), &Default::default()).unwrap();
+    let op_end =
+        oilfilm_physics::operating_point::solve(film.as_mut(), &running, Vector2::new(0.0, -config.operating.bearing_load_n), &Default::default()).unwrap();
     let c0 = rig.operating_point().coefficients.damping_n_s_m;
     let c_end = op_end.coefficients.damping_n_s_m;
     let err_end = (c_tail - c_end).norm() / c_end.norm();
@@ -324,7 +320,10 @@ fn support_friction_acts_as_its_describing_function() {
     let c_eq = 4.0 * friction / (std::f64::consts::PI * v_amp);
     println!("velocity amplitude {v_amp:.4e} m/s, equivalent damping {c_eq:.4e} N s/m");
     let t: Vec<f64> = samples.iter().map(|s| s.t_s).collect();
-    let sim = [phasor(&t, &samples.iter().map(|s| s.housing_m.x).collect::<Vec<_>>(), 31.0), phasor(&t, &samples.iter().map(|s| s.housing_m.y).collect::<Vec<_>>(), 31.0)];
+    let sim = [
+        phasor(&t, &samples.iter().map(|s| s.housing_m.x).collect::<Vec<_>>(), 31.0),
+        phasor(&t, &samples.iter().map(|s| s.housing_m.y).collect::<Vec<_>>(), 31.0),
+    ];
     let d = dirs(&config)[0];
     let with = linear_response(&k, &(c_film + Matrix2::identity() * c_eq), config.housing.mass_kg, d, 31.0, 200.0);
     let without = linear_response(&k, &c_film, config.housing.mass_kg, d, 31.0, 200.0);

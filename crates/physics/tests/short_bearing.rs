@@ -87,8 +87,7 @@ fn closed_form_matches_nonlinear_equilibrium() {
                 errors.push((format!("{name}{label}"), rel(a[(i, j)], b[(i, j)])));
             }
         }
-        let (worst_name, worst_here) =
-            errors.into_iter().fold((String::new(), 0.0_f64), |acc, e| if e.1 > acc.1 { e } else { acc });
+        let (worst_name, worst_here) = errors.into_iter().fold((String::new(), 0.0_f64), |acc, e| if e.1 > acc.1 { e } else { acc });
         println!(
             "eps {eps:.1}: closed eps {:.6}, Newton eps {:.6}, attitude {:.4} vs {:.4} deg; worst rel diff {worst_here:.2e} ({worst_name})",
             closed.eccentricity, numeric.eccentricity, closed.attitude_deg, numeric.attitude_deg
@@ -226,11 +225,7 @@ fn force_depends_on_velocity_only_through_w_and_is_homogeneous() {
         // Same position and w with a different speed: choose the velocities that keep w.
         let omega2 = rng.random_range(0.0..800.0);
         let run2 = Running { omega_rad_s: omega2, ..run };
-        let s2 = FilmState {
-            vx_m_s: (w.y - omega2 * s.y_m / c) * c / 2.0,
-            vy_m_s: -(w.x - omega2 * s.x_m / c) * c / 2.0,
-            ..s
-        };
+        let s2 = FilmState { vx_m_s: (w.y - omega2 * s.y_m / c) * c / 2.0, vy_m_s: -(w.x - omega2 * s.x_m / c) * c / 2.0, ..s };
         let f2 = film.force(&s2, &run2).expect("inside");
         let e1 = (f2 - f).norm() / f.norm();
         worst_same_w = worst_same_w.max(e1);

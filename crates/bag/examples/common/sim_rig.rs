@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use oilfilm_bag::{BagWriter, QosProfile, TopicSpec, WriterOptions};
-use oilfilm_msgs::RosMessage;
 use oilfilm_graph::runner::memory::{run_sim_rig, GraphParams, Recording};
 use oilfilm_graph::topics::{self, Topic};
+use oilfilm_msgs::RosMessage;
 use oilfilm_physics::config::RigConfig;
 
 /// One message as published: its topic (qualified), type, log time (its header stamp), CDR

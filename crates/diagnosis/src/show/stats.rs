@@ -22,10 +22,14 @@ pub(crate) fn line_fit(u: &[f64], v: &[f64]) -> Option<(f64, f64, f64)> {
         return None;
     }
     let slope = suv / suu;
-    let rss: f64 = u[..n].iter().zip(&v[..n]).map(|(a, b)| {
-        let e = b - mv - slope * (a - mu);
-        e * e
-    }).sum();
+    let rss: f64 = u[..n]
+        .iter()
+        .zip(&v[..n])
+        .map(|(a, b)| {
+            let e = b - mv - slope * (a - mu);
+            e * e
+        })
+        .sum();
     let se = (rss / (nf - 2.0) / suu).sqrt();
     (slope.is_finite() && se.is_finite()).then_some((slope, se, mv))
 }

@@ -34,7 +34,13 @@ fn node<N: Node>(rig: &RigConfig, params: &N::Params) -> Result<N, NodeError> {
 }
 
 /// Recorded frames and status through a fresh conditioner and estimator: status first.
-pub fn reanalyse(rig: &RigConfig, conditioner: &ConditionerParams, estimator: &EstimatorParams, frames: &[DaqFrame], status: &[RigStatus]) -> Result<Recording, NodeError> {
+pub fn reanalyse(
+    rig: &RigConfig,
+    conditioner: &ConditionerParams,
+    estimator: &EstimatorParams,
+    frames: &[DaqFrame],
+    status: &[RigStatus],
+) -> Result<Recording, NodeError> {
     let inputs = status.iter().cloned().map(Input::Status).chain(frames.iter().cloned().map(Input::Frame));
     reanalyse_stream(rig, conditioner, estimator, inputs)
 }
@@ -43,7 +49,12 @@ pub fn reanalyse(rig: &RigConfig, conditioner: &ConditionerParams, estimator: &E
 /// frame goes through the conditioner when it comes, status messages are kept for the
 /// estimator, which then takes all of them before the conditioned frames, as [`reanalyse`]
 /// does. The result is [`reanalyse`]'s for the same frames and status, bit for bit.
-pub fn reanalyse_stream(rig: &RigConfig, conditioner: &ConditionerParams, estimator: &EstimatorParams, inputs: impl IntoIterator<Item = Input>) -> Result<Recording, NodeError> {
+pub fn reanalyse_stream(
+    rig: &RigConfig,
+    conditioner: &ConditionerParams,
+    estimator: &EstimatorParams,
+    inputs: impl IntoIterator<Item = Input>,
+) -> Result<Recording, NodeError> {
     let mut cond = node::<Conditioner>(rig, conditioner)?;
     let mut est = node::<Estimator>(rig, estimator)?;
     let (status, conditioned) = (Bus::<RigStatus>::new(), Bus::<ConditionedFrame>::new());
@@ -98,7 +109,10 @@ pub fn reanalyse_overlapped(
             // cannot be made, the channel closes and the conditioner stops at its next frame.
             let mut est = node::<Estimator>(rig, estimator)?;
             let mut estimates = Collect::default();
-            est.turn(EPOCH, &mut EstimatorPorts { conditioned: Box::new(Channel(rx)), status: Box::new(Replay::new(status)), estimates: Box::new(&mut estimates) })?;
+            est.turn(
+                EPOCH,
+                &mut EstimatorPorts { conditioned: Box::new(Channel(rx)), status: Box::new(Replay::new(status)), estimates: Box::new(&mut estimates) },
+            )?;
             Ok(estimates.0)
         });
         let mut ports = ConditionerPorts { frames: Box::new(Iter(frames.into_iter())), conditioned: Box::new(ChannelOut(tx)) };

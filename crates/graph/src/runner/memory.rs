@@ -68,7 +68,8 @@ impl Buses {
         fn sink<M: Message>(bus: Bus<M>) -> TypedSink {
             let mut p = bus.publisher();
             Box::new(move |cdr: &RawCdr| {
-                let m: M = oilfilm_msgs::decode(&cdr.0).map_err(|e| NodeError::BadMessage { topic: M::TYPE_NAME.into(), sequence: 0, reason: e.to_string() })?;
+                let m: M =
+                    oilfilm_msgs::decode(&cdr.0).map_err(|e| NodeError::BadMessage { topic: M::TYPE_NAME.into(), sequence: 0, reason: e.to_string() })?;
                 p.publish(m)
             })
         }
@@ -324,7 +325,8 @@ impl GraphParams {
     /// The parameters of a ROS 2 params file (every node's section), as `--params-file`
     /// gives them.
     pub fn from_params_file(file: &Path) -> Result<Self, NodeError> {
-        let node = |name: &str| NodeArgs { name: name.into(), namespace: topics::NAMESPACE.into(), params_files: vec![file.to_path_buf()], ..Default::default() };
+        let node =
+            |name: &str| NodeArgs { name: name.into(), namespace: topics::NAMESPACE.into(), params_files: vec![file.to_path_buf()], ..Default::default() };
         Ok(Self {
             exciter: params::load(&node("exciter"))?.0,
             daq: params::load(&node("daq"))?.0,
@@ -364,7 +366,12 @@ pub fn run_sim_rig(rig: &RigConfig, params: &GraphParams) -> Result<(Recording, 
         g.tap::<CoefficientEstimate>(&topics::ESTIMATES)?,
     );
     g.run()?;
-    let truth = *g.node::<Daq>("daq").and_then(Daq::sim).ok_or_else(|| NodeError::parameter("source", "the sim graph's DAQ must simulate the rig (source: sim)"))?.operating_point();
-    let recording = Recording { commands: taps.0.drain(), frames: taps.1.drain(), status: taps.2.drain(), conditioned: taps.3.drain(), estimates: taps.4.drain() };
+    let truth = *g
+        .node::<Daq>("daq")
+        .and_then(Daq::sim)
+        .ok_or_else(|| NodeError::parameter("source", "the sim graph's DAQ must simulate the rig (source: sim)"))?
+        .operating_point();
+    let recording =
+        Recording { commands: taps.0.drain(), frames: taps.1.drain(), status: taps.2.drain(), conditioned: taps.3.drain(), estimates: taps.4.drain() };
     Ok((recording, truth))
 }

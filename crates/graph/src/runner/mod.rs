@@ -102,6 +102,9 @@ pub fn wire_launched<C: Connect>(n: &NodeLaunch, now: Stamp, rig: Option<&RigCon
         "oilfilm-estimator" => wire::<Estimator, C>(&args, &start, connect),
         "oilfilm-recorder" => wire::<Recorder, C>(&args, &start, connect),
         "oilfilm-player" => wire::<Player, C>(&args, &start, connect),
-        other => Err(NodeError::parameter("exec", format!("`{other}` is not one of our nodes (oilfilm-exciter, -daq, -conditioner, -estimator, -recorder, -player)"))),
+        other => Err(NodeError::parameter(
+            "exec",
+            format!("`{other}` is not one of our nodes (oilfilm-exciter, -daq, -conditioner, -estimator, -recorder, -player)"),
+        )),
     }
 }

@@ -1,9 +1,9 @@
 //! What the node tests share.
 #![allow(dead_code)]
 
+use oilfilm_graph::runner::memory::GraphParams;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::simulate::{self, SimulateOptions};
-use oilfilm_graph::runner::memory::GraphParams;
 use oilfilm_physics::config::RigConfig;
 
 /// The Zhou rig with its displacement probes at 40 dB below the plan's motion (the

@@ -15,23 +15,14 @@ use super::{first_non_finite, non_finite_error};
 use crate::IdentificationError;
 
 /// Converts one column of readings (V) of `channel` to its SI unit.
-pub fn to_si(
-    channel: ChannelId,
-    volts: &[f64],
-    calibration: &Calibration,
-) -> Result<Vec<f64>, IdentificationError> {
+pub fn to_si(channel: ChannelId, volts: &[f64], calibration: &Calibration) -> Result<Vec<f64>, IdentificationError> {
     let mut out = vec![0.0; volts.len()];
     to_si_into(channel, volts, calibration, &mut out)?;
     Ok(out)
 }
 
 /// [`to_si`] into a caller-owned buffer of the same length (no allocation).
-pub fn to_si_into(
-    channel: ChannelId,
-    volts: &[f64],
-    calibration: &Calibration,
-    out: &mut [f64],
-) -> Result<(), IdentificationError> {
+pub fn to_si_into(channel: ChannelId, volts: &[f64], calibration: &Calibration, out: &mut [f64]) -> Result<(), IdentificationError> {
     if out.len() != volts.len() {
         return Err(IdentificationError::BadInput {
             what: format!("calibrate `{channel}` output"),
@@ -62,11 +53,7 @@ pub fn to_si_into(
         }
         return Err(IdentificationError::BadInput {
             what: format!("channel `{channel}`, sample {i}"),
-            reason: format!(
-                "{} V does not convert to a finite {} with sensitivity {sensitivity}",
-                volts[i],
-                channel.unit()
-            ),
+            reason: format!("{} V does not convert to a finite {} with sensitivity {sensitivity}", volts[i], channel.unit()),
         });
     }
     Ok(())

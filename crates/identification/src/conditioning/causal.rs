@@ -167,7 +167,18 @@ impl CausalOutput {
     /// Forgets the first `n` samples (all if fewer are held); the violations stay.
     pub fn consume(&mut self, n: usize) {
         let n = n.min(self.len());
-        for c in [&mut self.x_m, &mut self.y_m, &mut self.vx_m_s, &mut self.vy_m_s, &mut self.ax_m_s2, &mut self.ay_m_s2, &mut self.fx_n, &mut self.fy_n, &mut self.temperature_c, &mut self.static_load_n] {
+        for c in [
+            &mut self.x_m,
+            &mut self.y_m,
+            &mut self.vx_m_s,
+            &mut self.vy_m_s,
+            &mut self.ax_m_s2,
+            &mut self.ay_m_s2,
+            &mut self.fx_n,
+            &mut self.fy_n,
+            &mut self.temperature_c,
+            &mut self.static_load_n,
+        ] {
             c.drain(..n);
         }
         self.valid.drain(..n);
@@ -328,7 +339,10 @@ impl CausalChain {
     /// on the cutting.
     pub fn push(&mut self, values: &[f64], out: &mut CausalOutput) -> Result<(), IdentificationError> {
         if !values.len().is_multiple_of(self.width) {
-            return Err(IdentificationError::BadInput { what: "scan values".into(), reason: format!("{} values are not whole scans of {} readings", values.len(), self.width) });
+            return Err(IdentificationError::BadInput {
+                what: "scan values".into(),
+                reason: format!("{} values are not whole scans of {} readings", values.len(), self.width),
+            });
         }
         for block in values.chunks(MAX_BLOCK * self.width) {
             simd::dispatch(self.chain.isa(), Push { c: self, values: block, out });

@@ -29,8 +29,8 @@ use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::{self, Applied};
 use super::lowpass::{Butterworth, Consume8, FromColumns, Produce8, MAX_ORDER};
 use super::{
-    all_finite, calibrate, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned,
-    ConditioningConfig, Mechanics, RawRecord, RawUnits, COLUMNS,
+    all_finite, calibrate, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, RawRecord,
+    RawUnits, COLUMNS,
 };
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
@@ -258,7 +258,17 @@ impl Chain {
         // only if one of them saw a non-finite value are the columns searched, to name it.
         let [x_m, y_m, tilt_x_m, tilt_y_m, housing_x_m, housing_y_m, fx_n, fy_n, static_load_n, temperature_c] = front;
         if !outcome.finite {
-            for (name, col) in [("x_m", &x_m), ("y_m", &y_m), ("tilt_x_m", &tilt_x_m), ("tilt_y_m", &tilt_y_m), ("ax_m_s2", &ax), ("ay_m_s2", &ay), ("fx_n", &fx_n), ("fy_n", &fy_n), ("temperature_c", &temperature_c)] {
+            for (name, col) in [
+                ("x_m", &x_m),
+                ("y_m", &y_m),
+                ("tilt_x_m", &tilt_x_m),
+                ("tilt_y_m", &tilt_y_m),
+                ("ax_m_s2", &ax),
+                ("ay_m_s2", &ay),
+                ("fx_n", &fx_n),
+                ("fy_n", &fy_n),
+                ("temperature_c", &temperature_c),
+            ] {
                 if let Some(i) = first_non_finite(col) {
                     return Err(IdentificationError::BadInput {
                         what: format!("conditioned `{name}`, sample {i}"),
@@ -313,7 +323,13 @@ impl Chain {
     /// Steps 3, 2, 4 and the linear combinations of steps 5 and 7, stage by stage on the
     /// window's columns (each stage names what it refuses): `[x, y, tilt_x, tilt_y, X, Y,
     /// fx (applied), fy (applied), f3, temperature]`; violations of step 2 into `violations`.
-    fn staged(&self, raw: &RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT], violations: &mut Vec<super::RangeViolation>) -> Result<[Vec<f64>; CHANNEL_COUNT], IdentificationError> {
+    fn staged(
+        &self,
+        raw: &RawRecord,
+        window: &Range<usize>,
+        col_of: &[usize; CHANNEL_COUNT],
+        violations: &mut Vec<super::RangeViolation>,
+    ) -> Result<[Vec<f64>; CHANNEL_COUNT], IdentificationError> {
         let n = window.len();
         let mut si: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| vec![0.0; n]);
         let mut tmp = vec![0.0; n];
@@ -410,7 +426,16 @@ pub(super) struct Derivatives<'a, S> {
 
 impl<'a, S: Simd> Derivatives<'a, S> {
     pub(super) fn new(simd: S, chain: &'a Chain, out: [[&'a mut [f64]; 2]; 4]) -> Self {
-        Self { simd, sg: &chain.derivative, mass_kg: chain.mechanics.housing_mass_kg, out, state: Default::default(), finite: [true; 3], fits: true, at_start: false }
+        Self {
+            simd,
+            sg: &chain.derivative,
+            mass_kg: chain.mechanics.housing_mass_kg,
+            out,
+            state: Default::default(),
+            finite: [true; 3],
+            fits: true,
+            at_start: false,
+        }
     }
 
     /// Every output is written.
@@ -566,7 +591,13 @@ pub(super) struct FrontScratch {
 
 impl Default for FrontScratch {
     fn default() -> Self {
-        Self { tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]), input: [0.0; TILE + MAX_TAPS], lanes: std::array::from_fn(|_| vec![0.0; TILE]), load: Vec::new(), temp: Vec::new() }
+        Self {
+            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
+            input: [0.0; TILE + MAX_TAPS],
+            lanes: std::array::from_fn(|_| vec![0.0; TILE]),
+            load: Vec::new(),
+            temp: Vec::new(),
+        }
     }
 }
 
@@ -646,7 +677,16 @@ impl<'a> FrontTiles<'a> {
             }
             chans.push(FrontChannel { volts, k, delay, interior: delay.interior(len) });
         }
-        Some(Self { chans, applied: chain.applied, len, tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]), input: [0.0; TILE + MAX_TAPS], load: Vec::new(), temp: Vec::new(), bad: 0 })
+        Some(Self {
+            chans,
+            applied: chain.applied,
+            len,
+            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
+            input: [0.0; TILE + MAX_TAPS],
+            load: Vec::new(),
+            temp: Vec::new(),
+            bad: 0,
+        })
     }
 }
 

@@ -86,26 +86,16 @@ impl FractionalDelay {
     /// stencil, `2 <= taps <= MAX_TAPS`.
     pub fn new(delay_samples: f64, taps: usize) -> Result<Self, IdentificationError> {
         if !(2..=MAX_TAPS).contains(&taps) {
-            return Err(IdentificationError::invalid(
-                "conditioning.deskew_taps",
-                format!("must be in 2..={MAX_TAPS}, got {taps}"),
-            ));
+            return Err(IdentificationError::invalid("conditioning.deskew_taps", format!("must be in 2..={MAX_TAPS}, got {taps}")));
         }
         if !(delay_samples.is_finite() && delay_samples.abs() <= 1.0e6) {
-            return Err(IdentificationError::invalid(
-                "deskew delay",
-                format!("must be finite and at most 1e6 samples, got {delay_samples}"),
-            ));
+            return Err(IdentificationError::invalid("deskew delay", format!("must be finite and at most 1e6 samples, got {delay_samples}")));
         }
         // |D| <= 1e6, so the ceiling is an exact small integer.
         let start = (-delay_samples - 0.5 * taps as f64).ceil() as isize;
         let mut weights = vec![0.0; taps];
         lagrange_weights(start, -delay_samples, &mut weights);
-        Ok(Self {
-            delay_samples,
-            start,
-            weights,
-        })
+        Ok(Self { delay_samples, start, weights })
     }
 
     /// No delay: one tap of weight 1 (what a chain without de-skew runs, so that its front end
@@ -115,11 +105,7 @@ impl FractionalDelay {
     }
 
     /// The filter for a channel converted `offset_s` after the scan start, at `sample_rate_hz`.
-    pub fn for_offset(
-        offset_s: f64,
-        sample_rate_hz: f64,
-        taps: usize,
-    ) -> Result<Self, IdentificationError> {
+    pub fn for_offset(offset_s: f64, sample_rate_hz: f64, taps: usize) -> Result<Self, IdentificationError> {
         Self::new(offset_s * sample_rate_hz, taps)
     }
 
@@ -169,10 +155,7 @@ impl FractionalDelay {
         let len = input.len();
         let taps = self.weights.len();
         if out.len() != len {
-            return Err(IdentificationError::BadInput {
-                what: "deskew output".into(),
-                reason: format!("buffer has {} samples, input {len}", out.len()),
-            });
+            return Err(IdentificationError::BadInput { what: "deskew output".into(), reason: format!("buffer has {} samples, input {len}", out.len()) });
         }
         if len < taps {
             return Err(IdentificationError::BadInput {
@@ -197,8 +180,7 @@ impl FractionalDelay {
     /// samples; the others are [`FractionalDelay::edge_value`]s.
     pub(crate) fn interior(&self, len: usize) -> std::ops::Range<usize> {
         let lo = (-self.start).max(0) as usize;
-        let hi = (len as isize - self.start - self.weights.len() as isize + 1)
-            .clamp(0, len as isize) as usize;
+        let hi = (len as isize - self.start - self.weights.len() as isize + 1).clamp(0, len as isize) as usize;
         lo..hi
     }
 
@@ -211,10 +193,7 @@ impl FractionalDelay {
         let first = (n as isize + self.start).clamp(0, (len - taps) as isize);
         lagrange_weights(first, n as f64 - self.delay_samples, w);
         let first = first as usize;
-        w.iter()
-            .enumerate()
-            .map(|(j, a)| a * input(first + j))
-            .sum()
+        w.iter().enumerate().map(|(j, a)| a * input(first + j)).sum()
     }
 
     /// Applies the delay, allocating the output.
@@ -227,18 +206,9 @@ impl FractionalDelay {
 
 /// Re-aligns one channel, converted `offset_s` after each scan start, to the scan starts
 /// (`taps`-point Lagrange interpolation). NaN input is a `BadInput` naming the channel.
-pub fn align(
-    channel: ChannelId,
-    column: &[f64],
-    offset_s: f64,
-    sample_rate_hz: f64,
-    taps: usize,
-) -> Result<Vec<f64>, IdentificationError> {
+pub fn align(channel: ChannelId, column: &[f64], offset_s: f64, sample_rate_hz: f64, taps: usize) -> Result<Vec<f64>, IdentificationError> {
     if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
-        return Err(IdentificationError::invalid(
-            "sample_rate_hz",
-            format!("must be finite and > 0, got {sample_rate_hz}"),
-        ));
+        return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz}")));
     }
     if let Some(i) = first_non_finite(column) {
         return Err(super::non_finite_error(channel, i, column[i], "sample"));

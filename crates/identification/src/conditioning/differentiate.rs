@@ -192,7 +192,10 @@ impl SavitzkyGolayDerivative {
         let (len, m) = (input.len(), self.half_length);
         let width = 2 * m + 1;
         if out.len() != len {
-            return Err(IdentificationError::BadInput { what: "differentiator output".into(), reason: format!("buffer has {} samples, input {len}", out.len()) });
+            return Err(IdentificationError::BadInput {
+                what: "differentiator output".into(),
+                reason: format!("buffer has {} samples, input {len}", out.len()),
+            });
         }
         if len < width {
             return Err(IdentificationError::BadInput {

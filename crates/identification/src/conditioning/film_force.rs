@@ -21,10 +21,26 @@ use crate::IdentificationError;
 /// Eq. 2 into caller buffers: all inputs and outputs the same length. Forces in N, housing
 /// acceleration in m/s^2.
 #[allow(clippy::too_many_arguments)] // five named input columns and two outputs, all plain
-pub fn eq2_into(f1: &[f64], f2: &[f64], f3: &[f64], housing_ax: &[f64], housing_ay: &[f64], mechanics: &Mechanics, fx: &mut [f64], fy: &mut [f64]) -> Result<(), IdentificationError> {
+pub fn eq2_into(
+    f1: &[f64],
+    f2: &[f64],
+    f3: &[f64],
+    housing_ax: &[f64],
+    housing_ay: &[f64],
+    mechanics: &Mechanics,
+    fx: &mut [f64],
+    fy: &mut [f64],
+) -> Result<(), IdentificationError> {
     mechanics.validate()?;
     let n = f1.len();
-    for (name, len) in [("f2", f2.len()), ("f3", f3.len()), ("housing_ax", housing_ax.len()), ("housing_ay", housing_ay.len()), ("fx output", fx.len()), ("fy output", fy.len())] {
+    for (name, len) in [
+        ("f2", f2.len()),
+        ("f3", f3.len()),
+        ("housing_ax", housing_ax.len()),
+        ("housing_ay", housing_ay.len()),
+        ("fx output", fx.len()),
+        ("fy output", fy.len()),
+    ] {
         if len != n {
             return Err(IdentificationError::BadInput { what: format!("eq. 2 `{name}`"), reason: format!("{len} samples, f1 has {n}") });
         }
@@ -92,9 +108,7 @@ pub fn eq2(
 ) -> Result<(Vec<f64>, Vec<f64>), IdentificationError> {
     let mut fx = vec![0.0; f1.len()];
     let mut fy = vec![0.0; f1.len()];
-    eq2_into(
-        f1, f2, f3, housing_ax, housing_ay, mechanics, &mut fx, &mut fy,
-    )?;
+    eq2_into(f1, f2, f3, housing_ax, housing_ay, mechanics, &mut fx, &mut fy)?;
     Ok((fx, fy))
 }
 
@@ -103,22 +117,14 @@ pub(crate) fn check_static_window(fx: &[f64], fy: &[f64], range: &Range<usize>) 
     if range.is_empty() || range.end > fx.len() || range.end > fy.len() {
         return Err(IdentificationError::BadInput {
             what: "static film force window".into(),
-            reason: format!(
-                "range {range:?} is empty or outside the {} / {} samples",
-                fx.len(),
-                fy.len()
-            ),
+            reason: format!("range {range:?} is empty or outside the {} / {} samples", fx.len(), fy.len()),
         });
     }
     Ok(())
 }
 
 /// The static film force: the mean of `fx`, `fy` over `range` (non-empty, inside both).
-pub fn static_part(
-    fx: &[f64],
-    fy: &[f64],
-    range: Range<usize>,
-) -> Result<[f64; 2], IdentificationError> {
+pub fn static_part(fx: &[f64], fy: &[f64], range: Range<usize>) -> Result<[f64; 2], IdentificationError> {
     check_static_window(fx, fy, &range)?;
     let k = range.len() as f64;
     // Both sums in one loop: each is still added up in index order from -0.0 (as `Iterator::

@@ -94,24 +94,15 @@ impl Mechanics {
     /// (`mechanics.housing_mass_kg`).
     pub fn validate(&self) -> Result<(), IdentificationError> {
         if !(self.housing_mass_kg.is_finite() && self.housing_mass_kg > 0.0) {
-            return Err(IdentificationError::invalid(
-                "mechanics.housing_mass_kg",
-                format!("must be finite and > 0, got {}", self.housing_mass_kg),
-            ));
+            return Err(IdentificationError::invalid("mechanics.housing_mass_kg", format!("must be finite and > 0, got {}", self.housing_mass_kg)));
         }
         for (i, a) in self.exciter_angles_deg.iter().enumerate() {
             if !a.is_finite() {
-                return Err(IdentificationError::invalid(
-                    format!("mechanics.exciter_angles_deg[{i}]"),
-                    format!("must be finite, got {a}"),
-                ));
+                return Err(IdentificationError::invalid(format!("mechanics.exciter_angles_deg[{i}]"), format!("must be finite, got {a}")));
             }
         }
         if !self.gravity_m_s2.is_finite() {
-            return Err(IdentificationError::invalid(
-                "mechanics.gravity_m_s2",
-                format!("must be finite, got {}", self.gravity_m_s2),
-            ));
+            return Err(IdentificationError::invalid("mechanics.gravity_m_s2", format!("must be finite, got {}", self.gravity_m_s2)));
         }
         Ok(())
     }
@@ -137,13 +128,7 @@ pub struct ConditioningConfig {
 
 impl Default for ConditioningConfig {
     fn default() -> Self {
-        Self {
-            lowpass_cutoff_hz: 200.0,
-            lowpass_order: 4,
-            differentiator_half_length: 5,
-            deskew: true,
-            deskew_taps: 4,
-        }
+        Self { lowpass_cutoff_hz: 200.0, lowpass_order: 4, differentiator_half_length: 5, deskew: true, deskew_taps: 4 }
     }
 }
 
@@ -204,29 +189,18 @@ impl RawRecord {
     /// a gap, a repeated or out-of-order scan is a `BadInput` naming the scan.
     pub fn from_scans(scans: &[DaqScan], sample_rate_hz: f64) -> Result<Self, IdentificationError> {
         if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
-            return Err(IdentificationError::invalid(
-                "sample_rate_hz",
-                format!("must be finite and > 0, got {sample_rate_hz}"),
-            ));
+            return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz}")));
         }
         let Some(first) = scans.first() else {
-            return Err(IdentificationError::BadInput {
-                what: "scans".into(),
-                reason: "no scans".into(),
-            });
+            return Err(IdentificationError::BadInput { what: "scans".into(), reason: "no scans".into() });
         };
         let channels = first.channels.clone();
         let start = first.scan_start_s;
         if !start.is_finite() {
-            return Err(IdentificationError::BadInput {
-                what: "scans[0].scan_start_s".into(),
-                reason: format!("not finite ({start})"),
-            });
+            return Err(IdentificationError::BadInput { what: "scans[0].scan_start_s".into(), reason: format!("not finite ({start})") });
         }
         let period = 1.0 / sample_rate_hz;
-        let mut columns: Vec<Vec<f64>> = (0..channels.len())
-            .map(|_| Vec::with_capacity(scans.len()))
-            .collect();
+        let mut columns: Vec<Vec<f64>> = (0..channels.len()).map(|_| Vec::with_capacity(scans.len())).collect();
         for (i, s) in scans.iter().enumerate() {
             if s.channels != channels || s.volts.len() != channels.len() {
                 return Err(IdentificationError::BadInput {
@@ -244,23 +218,14 @@ impl RawRecord {
             if deviation.is_nan() || deviation > 1.0e-3 * period {
                 return Err(IdentificationError::BadInput {
                     what: format!("scans[{i}].scan_start_s (scan_index {})", s.scan_index),
-                    reason: format!(
-                        "{} s, expected {expected} s at {sample_rate_hz} scans/s: missing, repeated or out-of-order scan",
-                        s.scan_start_s
-                    ),
+                    reason: format!("{} s, expected {expected} s at {sample_rate_hz} scans/s: missing, repeated or out-of-order scan", s.scan_start_s),
                 });
             }
             for (col, &v) in columns.iter_mut().zip(&s.volts) {
                 col.push(v);
             }
         }
-        Ok(Self {
-            sample_rate_hz,
-            start_time_s: start,
-            channels,
-            units: RawUnits::Volts,
-            columns,
-        })
+        Ok(Self { sample_rate_hz, start_time_s: start, channels, units: RawUnits::Volts, columns })
     }
 
     /// Samples per column (of the first column; [`RawRecord::validate_shape`] checks the rest).
@@ -274,63 +239,39 @@ impl RawRecord {
 
     /// The column of `channel`, if present.
     pub fn column(&self, channel: ChannelId) -> Option<&[f64]> {
-        self.channels
-            .iter()
-            .position(|&c| c == channel)
-            .and_then(|k| self.columns.get(k))
-            .map(Vec::as_slice)
+        self.channels.iter().position(|&c| c == channel).and_then(|k| self.columns.get(k)).map(Vec::as_slice)
     }
 
     /// Checks the shape: finite positive sample rate, finite start time, one column per
     /// channel, no channel twice, all columns the same non-zero length.
     pub fn validate_shape(&self) -> Result<(), IdentificationError> {
         if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
-            return Err(IdentificationError::invalid(
-                "sample_rate_hz",
-                format!("must be finite and > 0, got {}", self.sample_rate_hz),
-            ));
+            return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and > 0, got {}", self.sample_rate_hz)));
         }
         if !self.start_time_s.is_finite() {
-            return Err(IdentificationError::BadInput {
-                what: "start_time_s".into(),
-                reason: format!("not finite ({})", self.start_time_s),
-            });
+            return Err(IdentificationError::BadInput { what: "start_time_s".into(), reason: format!("not finite ({})", self.start_time_s) });
         }
         if self.channels.len() != self.columns.len() {
             return Err(IdentificationError::BadInput {
                 what: "columns".into(),
-                reason: format!(
-                    "{} columns for {} channels",
-                    self.columns.len(),
-                    self.channels.len()
-                ),
+                reason: format!("{} columns for {} channels", self.columns.len(), self.channels.len()),
             });
         }
         let mut seen = [false; CHANNEL_COUNT];
         for &c in &self.channels {
             if std::mem::replace(&mut seen[c.index()], true) {
-                return Err(IdentificationError::BadInput {
-                    what: format!("channel `{c}`"),
-                    reason: "appears twice in the record".into(),
-                });
+                return Err(IdentificationError::BadInput { what: format!("channel `{c}`"), reason: "appears twice in the record".into() });
             }
         }
         let n = self.len();
         if n == 0 {
-            return Err(IdentificationError::BadInput {
-                what: "columns".into(),
-                reason: "the record has no samples".into(),
-            });
+            return Err(IdentificationError::BadInput { what: "columns".into(), reason: "the record has no samples".into() });
         }
         for (c, col) in self.channels.iter().zip(&self.columns) {
             if col.len() != n {
                 return Err(IdentificationError::BadInput {
                     what: format!("column `{c}`"),
-                    reason: format!(
-                        "{} samples, but `{}` has {n}: ragged columns",
-                        col.len(),
-                        self.channels[0]
-                    ),
+                    reason: format!("{} samples, but `{}` has {n}: ragged columns", col.len(), self.channels[0]),
                 });
             }
         }
@@ -447,27 +388,15 @@ impl Conditioned {
             what: format!(
                 "record ({} channel(s) out of linear range: {})",
                 self.range_violations.len(),
-                self.range_violations
-                    .iter()
-                    .map(|v| v.channel.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                self.range_violations.iter().map(|v| v.channel.name()).collect::<Vec<_>>().join(", ")
             ),
-            reason: self
-                .range_violations
-                .iter()
-                .map(ToString::to_string)
-                .collect::<Vec<_>>()
-                .join("; "),
+            reason: self.range_violations.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
         })
     }
 
     /// The dynamic film force (`F` minus its static part) at sample `i`.
     pub fn dynamic_force_n(&self, i: usize) -> Option<[f64; 2]> {
-        Some([
-            self.fx_n.get(i)? - self.static_force_n[0],
-            self.fy_n.get(i)? - self.static_force_n[1],
-        ])
+        Some([self.fx_n.get(i)? - self.static_force_n[0], self.fy_n.get(i)? - self.static_force_n[1]])
     }
 }
 
@@ -513,16 +442,8 @@ pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
 }
 
 /// The `BadInput` for a non-finite sample.
-pub(crate) fn non_finite_error(
-    channel: ChannelId,
-    index: usize,
-    value: f64,
-    unit: &str,
-) -> IdentificationError {
-    IdentificationError::BadInput {
-        what: format!("channel `{channel}`, sample {index}"),
-        reason: format!("{value} is not a finite reading ({unit})"),
-    }
+pub(crate) fn non_finite_error(channel: ChannelId, index: usize, value: f64, unit: &str) -> IdentificationError {
+    IdentificationError::BadInput { what: format!("channel `{channel}`, sample {index}"), reason: format!("{value} is not a finite reading ({unit})") }
 }
 
 /// Runs steps 1-7 on a raw record: calibrate, range-check, deskew, low-pass, kinematics,
@@ -564,7 +485,13 @@ impl Conditioned {
 /// [`condition`] into `out`, reusing its column buffers: conditioning record after record
 /// into the same `Conditioned` allocates nothing of size once the buffers are large enough.
 /// On error `out` is left empty.
-pub fn condition_into(raw: &RawRecord, calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, out: &mut Conditioned) -> Result<(), IdentificationError> {
+pub fn condition_into(
+    raw: &RawRecord,
+    calibration: &Calibration,
+    mechanics: &Mechanics,
+    config: &ConditioningConfig,
+    out: &mut Conditioned,
+) -> Result<(), IdentificationError> {
     condition_window_into(raw, 0..raw.len(), calibration, mechanics, config, out)
 }
 

@@ -27,21 +27,13 @@ use crate::IdentificationError;
 
 /// Checks one column of `channel` (in `units`) against its calibrated linear range.
 /// `Ok(None)` when every sample is inside; a non-finite sample is a `BadInput`.
-pub fn check(
-    channel: ChannelId,
-    column: &[f64],
-    units: RawUnits,
-    calibration: &Calibration,
-) -> Result<Option<RangeViolation>, IdentificationError> {
+pub fn check(channel: ChannelId, column: &[f64], units: RawUnits, calibration: &Calibration) -> Result<Option<RangeViolation>, IdentificationError> {
     let c = calibration.channel(channel)?;
     let [lo_v, hi_v] = c.linear_range_v;
     let (lo, hi) = volts_bounds(channel, calibration)?;
     let (offset, sens) = (c.offset_v, c.sensitivity_v_per_unit);
     if !(sens.is_finite() && sens != 0.0) {
-        return Err(IdentificationError::invalid(
-            format!("calibration.{channel}.sensitivity_v_per_unit"),
-            format!("must be finite and non-zero, got {sens}"),
-        ));
+        return Err(IdentificationError::invalid(format!("calibration.{channel}.sensitivity_v_per_unit"), format!("must be finite and non-zero, got {sens}")));
     }
     let a = (lo_v - offset) / sens;
     let b = (hi_v - offset) / sens;
@@ -60,14 +52,8 @@ pub fn check(
         !(v > lo && v < hi)
     };
     let count = match units {
-        RawUnits::Volts => column
-            .iter()
-            .map(|&v| !(v > lo && v < hi) as usize)
-            .sum::<usize>(),
-        RawUnits::Si => column
-            .iter()
-            .map(|&x| out_of_range(x) as usize)
-            .sum::<usize>(),
+        RawUnits::Volts => column.iter().map(|&v| !(v > lo && v < hi) as usize).sum::<usize>(),
+        RawUnits::Si => column.iter().map(|&x| out_of_range(x) as usize).sum::<usize>(),
     };
     if count == 0 {
         return Ok(None);
@@ -84,31 +70,19 @@ pub fn check(
         RawUnits::Volts => (raw - offset) / sens,
         RawUnits::Si => raw,
     };
-    Ok(Some(RangeViolation {
-        channel,
-        index,
-        value_si,
-        range_si,
-        count,
-    }))
+    Ok(Some(RangeViolation { channel, index, value_si, range_si, count }))
 }
 
 /// The open interval of readings (V) that count as inside `channel`'s linear range: a reading
 /// `v` is in range when `v > lo && v < hi`.
-pub(crate) fn volts_bounds(
-    channel: ChannelId,
-    calibration: &Calibration,
-) -> Result<(f64, f64), IdentificationError> {
+pub(crate) fn volts_bounds(channel: ChannelId, calibration: &Calibration) -> Result<(f64, f64), IdentificationError> {
     let [lo_v, hi_v] = calibration.channel(channel)?.linear_range_v;
     let margin = 0.5 * calibration.lsb_v();
     Ok((lo_v + margin, hi_v - margin))
 }
 
 /// Checks every column of a record; violations in the record's channel order.
-pub fn check_record(
-    raw: &RawRecord,
-    calibration: &Calibration,
-) -> Result<Vec<RangeViolation>, IdentificationError> {
+pub fn check_record(raw: &RawRecord, calibration: &Calibration) -> Result<Vec<RangeViolation>, IdentificationError> {
     raw.validate_shape()?;
     let mut out = Vec::new();
     for (&ch, col) in raw.channels.iter().zip(&raw.columns) {

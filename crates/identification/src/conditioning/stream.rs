@@ -234,7 +234,10 @@ impl Kernel for Advance<'_> {
             return Ok(());
         }
         if s.first_needed() < offset {
-            return Err(IdentificationError::BadInput { what: "stream".into(), reason: format!("scans from {} needed, the record starts at {offset}", s.first_needed()) });
+            return Err(IdentificationError::BadInput {
+                what: "stream".into(),
+                reason: format!("scans from {} needed, the record starts at {offset}", s.first_needed()),
+            });
         }
         let cols: [&[f64]; CHANNEL_COUNT] = std::array::from_fn(|k| raw.columns.get(s.col_of[k]).map_or(&[][..], Vec::as_slice));
         let new_from = s.frames.len();

@@ -111,10 +111,7 @@ pub fn structural_explanation(model: ModelOrder, lines: &LineAnalysis, rank: usi
         }
         let alias = model == ModelOrder::Kcm && !parts.is_empty();
         if !alias && dominated(lines, 0) && dominated(lines, 1) && 2 * merged.len() < p {
-            parts.push(format!(
-                "{names} all lie in span{{cos, sin}} of {}",
-                fmt_hz(&merged)
-            ));
+            parts.push(format!("{names} all lie in span{{cos, sin}} of {}", fmt_hz(&merged)));
         }
         let advice = match model {
             ModelOrder::Kc => "excite two frequencies",
@@ -163,9 +160,7 @@ pub fn dependency(svd: &SmallSvd, names: &[&str]) -> String {
             combo.push_str(&format!(" + {c:.3} {name}"));
         }
     }
-    let pair = |a: &str, b: &str| {
-        involved.len() == 2 && names.get(involved[0]) == Some(&a) && names.get(involved[1]) == Some(&b)
-    };
+    let pair = |a: &str, b: &str| involved.len() == 2 && names.get(involved[0]) == Some(&a) && names.get(involved[1]) == Some(&b);
     let hint = if pair("x", "y") || pair("x'", "y'") {
         ": the orbit is (nearly) a straight line, both directions move in phase; drive the exciters out of phase or at different frequencies"
     } else if pair("x", "x''") || pair("y", "y''") {
@@ -199,8 +194,5 @@ pub fn ill_conditioned_explanation(svd: &SmallSvd, names: &[&str], lines: &LineA
 pub fn constant_columns(cols: &[usize], names: &[&str]) -> String {
     let list: Vec<&str> = cols.iter().map(|&j| names.get(j).copied().unwrap_or("?")).collect();
     let verb = if list.len() == 1 { "does" } else { "do" };
-    format!(
-        "{} {verb} not vary over the window: that direction is not excited or its probe is dead",
-        list.join(", ")
-    )
+    format!("{} {verb} not vary over the window: that direction is not excited or its probe is dead", list.join(", "))
 }

@@ -76,12 +76,7 @@ pub struct FrequencyEstimate {
 }
 
 /// Phasors of the record at `lines_hz` and the coefficients they imply. Uses the whole record.
-pub fn frequency_domain(
-    signals: &Signals,
-    lines_hz: &[f64],
-    sample_rate_hz: f64,
-    model: ModelOrder,
-) -> Result<FrequencyEstimate, IdentificationError> {
+pub fn frequency_domain(signals: &Signals, lines_hz: &[f64], sample_rate_hz: f64, model: ModelOrder) -> Result<FrequencyEstimate, IdentificationError> {
     signals.check(model)?;
     if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
         return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and positive, got {sample_rate_hz}")));
@@ -96,10 +91,7 @@ pub fn frequency_domain(
     let n = signals.len();
     let nl = lines_hz.len();
     if n < 4 * (2 * nl + 1) {
-        return Err(IdentificationError::BadInput {
-            what: "signals".to_string(),
-            reason: format!("{n} samples are too few to fit {nl} lines"),
-        });
+        return Err(IdentificationError::BadInput { what: "signals".to_string(), reason: format!("{n} samples are too few to fit {nl} lines") });
     }
     let chans: [(&str, &[f64]); 4] = [("x_m", signals.x_m), ("y_m", signals.y_m), ("fx_n", signals.fx_n), ("fy_n", signals.fy_n)];
     for (name, c) in chans {
@@ -143,16 +135,7 @@ pub fn frequency_domain(
             Axis::Y => Some([-fx / y, -fy / y]),
             Axis::Both => None,
         };
-        lines.push(LinePhasors {
-            frequency_hz: f,
-            x_m: x,
-            y_m: y,
-            fx_n: fx,
-            fy_n: fy,
-            excited,
-            direct_dynamic_stiffness_n_m: direct,
-            column_n_m,
-        });
+        lines.push(LinePhasors { frequency_hz: f, x_m: x, y_m: y, fx_n: fx, fy_n: fy, excited, direct_dynamic_stiffness_n_m: direct, column_n_m });
     }
     Ok(fit_across_lines(lines, model))
 }
@@ -186,7 +169,8 @@ fn fit_across_lines(lines: Vec<LinePhasors>, model: ModelOrder) -> FrequencyEsti
     let mut summary = BlockSummary::empty(q);
     summary.n = rows;
     summary.r.absorb(&mut block, rows);
-    let mut out = FrequencyEstimate { lines, result: Err(Refusal::TooShort { samples: rows, needed: p }), condition_number: f64::NAN, residual_rms_n: [f64::NAN; 2] };
+    let mut out =
+        FrequencyEstimate { lines, result: Err(Refusal::TooShort { samples: rows, needed: p }), condition_number: f64::NAN, residual_rms_n: [f64::NAN; 2] };
     if rows < p {
         out.result = Err(Refusal::RankDeficient { rank: rows, needed: p, explanation: needs(model, &out.lines) });
         return out;
@@ -229,10 +213,7 @@ fn needs(model: ModelOrder, lines: &[LinePhasors]) -> String {
     let count = |a: Axis| lines.iter().filter(|l| l.excited == a || l.excited == Axis::Both).count();
     let (nx, ny) = (count(Axis::X), count(Axis::Y));
     match model {
-        ModelOrder::Kc => format!(
-            "K and C need two independent motions; the lines move x at {nx} and y at {ny} of {} lines",
-            lines.len()
-        ),
+        ModelOrder::Kc => format!("K and C need two independent motions; the lines move x at {nx} and y at {ny} of {} lines", lines.len()),
         ModelOrder::Kcm => format!(
             "stiffness and added mass alias (K - w^2 M) unless each direction moves at two or more lines; x moves at {nx}, y at {ny} of {} lines",
             lines.len()

@@ -244,10 +244,7 @@ impl EstimatorConfig {
             return Err(IdentificationError::invalid("hop", format!("must be 1 to {MAX_WINDOW_SAMPLES} samples (0 would never advance), got {}", self.hop)));
         }
         if !(self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0) {
-            return Err(IdentificationError::invalid(
-                "sample_rate_hz",
-                format!("must be finite and positive, got {}", self.sample_rate_hz),
-            ));
+            return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and positive, got {}", self.sample_rate_hz)));
         }
         if !(self.max_relative_se > 0.0) {
             return Err(IdentificationError::invalid(
@@ -305,8 +302,7 @@ impl<'a> Signals<'a> {
     /// All columns present must have one length; `Kcm` needs both accelerations.
     pub fn check(&self, model: ModelOrder) -> Result<(), IdentificationError> {
         let n = self.x_m.len();
-        let mut cols: Vec<(&str, &[f64])> =
-            vec![("y_m", self.y_m), ("vx_m_s", self.vx_m_s), ("vy_m_s", self.vy_m_s), ("fx_n", self.fx_n), ("fy_n", self.fy_n)];
+        let mut cols: Vec<(&str, &[f64])> = vec![("y_m", self.y_m), ("vx_m_s", self.vx_m_s), ("vy_m_s", self.vy_m_s), ("fx_n", self.fx_n), ("fy_n", self.fy_n)];
         if let Some(a) = self.ax_m_s2 {
             cols.push(("ax_m_s2", a));
         }
@@ -338,12 +334,7 @@ impl<'a> Signals<'a> {
     /// Call [`Signals::check`] first (missing accelerations give empty columns here).
     fn design(&self, model: ModelOrder, range: Range<usize>) -> Vec<(&'static str, &'a [f64])> {
         let cut = |c: &'a [f64]| c.get(range.clone()).unwrap_or(&[]);
-        let mut cols = vec![
-            ("x_m", cut(self.x_m)),
-            ("y_m", cut(self.y_m)),
-            ("vx_m_s", cut(self.vx_m_s)),
-            ("vy_m_s", cut(self.vy_m_s)),
-        ];
+        let mut cols = vec![("x_m", cut(self.x_m)), ("y_m", cut(self.y_m)), ("vx_m_s", cut(self.vx_m_s)), ("vy_m_s", cut(self.vy_m_s))];
         if model == ModelOrder::Kcm {
             cols.push(("ax_m_s2", self.ax_m_s2.map(cut).unwrap_or(&[])));
             cols.push(("ay_m_s2", self.ay_m_s2.map(cut).unwrap_or(&[])));
@@ -392,24 +383,21 @@ impl fmt::Display for Refusal {
                     write!(f, "cannot separate the coefficients (rank {rank} of {needed}): {explanation}")
                 }
             }
-            Refusal::IllConditioned { condition, limit, explanation } => write!(
-                f,
-                "ill-conditioned window: condition number {condition:.3e} of the scaled regressors exceeds the limit {limit:.1e} ({explanation})"
-            ),
-            Refusal::TooShort { samples, needed } => write!(
-                f,
-                "window too short: {samples} samples, at least {needed} needed for the coefficients, their intercept and meaningful standard errors"
-            ),
+            Refusal::IllConditioned { condition, limit, explanation } => {
+                write!(f, "ill-conditioned window: condition number {condition:.3e} of the scaled regressors exceeds the limit {limit:.1e} ({explanation})")
+            }
+            Refusal::TooShort { samples, needed } => {
+                write!(f, "window too short: {samples} samples, at least {needed} needed for the coefficients, their intercept and meaningful standard errors")
+            }
             Refusal::Undetermined { coefficient, relative_se, limit, explanation } => write!(
                 f,
                 "{coefficient} is not determined by this excitation: its standard error is {:.0} % of its value (limit {:.0} %): {explanation}",
                 100.0 * relative_se,
                 100.0 * limit
             ),
-            Refusal::NonFinite { column, index } => write!(
-                f,
-                "`{column}` is not finite at sample {index}: a dropped or saturated sample; repair or cut it before identification"
-            ),
+            Refusal::NonFinite { column, index } => {
+                write!(f, "`{column}` is not finite at sample {index}: a dropped or saturated sample; repair or cut it before identification")
+            }
         }
     }
 }
@@ -446,10 +434,7 @@ pub fn estimate_windows(signals: &Signals, config: &EstimatorConfig) -> Result<V
     signals.check(config.model)?;
     let n = signals.len();
     if config.window > n {
-        return Err(IdentificationError::invalid(
-            "window",
-            format!("{} samples is longer than the record ({n} samples)", config.window),
-        ));
+        return Err(IdentificationError::invalid("window", format!("{} samples is longer than the record ({n} samples)", config.window)));
     }
     let mut out = Vec::new();
     let mut start = 0;
@@ -487,12 +472,7 @@ pub fn estimate_window_with_search(
 /// fit, or has not taken all of the window, is ignored and the window analysed from its
 /// samples). The result is [`estimate_window`]'s, bit for bit: only the time after the last
 /// sample is shorter.
-pub fn estimate_window_fed(
-    signals: &Signals,
-    range: Range<usize>,
-    config: &EstimatorConfig,
-    feed: WindowFeed,
-) -> Result<WindowEstimate, IdentificationError> {
+pub fn estimate_window_fed(signals: &Signals, range: Range<usize>, config: &EstimatorConfig, feed: WindowFeed) -> Result<WindowEstimate, IdentificationError> {
     let n = range.len();
     let fed = if feed.fits(&EstimatorConfig { window: n, ..config.clone() }) { feed.into_window(n) } else { None };
     match fed {
@@ -523,10 +503,7 @@ fn estimate_window_searched(
     signals.check(config.model)?;
     let n = signals.len();
     if range.start >= range.end || range.end > n {
-        return Err(IdentificationError::invalid(
-            "range",
-            format!("{}..{} is empty or outside the record of {n} samples", range.start, range.end),
-        ));
+        return Err(IdentificationError::invalid("range", format!("{}..{} is empty or outside the record of {n} samples", range.start, range.end)));
     }
     let cols = signals.design(config.model, range.clone());
     Ok(analyse_window(&cols, range.start, search, None, config))
@@ -669,11 +646,7 @@ pub(crate) fn analyse_window(
                 return est;
             }
             let Some(sol) = factor.solve(config.solver) else {
-                est.result = Err(Refusal::RankDeficient {
-                    rank: est.rank,
-                    needed: p,
-                    explanation: "a zero pivot appeared in back-substitution".to_string(),
-                });
+                est.result = Err(Refusal::RankDeficient { rank: est.rank, needed: p, explanation: "a zero pivot appeared in back-substitution".to_string() });
                 return est;
             };
             (factor.mean, factor.scale, sol.coef, sol.inverse_gram_scaled)
@@ -736,10 +709,7 @@ fn undetermined(c: &Coefficients, lines: &spectrum::LineAnalysis, limit: f64) ->
         ("dxx", c.damping_n_s_m[(0, 0)], c.damping_se[(0, 0)]),
         ("dyy", c.damping_n_s_m[(1, 1)], c.damping_se[(1, 1)]),
     ];
-    let (name, value, se) = direct
-        .iter()
-        .copied()
-        .max_by(|a, b| (a.2 / a.1.abs()).total_cmp(&(b.2 / b.1.abs())))?;
+    let (name, value, se) = direct.iter().copied().max_by(|a, b| (a.2 / a.1.abs()).total_cmp(&(b.2 / b.1.abs())))?;
     let relative_se = se / value.abs();
     if relative_se.is_nan() || relative_se <= limit {
         return None;
@@ -758,9 +728,7 @@ fn undetermined(c: &Coefficients, lines: &spectrum::LineAnalysis, limit: f64) ->
 /// Coefficient matrices from the regression vector (`coef[j * 2 + k]`, regressor `j`, force `k`).
 fn assemble(model: ModelOrder, coef: &[f64], se: &[f64]) -> Coefficients {
     let m = 2;
-    let block = |v: &[f64], first: usize, sign: f64| {
-        Matrix2::from_fn(|k, d| sign * v.get((first + d) * m + k).copied().unwrap_or(f64::NAN))
-    };
+    let block = |v: &[f64], first: usize, sign: f64| Matrix2::from_fn(|k, d| sign * v.get((first + d) * m + k).copied().unwrap_or(f64::NAN));
     let kcm = model == ModelOrder::Kcm;
     Coefficients {
         stiffness_n_m: block(coef, 0, -1.0),
@@ -779,17 +747,10 @@ fn excitation_flags(out: &mut Vec<String>, model: ModelOrder, lines: &LineAnalys
     for d in 0..2 {
         let l = &lines.lines[d];
         if model == ModelOrder::Kcm && dominated(d) && l.len() < 2 {
-            out.push(format!(
-                "stiffness and added mass alias at one frequency (K - w^2 M): {} moves at {} only",
-                dir[d],
-                explain::fmt_hz(l)
-            ));
+            out.push(format!("stiffness and added mass alias at one frequency (K - w^2 M): {} moves at {} only", dir[d], explain::fmt_hz(l)));
         }
         if !dominated(d) && l.is_empty() {
-            out.push(format!(
-                "no excitation line in {}: its coefficients rest on broadband motion (biased if that motion is sensor noise)",
-                dir[d]
-            ));
+            out.push(format!("no excitation line in {}: its coefficients rest on broadband motion (biased if that motion is sensor noise)", dir[d]));
         }
     }
 }
@@ -937,10 +898,7 @@ fn errors_in_variables(out: &mut Vec<String>, model: ModelOrder, lines: &LineAna
         _ => "added mass from twice-differentiated noisy displacement may be biased (errors in variables)",
     };
     let regressors = model.regressor_names();
-    let snr: Vec<String> = (0..p)
-        .filter(|&j| eta[j] > 0.0)
-        .map(|j| format!("{} {:.1} dB", regressors[j], -10.0 * eta[j].log10()))
-        .collect();
+    let snr: Vec<String> = (0..p).filter(|&j| eta[j] > 0.0).map(|j| format!("{} {:.1} dB", regressors[j], -10.0 * eta[j].log10())).collect();
     out.push(format!(
         "{headline}: noise in the regressors over the whole regression band, not only at the lines, biases every coefficient it touches, and the standard errors do not include it. Predicted bias: {}. Regressor SNR (variance outside the lines, probe and ADC quantisation noise alike): {}. Less bias: a low-pass cutoff nearer the excitation band (velocity-noise power grows as the cutoff cubed), higher excitation frequencies, quieter probes",
         named.iter().map(|(_, _, t)| t.as_str()).collect::<Vec<_>>().join(", "),
@@ -967,7 +925,9 @@ fn flags(
 ) {
     errors_in_variables(out, model, lines, fit, accel_noise);
     if hac.lag_capped {
-        out.push("the window is so short that the residual spectrum's lag window was clipped to a quarter of it: standard errors may be optimistic".to_string());
+        out.push(
+            "the window is so short that the residual spectrum's lag window was clipped to a quarter of it: standard errors may be optimistic".to_string(),
+        );
     }
     for (k, name) in ["fx", "fy"].iter().enumerate() {
         let var = centred_ss[k] / n as f64;

@@ -84,7 +84,11 @@ pub fn solve(cols: &[&[f64]], p: usize) -> NormalSolution {
             Some(e) => {
                 let hi = e.eigenvalues.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
                 let lo = e.eigenvalues.iter().cloned().fold(f64::INFINITY, f64::min);
-                if lo > 0.0 { hi / lo } else { f64::INFINITY }
+                if lo > 0.0 {
+                    hi / lo
+                } else {
+                    f64::INFINITY
+                }
             }
             None => f64::NAN,
         }

@@ -63,9 +63,7 @@ impl ScaledFactor {
         let r = &summary.r;
         let norms: Vec<f64> = (0..p).map(|j| r.column_norm(j)).collect();
         let zero_columns: Vec<usize> = (0..p).filter(|&j| norms[j] == 0.0).collect();
-        let scale: Vec<f64> = norms
-            .into_iter()
-            .map(|d| if d > 0.0 && d.is_finite() { d } else { 1.0 }).collect();
+        let scale: Vec<f64> = norms.into_iter().map(|d| if d > 0.0 && d.is_finite() { d } else { 1.0 }).collect();
         let mut rs = vec![0.0; p * p];
         for i in 0..p {
             for j in i..p {

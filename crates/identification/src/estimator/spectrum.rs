@@ -458,8 +458,7 @@ fn find_lines(pw: &[f64]) -> Vec<f64> {
         }
         let flo = k.saturating_sub(FLOOR_HALF_WIDTH).max(1);
         let fhi = (k + FLOOR_HALF_WIDTH).min(nb - 1);
-        let neighbourhood: Vec<f64> =
-            (flo..=fhi).filter(|&i| i + 2 * MAIN_LOBE_BINS < k || i > k + 2 * MAIN_LOBE_BINS).map(|i| pw[i]).collect();
+        let neighbourhood: Vec<f64> = (flo..=fhi).filter(|&i| i + 2 * MAIN_LOBE_BINS < k || i > k + 2 * MAIN_LOBE_BINS).map(|i| pw[i]).collect();
         let floor = median(neighbourhood);
         if !(v > FLOOR_RATIO * floor) {
             continue;
@@ -523,7 +522,13 @@ fn line_snr(pw: &[f64], bins: &[f64]) -> Vec<f64> {
     bins.iter()
         .map(|&b| {
             let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
-            if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+            if outside > 0.0 {
+                line / outside
+            } else if line > 0.0 {
+                f64::INFINITY
+            } else {
+                f64::NAN
+            }
         })
         .collect()
 }
@@ -571,7 +576,13 @@ fn lobe_snr(pw: &[f64], bins: &[f64], outside: f64) -> Vec<f64> {
     bins.iter()
         .map(|&b| {
             let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
-            if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+            if outside > 0.0 {
+                line / outside
+            } else if line > 0.0 {
+                f64::INFINITY
+            } else {
+                f64::NAN
+            }
         })
         .collect()
 }
@@ -616,11 +627,7 @@ fn lines_of(px: &[f64], py: &[f64], pvx: &[f64], pvy: &[f64], df: f64) -> LineAn
         let snr = |pd: &[f64], pv: &[f64], b: &[f64]| -> Vec<f64> {
             line_snr(pd, b).into_iter().zip(line_snr(pv, b)).map(|(a, v)| if a.is_nan() || v.is_nan() { f64::NAN } else { a.min(v) }).collect()
         };
-        (
-            [fraction_in(px, &bx), fraction_in(py, &by)],
-            [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)],
-            [snr(px, pvx, &bx), snr(py, pvy, &by)],
-        )
+        ([fraction_in(px, &bx), fraction_in(py, &by)], [1.0 - fraction_in(pvx, &bx), 1.0 - fraction_in(pvy, &by)], [snr(px, pvx, &bx), snr(py, pvy, &by)])
     };
     let lx: Vec<f64> = bx.iter().map(|b| b * df).collect();
     let ly: Vec<f64> = by.iter().map(|b| b * df).collect();
@@ -684,7 +691,8 @@ mod tests {
     fn lobe_sums_equal_the_passes_over_every_bin() {
         let nb = 8_193;
         let pw: Vec<f64> = (0..nb).map(|k| 1e-12 * (1.0 + ((k * 7919) % 1013) as f64) * (1.0 + (k as f64 * 0.37).sin().abs())).collect();
-        let cases: [&[f64]; 6] = [&[], &[94.2, 151.7], &[1.0, 2.5, nb as f64 - 1.0], &[0.0, nb as f64 + 0.4], &[f64::NAN, 40.0, f64::INFINITY], &[30.49, 30.51, 4_000.0]];
+        let cases: [&[f64]; 6] =
+            [&[], &[94.2, 151.7], &[1.0, 2.5, nb as f64 - 1.0], &[0.0, nb as f64 + 0.4], &[f64::NAN, 40.0, f64::INFINITY], &[30.49, 30.51, 4_000.0]];
         for bins in cases {
             let near_any = |k: usize| bins.iter().any(|&b| near(k, b));
             let outside: f64 = (1..nb).filter(|&k| !near_any(k)).map(|k| pw[k]).sum();
@@ -692,7 +700,13 @@ mod tests {
                 .iter()
                 .map(|&b| {
                     let line: f64 = (1..nb).filter(|&k| near(k, b)).map(|k| pw[k]).sum();
-                    if outside > 0.0 { line / outside } else if line > 0.0 { f64::INFINITY } else { f64::NAN }
+                    if outside > 0.0 {
+                        line / outside
+                    } else if line > 0.0 {
+                        f64::INFINITY
+                    } else {
+                        f64::NAN
+                    }
                 })
                 .collect();
             assert_eq!(format!("{:?}", line_snr(&pw, bins)), format!("{snr:?}"), "lines {bins:?}");
@@ -719,7 +733,9 @@ mod tests {
     fn line_search_fed_in_pieces_is_bitwise_analyse() {
         let fs = 5000.0;
         let n = 150_001;
-        let sig = |f: f64, ph: f64| -> Vec<f64> { (0..n).map(|t| (2.0 * std::f64::consts::PI * f * t as f64 / fs + ph).sin() + 1e-4 * ((t * 7919) % 101) as f64).collect() };
+        let sig = |f: f64, ph: f64| -> Vec<f64> {
+            (0..n).map(|t| (2.0 * std::f64::consts::PI * f * t as f64 / fs + ph).sin() + 1e-4 * ((t * 7919) % 101) as f64).collect()
+        };
         let (x, y, vx, vy) = (sig(23.0, 0.1), sig(37.0, 0.7), sig(23.0, 1.1), sig(37.0, 2.0));
         let whole = format!("{:?}", analyse(&x, &y, &vx, &vy, fs));
         for step in [1_000, 33_333, n] {
@@ -740,7 +756,12 @@ mod tests {
     fn finds_two_lines() {
         let fs = 5000.0;
         let n = 20_000;
-        let x: Vec<f64> = (0..n).map(|t| { let s = t as f64 / fs; (2.0 * std::f64::consts::PI * 20.0 * s).sin() + 0.5 * (2.0 * std::f64::consts::PI * 47.3 * s).cos() }).collect();
+        let x: Vec<f64> = (0..n)
+            .map(|t| {
+                let s = t as f64 / fs;
+                (2.0 * std::f64::consts::PI * 20.0 * s).sin() + 0.5 * (2.0 * std::f64::consts::PI * 47.3 * s).cos()
+            })
+            .collect();
         let y: Vec<f64> = (0..n).map(|t| (2.0 * std::f64::consts::PI * 31.0 * t as f64 / fs).sin()).collect();
         let a = analyse(&x, &y, &x, &y, fs);
         assert_eq!(a.lines[0].len(), 2, "{:?}", a.lines);

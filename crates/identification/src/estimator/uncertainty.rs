@@ -177,7 +177,11 @@ const MISFIT_RATIO: f64 = 20.0;
 pub fn parzen_lag(n: usize) -> (usize, bool) {
     let l = (n as f64).powf(2.0 / 3.0).ceil() as usize;
     let cap = n / 4;
-    if l > cap { (cap, true) } else { (l, false) }
+    if l > cap {
+        (cap, true)
+    } else {
+        (l, false)
+    }
 }
 
 /// Parzen's lag window at `u = l / L` (zero for `|u| ≥ 1`).
@@ -403,7 +407,11 @@ pub fn spectral_of_decimated(decimated: &[&[f64]], n: usize, p: usize, mean: &[f
                 .map(|i| {
                     let dens = if h == 0 { g[i].re } else { g[i].im };
                     let p = raw[i] / nd as f64;
-                    if p > MISFIT_RATIO * dens { p } else { dens }
+                    if p > MISFIT_RATIO * dens {
+                        p
+                    } else {
+                        dens
+                    }
                 })
                 .collect();
         }
@@ -477,7 +485,11 @@ fn split_pair(z: &[Complex<f64>], a_re: &mut [f64], a_im: &mut [f64], b_re: &mut
 
 /// Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
 fn bin_weight(k: usize, nfft: usize) -> f64 {
-    if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 }
+    if k == 0 || k == nfft / 2 {
+        1.0
+    } else {
+        2.0
+    }
 }
 
 /// `s[a p + b] = Σ_i (re_a re_b + im_a im_b)_i d_i` for `b >= a`, `d_i` the density times the
@@ -639,11 +651,7 @@ fn var1<const P: usize>(g: &[[f64; P]]) -> [[f64; P]; P] {
     let mut out = [[0.0; P]; P];
     for i in 0..P {
         for j in 0..P {
-            out[i][j] = if top <= RHO_MAX {
-                a[i * P + j]
-            } else {
-                (0..P).map(|kk| svd.u[i * P + kk] * svd.sigma[kk].min(RHO_MAX) * svd.v[j * P + kk]).sum()
-            };
+            out[i][j] = if top <= RHO_MAX { a[i * P + j] } else { (0..P).map(|kk| svd.u[i * P + kk] * svd.sigma[kk].min(RHO_MAX) * svd.v[j * P + kk]).sum() };
         }
     }
     out
@@ -693,7 +701,11 @@ fn andrews_lag<const P: usize>(u: &[[f64; P]]) -> (usize, bool) {
     let bandwidth = 1.1447 * (alpha * n as f64).cbrt();
     let lag = if bandwidth.is_finite() && bandwidth > 1.0 { bandwidth.ceil() as usize - 1 } else { 0 };
     let cap = n / 4;
-    if lag > cap { (cap, true) } else { (lag, false) }
+    if lag > cap {
+        (cap, true)
+    } else {
+        (lag, false)
+    }
 }
 
 /// `S = (1/(L+1)) Σ_t G_t G_tᵀ` with `G_t` the moving sum of the last `L + 1` rows of `u`.
@@ -744,134 +756,137 @@ fn recolour<const P: usize>(s_u: &[[f64; P]; P], a: &[[f64; P]; P]) -> [[f64; P]
 mod tests {
     use super::*;
 
-/// [`spectral_of_decimated`] as it was written first (allocating per transform, one loop per
-/// formula): the definition the faster one must equal bit for bit (tested).
-///
-/// The spectral standard errors from the window's every `q`-th sample alone: `decimated` holds
-/// samples `0, q, 2q, ...` of each column (regressors, then right-hand sides) of a window of
-/// `n` samples, `⌈n/q⌉` each; the rest as [`spectral_decimated`], whose errors these are, bit
-/// for bit. The residual RMS is left NaN: it needs every sample, and the caller has it from
-/// the window's factor (the column norms of `T`, see `qr`) without another pass.
-#[cfg(test)]
-#[allow(clippy::too_many_arguments)]
-fn spectral_of_decimated_reference(decimated: &[&[f64]], n: usize, p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64], q: usize) -> Hac {
-    let nq_cols = decimated.len();
-    let m = nq_cols.saturating_sub(p);
-    let mut out = Hac::nan(p, m);
-    if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < nq_cols || q == 0 {
-        return out;
-    }
-    let dof = n as f64 / (n - p - 1) as f64;
-    let (full_lag, capped) = parzen_lag(n);
-    out.lag_capped = capped;
-    // Samples and lag on the decimated grid (the full ones when q = 1).
-    let nd = n.div_ceil(q);
-    let lag = if q == 1 { full_lag } else { full_lag.div_ceil(q) };
-    if nd <= p + 2 || decimated.iter().any(|c| c.len() < nd) {
-        return out;
-    }
-    let nfft = (nd + lag + 1).next_power_of_two();
-    let nb = nfft / 2 + 1;
-    // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
-    let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
-
-    // Spectra of the centred, scaled regressors, two per FFT.
-    let scaled: Vec<Vec<f64>> = (0..p).map(|j| decimated[j][..nd].iter().map(|v| (v - mean[j]) / scale[j]).collect()).collect();
-    let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
-    for j in (0..p).step_by(2) {
-        let (a, b) = fft_pair(&scaled[j], scaled.get(j + 1).map(|v| v.as_slice()), nfft);
-        spec.push(a);
-        if j + 1 < p {
-            spec.push(b);
+    /// [`spectral_of_decimated`] as it was written first (allocating per transform, one loop per
+    /// formula): the definition the faster one must equal bit for bit (tested).
+    ///
+    /// The spectral standard errors from the window's every `q`-th sample alone: `decimated` holds
+    /// samples `0, q, 2q, ...` of each column (regressors, then right-hand sides) of a window of
+    /// `n` samples, `⌈n/q⌉` each; the rest as [`spectral_decimated`], whose errors these are, bit
+    /// for bit. The residual RMS is left NaN: it needs every sample, and the caller has it from
+    /// the window's factor (the column norms of `T`, see `qr`) without another pass.
+    #[cfg(test)]
+    #[allow(clippy::too_many_arguments)]
+    fn spectral_of_decimated_reference(decimated: &[&[f64]], n: usize, p: usize, mean: &[f64], scale: &[f64], coef: &[f64], ginv_s: &[f64], q: usize) -> Hac {
+        let nq_cols = decimated.len();
+        let m = nq_cols.saturating_sub(p);
+        let mut out = Hac::nan(p, m);
+        if p == 0 || p > 8 || n <= p + 2 || coef.len() != p * m || ginv_s.len() != p * p || scale.len() < p || mean.len() < nq_cols || q == 0 {
+            return out;
         }
-    }
-
-    // Residuals of every right-hand side on the decimated grid, all right-hand sides in one
-    // pass over the regressors.
-    let mut resid: Vec<Vec<f64>> = (0..m).map(|_| Vec::with_capacity(nd)).collect();
-    let mut centred = vec![0.0; p];
-    for t in 0..nd {
-        for j in 0..p {
-            centred[j] = decimated[j][t] - mean[j];
+        let dof = n as f64 / (n - p - 1) as f64;
+        let (full_lag, capped) = parzen_lag(n);
+        out.lag_capped = capped;
+        // Samples and lag on the decimated grid (the full ones when q = 1).
+        let nd = n.div_ceil(q);
+        let lag = if q == 1 { full_lag } else { full_lag.div_ceil(q) };
+        if nd <= p + 2 || decimated.iter().any(|c| c.len() < nd) {
+            return out;
         }
-        for k in 0..m {
-            let mut e = decimated[p + k][t] - mean[p + k];
+        let nfft = (nd + lag + 1).next_power_of_two();
+        let nb = nfft / 2 + 1;
+        // Bins 0 and N/2 appear once in the full sum over k, the others twice (k and N - k).
+        let bin_weight = |k: usize| if k == 0 || k == nfft / 2 { 1.0 } else { 2.0 };
+
+        // Spectra of the centred, scaled regressors, two per FFT.
+        let scaled: Vec<Vec<f64>> = (0..p).map(|j| decimated[j][..nd].iter().map(|v| (v - mean[j]) / scale[j]).collect()).collect();
+        let mut spec: Vec<[Vec<f64>; 2]> = Vec::with_capacity(p);
+        for j in (0..p).step_by(2) {
+            let (a, b) = fft_pair(&scaled[j], scaled.get(j + 1).map(|v| v.as_slice()), nfft);
+            spec.push(a);
+            if j + 1 < p {
+                spec.push(b);
+            }
+        }
+
+        // Residuals of every right-hand side on the decimated grid, all right-hand sides in one
+        // pass over the regressors.
+        let mut resid: Vec<Vec<f64>> = (0..m).map(|_| Vec::with_capacity(nd)).collect();
+        let mut centred = vec![0.0; p];
+        for t in 0..nd {
             for j in 0..p {
-                e -= centred[j] * coef[j * m + k];
+                centred[j] = decimated[j][t] - mean[j];
             }
-            resid[k].push(e);
+            for k in 0..m {
+                let mut e = decimated[p + k][t] - mean[p + k];
+                for j in 0..p {
+                    e -= centred[j] * coef[j * m + k];
+                }
+                resid[k].push(e);
+            }
         }
-    }
 
-    // Residual spectral densities per right-hand side, bins 0..=N/2.
-    let mut density = vec![Vec::new(); m];
-    for k0 in (0..m).step_by(2) {
-        let pair = [Some(k0), (k0 + 1 < m).then_some(k0 + 1)];
-        // Periodograms |E_k|², full length N (real and even).
-        let (ea, eb) = fft_pair(&resid[k0], pair[1].map(|k| resid[k].as_slice()), nfft);
-        let full = |s: &[Vec<f64>; 2]| -> Vec<f64> {
-            let mut v = vec![0.0; nfft];
-            for i in 0..nb {
-                let pw = s[0][i] * s[0][i] + s[1][i] * s[1][i];
-                v[i] = pw;
-                v[(nfft - i) % nfft] = pw;
+        // Residual spectral densities per right-hand side, bins 0..=N/2.
+        let mut density = vec![Vec::new(); m];
+        for k0 in (0..m).step_by(2) {
+            let pair = [Some(k0), (k0 + 1 < m).then_some(k0 + 1)];
+            // Periodograms |E_k|², full length N (real and even).
+            let (ea, eb) = fft_pair(&resid[k0], pair[1].map(|k| resid[k].as_slice()), nfft);
+            let full = |s: &[Vec<f64>; 2]| -> Vec<f64> {
+                let mut v = vec![0.0; nfft];
+                for i in 0..nb {
+                    let pw = s[0][i] * s[0][i] + s[1][i] * s[1][i];
+                    v[i] = pw;
+                    v[(nfft - i) % nfft] = pw;
+                }
+                v
+            };
+            // Autocovariances Σ_t e_t e_{t+l} = FFT(|E|²)(l) / N (exact for l ≤ N - n).
+            let (ca, cb) = fft_even_pair(full(&ea), full(&eb));
+            // Lag-windowed, biased autocovariances, placed symmetrically on 0..N.
+            let windowed = |c: &[f64]| -> Vec<f64> {
+                let mut g = vec![0.0; nfft];
+                for l in 0..=lag.min(nfft / 2 - 1) {
+                    let w = parzen(l as f64 / (lag.max(1)) as f64) * c[l] / (nfft as f64 * nd as f64);
+                    g[l] = w;
+                    if l > 0 {
+                        g[nfft - l] = w;
+                    }
+                }
+                g
+            };
+            // Spectral densities on the grid (real: the sequences are even).
+            let (sa, sb) = fft_even_pair(windowed(&ca), windowed(&cb));
+            for ((slot, dens), raw) in pair.iter().zip([&sa, &sb]).zip([&ea, &eb]) {
+                let Some(k) = *slot else { continue };
+                // Lines in the residual (misfit) stay at their own height.
+                density[k] = (0..nb)
+                    .map(|i| {
+                        let p = (raw[0][i] * raw[0][i] + raw[1][i] * raw[1][i]) / nd as f64;
+                        if p > MISFIT_RATIO * dens[i] {
+                            p
+                        } else {
+                            dens[i]
+                        }
+                    })
+                    .collect();
             }
-            v
-        };
-        // Autocovariances Σ_t e_t e_{t+l} = FFT(|E|²)(l) / N (exact for l ≤ N - n).
-        let (ca, cb) = fft_even_pair(full(&ea), full(&eb));
-        // Lag-windowed, biased autocovariances, placed symmetrically on 0..N.
-        let windowed = |c: &[f64]| -> Vec<f64> {
-            let mut g = vec![0.0; nfft];
-            for l in 0..=lag.min(nfft / 2 - 1) {
-                let w = parzen(l as f64 / (lag.max(1)) as f64) * c[l] / (nfft as f64 * nd as f64);
-                g[l] = w;
-                if l > 0 {
-                    g[nfft - l] = w;
+        }
+
+        // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k), every right-hand side in one pass over the
+        // regressors' spectra (each sum still in bin order).
+        let mut sums = vec![vec![0.0; p * p]; m];
+        for i in 0..nb {
+            for (s, dens) in sums.iter_mut().zip(&density) {
+                let d = dens[i].max(0.0) * bin_weight(i);
+                if d == 0.0 {
+                    continue;
+                }
+                for a in 0..p {
+                    let (ar, ai) = (spec[a][0][i], spec[a][1][i]);
+                    for b in a..p {
+                        s[a * p + b] += (ar * spec[b][0][i] + ai * spec[b][1][i]) * d;
+                    }
                 }
             }
-            g
-        };
-        // Spectral densities on the grid (real: the sequences are even).
-        let (sa, sb) = fft_even_pair(windowed(&ca), windowed(&cb));
-        for ((slot, dens), raw) in pair.iter().zip([&sa, &sb]).zip([&ea, &eb]) {
-            let Some(k) = *slot else { continue };
-            // Lines in the residual (misfit) stay at their own height.
-            density[k] = (0..nb)
-                .map(|i| {
-                    let p = (raw[0][i] * raw[0][i] + raw[1][i] * raw[1][i]) / nd as f64;
-                    if p > MISFIT_RATIO * dens[i] { p } else { dens[i] }
-                })
-                .collect();
         }
-    }
-
-    // S = (1/N) Σ_k Re(conj(A_k) A_kᵀ) Ŝ_e(f_k), every right-hand side in one pass over the
-    // regressors' spectra (each sum still in bin order).
-    let mut sums = vec![vec![0.0; p * p]; m];
-    for i in 0..nb {
-        for (s, dens) in sums.iter_mut().zip(&density) {
-            let d = dens[i].max(0.0) * bin_weight(i);
-            if d == 0.0 {
-                continue;
-            }
-            for a in 0..p {
-                let (ar, ai) = (spec[a][0][i], spec[a][1][i]);
-                for b in a..p {
-                    s[a * p + b] += (ar * spec[b][0][i] + ai * spec[b][1][i]) * d;
-                }
-            }
+        // Σ over every q-th sample of a band-limited product is 1/q of the full sum, so the full
+        // window's S is q² times the decimated one's.
+        for (k, mut s) in sums.into_iter().enumerate() {
+            out.lag[k] = lag * q;
+            standard_errors_from_sums(&mut s, p, nfft, q, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
         }
+        out
     }
-    // Σ over every q-th sample of a band-limited product is 1/q of the full sum, so the full
-    // window's S is q² times the decimated one's.
-    for (k, mut s) in sums.into_iter().enumerate() {
-        out.lag[k] = lag * q;
-        standard_errors_from_sums(&mut s, p, nfft, q, ginv_s, dof, scale, |j, se| out.se[j * m + k] = se);
-    }
-    out
-}
-
 
     /// The faster spectral standard errors are the plain ones, bit for bit: regressor counts
     /// even and odd, one and two right-hand sides, decimated or not, a residual with a line.
@@ -886,7 +901,15 @@ fn spectral_of_decimated_reference(decimated: &[&[f64]], n: usize, p: usize, mea
         };
         for (p, m, n, q) in [(4, 2, 25_000, 11), (6, 2, 20_000, 9), (4, 1, 3_000, 1), (3, 2, 5_000, 2), (1, 1, 800, 1), (8, 2, 9_000, 4)] {
             let cols: Vec<Vec<f64>> = (0..p + m)
-                .map(|c| (0..n).map(|t| (c as f64 + 1.0) * (t as f64 * (0.01 + 0.003 * c as f64)).sin() + 0.1 * noise() + if c >= p { 0.3 * (t as f64 * 0.2).cos() } else { 0.0 }).collect())
+                .map(|c| {
+                    (0..n)
+                        .map(|t| {
+                            (c as f64 + 1.0) * (t as f64 * (0.01 + 0.003 * c as f64)).sin()
+                                + 0.1 * noise()
+                                + if c >= p { 0.3 * (t as f64 * 0.2).cos() } else { 0.0 }
+                        })
+                        .collect()
+                })
                 .collect();
             let dec: Vec<Vec<f64>> = cols.iter().map(|c| c.iter().step_by(q).copied().collect()).collect();
             let views: Vec<&[f64]> = dec.iter().map(|c| c.as_slice()).collect();

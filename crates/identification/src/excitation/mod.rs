@@ -207,19 +207,12 @@ impl Waveform {
     fn value(&self, t_s: f64) -> f64 {
         match *self {
             Waveform::Off => 0.0,
-            Waveform::Sine { frequency_hz, amplitude_n, phase_deg } => {
-                amplitude_n
-                    * (2.0 * PI * (frequency_hz * t_s).fract() + phase_deg.to_radians()).sin()
-            }
-            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
-                match multisine::lines(band_hz, period_s, line_set) {
-                    Ok(lines) => multisine::value(lines, rms_n, period_s, t_s),
-                    Err(_) => 0.0,
-                }
-            }
-            Waveform::Chirp { start_hz, end_hz, sweep_s, amplitude_n } => {
-                amplitude_n * (2.0 * PI * chirp_cycles(start_hz, end_hz, sweep_s, t_s)).sin()
-            }
+            Waveform::Sine { frequency_hz, amplitude_n, phase_deg } => amplitude_n * (2.0 * PI * (frequency_hz * t_s).fract() + phase_deg.to_radians()).sin(),
+            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => match multisine::lines(band_hz, period_s, line_set) {
+                Ok(lines) => multisine::value(lines, rms_n, period_s, t_s),
+                Err(_) => 0.0,
+            },
+            Waveform::Chirp { start_hz, end_hz, sweep_s, amplitude_n } => amplitude_n * (2.0 * PI * chirp_cycles(start_hz, end_hz, sweep_s, t_s)).sin(),
         }
     }
 
@@ -234,21 +227,15 @@ impl Waveform {
                 // sin(x + p) = cos(x + p - pi/2)
                 phase_rad: phase_deg.to_radians() - PI / 2.0,
             }],
-            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
-                match Design::new(band_hz, period_s, rms_n, line_set) {
-                    Ok(d) => d
-                        .harmonics
-                        .iter()
-                        .zip(&d.phases_rad)
-                        .map(|(&k, &phase_rad)| Tone {
-                            frequency_hz: k as f64 / period_s,
-                            amplitude_n: d.amplitude_n,
-                            phase_rad,
-                        })
-                        .collect(),
-                    Err(_) => Vec::new(),
-                }
-            }
+            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => match Design::new(band_hz, period_s, rms_n, line_set) {
+                Ok(d) => d
+                    .harmonics
+                    .iter()
+                    .zip(&d.phases_rad)
+                    .map(|(&k, &phase_rad)| Tone { frequency_hz: k as f64 / period_s, amplitude_n: d.amplitude_n, phase_rad })
+                    .collect(),
+                Err(_) => Vec::new(),
+            },
         }
     }
 
@@ -266,15 +253,11 @@ impl Waveform {
     pub fn peak_force_n(&self) -> f64 {
         match *self {
             Waveform::Off => 0.0,
-            Waveform::Sine { amplitude_n, .. } | Waveform::Chirp { amplitude_n, .. } => {
-                amplitude_n.abs()
-            }
-            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
-                match Design::new(band_hz, period_s, rms_n, line_set) {
-                    Ok(d) => d.peak().2,
-                    Err(_) => f64::NAN,
-                }
-            }
+            Waveform::Sine { amplitude_n, .. } | Waveform::Chirp { amplitude_n, .. } => amplitude_n.abs(),
+            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => match Design::new(band_hz, period_s, rms_n, line_set) {
+                Ok(d) => d.peak().2,
+                Err(_) => f64::NAN,
+            },
         }
     }
 
@@ -285,15 +268,13 @@ impl Waveform {
     pub fn crest_factor(&self) -> f64 {
         let (peak, rms) = match *self {
             Waveform::Off => return 0.0,
-            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
-                match Design::new(band_hz, period_s, rms_n, line_set) {
-                    Ok(d) => {
-                        let (peak, rms, _) = d.peak();
-                        (peak, rms)
-                    }
-                    Err(_) => return f64::NAN,
+            Waveform::Multisine { band_hz, period_s, rms_n, line_set } => match Design::new(band_hz, period_s, rms_n, line_set) {
+                Ok(d) => {
+                    let (peak, rms, _) = d.peak();
+                    (peak, rms)
                 }
-            }
+                Err(_) => return f64::NAN,
+            },
             Waveform::Sine { frequency_hz, .. } => {
                 if !finite_positive(frequency_hz) {
                     return f64::NAN;
@@ -354,10 +335,7 @@ impl ExcitationPlan {
     /// docs). Kept for reproducing the paper; prefer [`ExcitationPlan::two_tone`].
     pub fn paper_sine(frequency_hz: f64, amplitude_n: f64) -> Self {
         Self {
-            exciters: [
-                Waveform::Sine { frequency_hz, amplitude_n, phase_deg: 0.0 },
-                Waveform::Sine { frequency_hz, amplitude_n, phase_deg: -90.0 },
-            ],
+            exciters: [Waveform::Sine { frequency_hz, amplitude_n, phase_deg: 0.0 }, Waveform::Sine { frequency_hz, amplitude_n, phase_deg: -90.0 }],
             ramp_s: DEFAULT_RAMP_S,
             amplitude_steps: Vec::new(),
         }
@@ -383,11 +361,7 @@ impl ExcitationPlan {
     /// one known force direction), each with `rms_n`.
     pub fn multisine(band_hz: [f64; 2], period_s: f64, rms_n: f64) -> Self {
         let make = |line_set| Waveform::Multisine { band_hz, period_s, rms_n, line_set };
-        Self {
-            exciters: [make(LineSet::Odd), make(LineSet::Even)],
-            ramp_s: DEFAULT_RAMP_S,
-            amplitude_steps: Vec::new(),
-        }
+        Self { exciters: [make(LineSet::Odd), make(LineSet::Even)], ramp_s: DEFAULT_RAMP_S, amplitude_steps: Vec::new() }
     }
 
     /// Checks the plan against the rig's hard limits. Refuses, naming the exciter and the
@@ -401,23 +375,14 @@ impl ExcitationPlan {
     ///   steps) above `limits.max_force_n` (`ExcitationLimit`).
     pub fn validate(&self, limits: &Limits) -> Result<(), IdentificationError> {
         if !finite_positive(limits.max_force_n) {
-            return Err(IdentificationError::invalid(
-                "limits.max_force_n",
-                format!("must be finite and positive, got {}", limits.max_force_n),
-            ));
+            return Err(IdentificationError::invalid("limits.max_force_n", format!("must be finite and positive, got {}", limits.max_force_n)));
         }
         let [lo, hi] = limits.band_hz;
         if !(finite_non_negative(lo) && hi.is_finite() && lo < hi) {
-            return Err(IdentificationError::invalid(
-                "limits.band_hz",
-                format!("must be finite with 0 <= low < high, got [{lo}, {hi}]"),
-            ));
+            return Err(IdentificationError::invalid("limits.band_hz", format!("must be finite with 0 <= low < high, got [{lo}, {hi}]")));
         }
         if !finite_non_negative(self.ramp_s) {
-            return Err(IdentificationError::invalid(
-                "ramp_s",
-                format!("must be finite and non-negative, got {}", self.ramp_s),
-            ));
+            return Err(IdentificationError::invalid("ramp_s", format!("must be finite and non-negative, got {}", self.ramp_s)));
         }
         let last = self.amplitude_steps.len().saturating_sub(1);
         for (i, step) in self.amplitude_steps.iter().enumerate() {
@@ -449,11 +414,7 @@ impl ExcitationPlan {
                 ));
             }
         }
-        let max_scale = if self.amplitude_steps.is_empty() {
-            1.0
-        } else {
-            self.amplitude_steps.iter().fold(0.0_f64, |m, s| m.max(s.scale))
-        };
+        let max_scale = if self.amplitude_steps.is_empty() { 1.0 } else { self.amplitude_steps.iter().fold(0.0_f64, |m, s| m.max(s.scale)) };
         for (j, waveform) in self.exciters.iter().enumerate() {
             validate_waveform(j, waveform, limits, max_scale)?;
         }
@@ -531,65 +492,32 @@ impl ExcitationPlan {
     /// Honest peak force of each exciter over the whole plan: waveform peak times the largest
     /// amplitude-step scale (1 without steps). NaN for a malformed waveform.
     pub fn peak_force_n(&self) -> [f64; 2] {
-        let scale = if self.amplitude_steps.is_empty() {
-            1.0
-        } else {
-            self.amplitude_steps.iter().fold(0.0_f64, |m, s| m.max(s.scale.abs()))
-        };
+        let scale = if self.amplitude_steps.is_empty() { 1.0 } else { self.amplitude_steps.iter().fold(0.0_f64, |m, s| m.max(s.scale.abs())) };
         [self.exciters[0].peak_force_n() * scale, self.exciters[1].peak_force_n() * scale]
     }
 }
 
-fn validate_waveform(
-    j: usize,
-    waveform: &Waveform,
-    limits: &Limits,
-    max_scale: f64,
-) -> Result<(), IdentificationError> {
+fn validate_waveform(j: usize, waveform: &Waveform, limits: &Limits, max_scale: f64) -> Result<(), IdentificationError> {
     let label = exciter_label(j);
     let check = |ok: bool, name: &str, value: f64, rule: &str| {
         if ok {
             Ok(())
         } else {
-            Err(IdentificationError::invalid(
-                format!("exciters[{j}].{name}"),
-                format!("{label}: {name} must be {rule}, got {value}"),
-            ))
+            Err(IdentificationError::invalid(format!("exciters[{j}].{name}"), format!("{label}: {name} must be {rule}, got {value}")))
         }
     };
     let out_of_band = |what: String, f: f64| {
-        IdentificationError::ExcitationLimit(format!(
-            "{label}: {what} = {f} Hz lies outside the rig band [{}, {}] Hz",
-            limits.band_hz[0], limits.band_hz[1]
-        ))
+        IdentificationError::ExcitationLimit(format!("{label}: {what} = {f} Hz lies outside the rig band [{}, {}] Hz", limits.band_hz[0], limits.band_hz[1]))
     };
     let too_strong = |peak: f64, how: String| {
-        IdentificationError::ExcitationLimit(format!(
-            "{label}: peak force {} N ({how}) exceeds max_force_n = {} N",
-            readable(peak),
-            limits.max_force_n
-        ))
+        IdentificationError::ExcitationLimit(format!("{label}: peak force {} N ({how}) exceeds max_force_n = {} N", readable(peak), limits.max_force_n))
     };
-    let scaled = if max_scale == 1.0 {
-        String::new()
-    } else {
-        format!(" x largest amplitude-step scale {max_scale}")
-    };
+    let scaled = if max_scale == 1.0 { String::new() } else { format!(" x largest amplitude-step scale {max_scale}") };
     match *waveform {
         Waveform::Off => Ok(()),
         Waveform::Sine { frequency_hz, amplitude_n, phase_deg } => {
-            check(
-                finite_positive(frequency_hz),
-                "frequency_hz",
-                frequency_hz,
-                "finite and positive",
-            )?;
-            check(
-                finite_non_negative(amplitude_n),
-                "amplitude_n",
-                amplitude_n,
-                "finite and non-negative",
-            )?;
+            check(finite_positive(frequency_hz), "frequency_hz", frequency_hz, "finite and positive")?;
+            check(finite_non_negative(amplitude_n), "amplitude_n", amplitude_n, "finite and non-negative")?;
             check(phase_deg.is_finite(), "phase_deg", phase_deg, "finite")?;
             if !in_band(frequency_hz, limits.band_hz) {
                 return Err(out_of_band("sine frequency_hz".into(), frequency_hz));
@@ -603,12 +531,8 @@ fn validate_waveform(
         Waveform::Multisine { band_hz, period_s, rms_n, line_set } => {
             check(finite_positive(period_s), "period_s", period_s, "finite and positive")?;
             check(finite_non_negative(rms_n), "rms_n", rms_n, "finite and non-negative")?;
-            let design = Design::new(band_hz, period_s, rms_n, line_set).map_err(|reason| {
-                IdentificationError::invalid(
-                    format!("exciters[{j}].band_hz"),
-                    format!("{label}: {reason}"),
-                )
-            })?;
+            let design = Design::new(band_hz, period_s, rms_n, line_set)
+                .map_err(|reason| IdentificationError::invalid(format!("exciters[{j}].band_hz"), format!("{label}: {reason}")))?;
             for &k in &design.harmonics {
                 let f = k as f64 / period_s;
                 if !in_band(f, limits.band_hz) {
@@ -619,13 +543,7 @@ fn validate_waveform(
             let peak = bound * max_scale;
             if peak > limits.max_force_n {
                 let crest = if rms > 0.0 { bound / rms } else { f64::NAN };
-                return Err(too_strong(
-                    peak,
-                    format!(
-                        "rms_n {rms_n} N x true crest factor {crest:.3} over {} lines{scaled}",
-                        design.harmonics.len()
-                    ),
-                ));
+                return Err(too_strong(peak, format!("rms_n {rms_n} N x true crest factor {crest:.3} over {} lines{scaled}", design.harmonics.len())));
             }
             Ok(())
         }
@@ -633,12 +551,7 @@ fn validate_waveform(
             check(finite_non_negative(start_hz), "start_hz", start_hz, "finite and non-negative")?;
             check(finite_non_negative(end_hz), "end_hz", end_hz, "finite and non-negative")?;
             check(finite_positive(sweep_s), "sweep_s", sweep_s, "finite and positive")?;
-            check(
-                finite_non_negative(amplitude_n),
-                "amplitude_n",
-                amplitude_n,
-                "finite and non-negative",
-            )?;
+            check(finite_non_negative(amplitude_n), "amplitude_n", amplitude_n, "finite and non-negative")?;
             for (name, f) in [("chirp start_hz", start_hz), ("chirp end_hz", end_hz)] {
                 if !in_band(f, limits.band_hz) {
                     return Err(out_of_band(name.into(), f));

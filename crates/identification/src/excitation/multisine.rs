@@ -92,21 +92,14 @@ pub(crate) fn lines(band_hz: [f64; 2], period_s: f64, set: LineSet) -> Result<Li
             LineSet::Odd => "odd ",
             LineSet::Even => "even ",
         };
-        return Err(format!(
-            "no {which}harmonic of 1/period_s = {} Hz lies in band [{lo}, {hi}] Hz",
-            1.0 / period_s
-        ));
+        return Err(format!("no {which}harmonic of 1/period_s = {} Hz lies in band [{lo}, {hi}] Hz", 1.0 / period_s));
     }
     Ok(Lines { first, step, count: (k_hi - first) / step + 1 })
 }
 
 /// [`lines`] as a list.
 #[cfg(test)]
-pub(crate) fn harmonics(
-    band_hz: [f64; 2],
-    period_s: f64,
-    set: LineSet,
-) -> Result<Vec<u64>, String> {
+pub(crate) fn harmonics(band_hz: [f64; 2], period_s: f64, set: LineSet) -> Result<Vec<u64>, String> {
     lines(band_hz, period_s, set).map(|l| l.iter().collect())
 }
 
@@ -174,11 +167,7 @@ impl Design {
     pub fn new(band_hz: [f64; 2], period_s: f64, rms_n: f64, set: LineSet) -> Result<Self, String> {
         let lines = lines(band_hz, period_s, set)?;
         let n = lines.count;
-        Ok(Self {
-            harmonics: lines.iter().collect(),
-            phases_rad: (1..=n).map(|i| schroeder_phase(i, n)).collect(),
-            amplitude_n: line_amplitude(rms_n, n),
-        })
+        Ok(Self { harmonics: lines.iter().collect(), phases_rad: (1..=n).map(|i| schroeder_phase(i, n)).collect(), amplitude_n: line_amplitude(rms_n, n) })
     }
 
     /// The signal at time `t_s` for period `period_s`, one cosine per line: the reference
@@ -186,12 +175,7 @@ impl Design {
     #[cfg(test)]
     fn value(&self, period_s: f64, t_s: f64) -> f64 {
         let u = t_s.rem_euclid(period_s) / period_s;
-        self.harmonics
-            .iter()
-            .zip(&self.phases_rad)
-            .map(|(&k, &phi)| (2.0 * PI * (k as f64 * u).fract() + phi).cos())
-            .sum::<f64>()
-            * self.amplitude_n
+        self.harmonics.iter().zip(&self.phases_rad).map(|(&k, &phi)| (2.0 * PI * (k as f64 * u).fract() + phi).cos()).sum::<f64>() * self.amplitude_n
     }
 
     /// The signal at `m` equally spaced points of one period (`u = j / m`), by an inverse FFT.
@@ -212,8 +196,7 @@ impl Design {
     /// Upper bound of `|second derivative|` with respect to the period fraction `u`:
     /// `a * sum (2 pi k)^2`.
     fn curvature_bound(&self) -> f64 {
-        self.amplitude_n.abs()
-            * self.harmonics.iter().map(|&k| (2.0 * PI * k as f64).powi(2)).sum::<f64>()
+        self.amplitude_n.abs() * self.harmonics.iter().map(|&k| (2.0 * PI * k as f64).powi(2)).sum::<f64>()
     }
 
     /// Number of points per period at which the sampled maximum is within 0.1 % of the true
@@ -224,11 +207,9 @@ impl Design {
         // The peak is at least the rms, a sqrt(N/2); ask the sampling error
         // D2 / (8 m^2) to stay below 1e-3 of that.
         let rms = self.amplitude_n.abs() * (n / 2.0).sqrt();
-        let wanted =
-            if rms > 0.0 { (self.curvature_bound() / (8.0 * 1e-3 * rms)).sqrt() } else { 0.0 };
+        let wanted = if rms > 0.0 { (self.curvature_bound() / (8.0 * 1e-3 * rms)).sqrt() } else { 0.0 };
         let floor = (4 * k_max).max(1024);
-        let wanted =
-            if wanted.is_finite() { wanted.min(MAX_PEAK_POINTS as f64) as usize } else { 0 };
+        let wanted = if wanted.is_finite() { wanted.min(MAX_PEAK_POINTS as f64) as usize } else { 0 };
         wanted.max(floor).next_power_of_two().min(MAX_PEAK_POINTS)
     }
 
@@ -294,9 +275,6 @@ mod tests {
         assert_eq!(harmonics([2.0, 7.0], 1.0, LineSet::Odd).unwrap(), vec![3, 5, 7]);
         assert_eq!(harmonics([3.0, 7.0], 1.0, LineSet::Even).unwrap(), vec![4, 6]);
         assert!(harmonics([3.0, 3.5], 1.0, LineSet::Even).is_err());
-        assert_eq!(
-            harmonics([0.0, 0.0], 1.0, LineSet::Odd).map_err(|e| e.contains("odd")),
-            Err(true)
-        );
+        assert_eq!(harmonics([0.0, 0.0], 1.0, LineSet::Odd).map_err(|e| e.contains("odd")), Err(true));
     }
 }

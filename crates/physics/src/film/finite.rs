@@ -156,23 +156,13 @@ impl GridSpec {
         if !(Self::MIN_N_THETA..=Self::MAX_N_THETA).contains(&self.n_theta) {
             return Err(PhysicsError::invalid(
                 format!("{prefix}.n_theta"),
-                format!(
-                    "must lie in [{}, {}] intervals per pad, got {}",
-                    Self::MIN_N_THETA,
-                    Self::MAX_N_THETA,
-                    self.n_theta
-                ),
+                format!("must lie in [{}, {}] intervals per pad, got {}", Self::MIN_N_THETA, Self::MAX_N_THETA, self.n_theta),
             ));
         }
         if !(Self::MIN_N_Z..=Self::MAX_N_Z).contains(&self.n_z) {
             return Err(PhysicsError::invalid(
                 format!("{prefix}.n_z"),
-                format!(
-                    "must lie in [{}, {}] intervals across the half length, got {}",
-                    Self::MIN_N_Z,
-                    Self::MAX_N_Z,
-                    self.n_z
-                ),
+                format!("must lie in [{}, {}] intervals across the half length, got {}", Self::MIN_N_Z, Self::MAX_N_Z, self.n_z),
             ));
         }
         let storage = self.n_theta * self.n_z * (self.n_z + 1);
@@ -277,9 +267,7 @@ impl Factorisation {
     /// Completes the factorisation once `band` is assembled (rows from `first_row` on; the
     /// ones before are factorised already) and `wrap` filled.
     fn factor_from(&mut self, first_row: usize, what: &str) -> Result<(), PhysicsError> {
-        self.band
-            .factor_from(first_row)
-            .map_err(|row| PhysicsError::Singular { what: format!("{what}: banded Reynolds matrix"), row })?;
+        self.band.factor_from(first_row).map_err(|row| PhysicsError::Singular { what: format!("{what}: banded Reynolds matrix"), row })?;
         let m = self.wrap.len();
         if m == 0 {
             return Ok(());
@@ -301,9 +289,7 @@ impl Factorisation {
                 self.capacitance.add(r, s, z[pr] - z[qr]);
             }
         }
-        self.capacitance
-            .factor()
-            .map_err(|row| PhysicsError::Singular { what: format!("{what}: periodic (Woodbury) capacitance matrix"), row })
+        self.capacitance.factor().map_err(|row| PhysicsError::Singular { what: format!("{what}: periodic (Woodbury) capacitance matrix"), row })
     }
 
     /// Solves `A x = rhs` in place.
@@ -803,11 +789,7 @@ impl FiniteBearing {
         grid.validate("film")?;
         let periodic = matches!(geometry.kind, BearingKind::Plain);
         let half_length_over_radius = 0.5 * geometry.length_m / geometry.radius_m();
-        let pads = geometry
-            .pads()
-            .iter()
-            .map(|pad| PadSystem::new(pad.start_rad, pad.end_rad, periodic, grid, half_length_over_radius))
-            .collect();
+        let pads = geometry.pads().iter().map(|pad| PadSystem::new(pad.start_rad, pad.end_rad, periodic, grid, half_length_over_radius)).collect();
         Ok(Self { geometry, grid, cavitation: Cavitation::SwiftStieber, pads, pressure_scale_pa_s: 0.0 })
     }
 
@@ -1263,7 +1245,12 @@ mod tests {
         let run = running();
         let geometry = grooved(1.0);
         let mut warm = FiniteBearing::new(geometry, GridSpec::default()).unwrap();
-        let states = [FilmState::at_rest(1e-5, -2e-5), FilmState::at_rest(4e-5, -7e-5), FilmState { x_m: -3e-5, y_m: -5e-5, vx_m_s: 1e-3, vy_m_s: 2e-3 }, FilmState::at_rest(1e-5, -2e-5)];
+        let states = [
+            FilmState::at_rest(1e-5, -2e-5),
+            FilmState::at_rest(4e-5, -7e-5),
+            FilmState { x_m: -3e-5, y_m: -5e-5, vx_m_s: 1e-3, vy_m_s: 2e-3 },
+            FilmState::at_rest(1e-5, -2e-5),
+        ];
         for state in states {
             let fw = warm.force_jacobian(&state, &run).unwrap();
             let fc = FiniteBearing::new(geometry, GridSpec::default()).unwrap().force_jacobian(&state, &run).unwrap();
@@ -1314,7 +1301,12 @@ mod tests {
             let op = last.unwrap();
             println!(
                 "Zhou point, grid {} x {}: one coefficient set from a cold start: min {:.3} ms, median {:.3} ms (eps {:.4}, attitude {:.2} deg)",
-                grid.n_theta, grid.n_z, times[0], times[times.len() / 2], op.eccentricity, op.attitude_deg
+                grid.n_theta,
+                grid.n_z,
+                times[0],
+                times[times.len() / 2],
+                op.eccentricity,
+                op.attitude_deg
             );
         }
     }

@@ -186,10 +186,7 @@ impl MapSpec {
     /// Checks the fields; the error names the field under `film_map.spec`.
     pub fn validate(&self) -> Result<(), PhysicsError> {
         if !self.half_width.is_finite() || self.half_width <= 0.0 {
-            return Err(PhysicsError::invalid(
-                "film_map.spec.half_width",
-                format!("must be a positive finite eccentricity ratio, got {}", self.half_width),
-            ));
+            return Err(PhysicsError::invalid("film_map.spec.half_width", format!("must be a positive finite eccentricity ratio, got {}", self.half_width)));
         }
         if self.n_position < 5 {
             return Err(PhysicsError::invalid(
@@ -198,10 +195,7 @@ impl MapSpec {
             ));
         }
         if self.n_angle < 8 {
-            return Err(PhysicsError::invalid(
-                "film_map.spec.n_angle",
-                format!("needs at least 8 nodes over the full turn, got {}", self.n_angle),
-            ));
+            return Err(PhysicsError::invalid("film_map.spec.n_angle", format!("needs at least 8 nodes over the full turn, got {}", self.n_angle)));
         }
         // Keep the table to a size that is plainly meant (and whose index arithmetic is safe).
         let nodes = self.n_position.checked_mul(self.n_position).and_then(|n| n.checked_mul(self.n_angle));
@@ -254,12 +248,7 @@ impl FilmMap {
     /// Errors: [`PhysicsError::InvalidConfig`] for a bad spec, a box that reaches beyond
     /// [`MAX_BOX_ECCENTRICITY`], or an inner film that is not homogeneous; whatever the inner
     /// film returns for a node it cannot solve.
-    pub fn build(
-        mut inner: Box<dyn Film + Send>,
-        centre_x_m: f64,
-        centre_y_m: f64,
-        spec: MapSpec,
-    ) -> Result<Self, PhysicsError> {
+    pub fn build(mut inner: Box<dyn Film + Send>, centre_x_m: f64, centre_y_m: f64, spec: MapSpec) -> Result<Self, PhysicsError> {
         spec.validate()?;
         PhysicsError::check_finite("film map centre_x_m", centre_x_m)?;
         PhysicsError::check_finite("film map centre_y_m", centre_y_m)?;
@@ -333,20 +322,7 @@ impl FilmMap {
                 }
             }
         }
-        Ok(Self {
-            inner,
-            geometry,
-            spec,
-            centre_ex,
-            centre_ey,
-            ex_min,
-            ey_min,
-            d_pos,
-            d_alpha,
-            table,
-            fallbacks: 0,
-            inner_solves: n_nodes + 2,
-        })
+        Ok(Self { inner, geometry, spec, centre_ex, centre_ey, ex_min, ey_min, d_pos, d_alpha, table, fallbacks: 0, inner_solves: n_nodes + 2 })
     }
 
     /// How many calls fell outside the table (position outside the box, or a viscosity that is
@@ -526,14 +502,8 @@ fn check_homogeneous(inner: &mut dyn Film, ex: f64, ey: f64) -> Result<(), Physi
     let (sa, ca) = 1.1_f64.sin_cos();
     let (omega1, mu1, rho1) = (REFERENCE_OMEGA_RAD_S, REFERENCE_VISCOSITY_PA_S, REFERENCE_OMEGA_RAD_S);
     let (omega2, mu2, rho2) = (2.7 * omega1, 0.2 * mu1, 1.9 * rho1);
-    let f1 = inner.force(
-        &realise(c, ex, ey, omega1, rho1 * ca, rho1 * sa),
-        &Running { omega_rad_s: omega1, viscosity_pa_s: mu1 },
-    )?;
-    let f2 = inner.force(
-        &realise(c, ex, ey, omega2, rho2 * ca, rho2 * sa),
-        &Running { omega_rad_s: omega2, viscosity_pa_s: mu2 },
-    )?;
+    let f1 = inner.force(&realise(c, ex, ey, omega1, rho1 * ca, rho1 * sa), &Running { omega_rad_s: omega1, viscosity_pa_s: mu1 })?;
+    let f2 = inner.force(&realise(c, ex, ey, omega2, rho2 * ca, rho2 * sa), &Running { omega_rad_s: omega2, viscosity_pa_s: mu2 })?;
     let expected = f1 * (mu2 * rho2 / (mu1 * rho1));
     let violation = (f2 - expected).norm() / expected.norm();
     if violation.is_nan() || violation > HOMOGENEITY_TOLERANCE {
@@ -672,12 +642,7 @@ impl Film for FilmMap {
         Ok(ForceJacobian { force_n: Vector2::new(s * f[0], s * f[1]), jacobian })
     }
 
-    fn added_mass(
-        &mut self,
-        state: &FilmState,
-        running: &Running,
-        density_kg_m3: f64,
-    ) -> Result<Option<Matrix2<f64>>, PhysicsError> {
+    fn added_mass(&mut self, state: &FilmState, running: &Running, density_kg_m3: f64) -> Result<Option<Matrix2<f64>>, PhysicsError> {
         self.inner.added_mass(state, running, density_kg_m3)
     }
 }
@@ -985,9 +950,7 @@ mod tests {
     #[test]
     fn bad_specs_are_refused() {
         let c = zhou().clearance_m;
-        let build = |spec: MapSpec, centre: (f64, f64)| {
-            FilmMap::build(Box::new(PiFilm::new(zhou())), centre.0 * c, centre.1 * c, spec)
-        };
+        let build = |spec: MapSpec, centre: (f64, f64)| FilmMap::build(Box::new(PiFilm::new(zhou())), centre.0 * c, centre.1 * c, spec);
         let good = MapSpec { half_width: 0.1, n_position: 5, n_angle: 8 };
         assert!(build(good, CENTRE).is_ok());
         for (spec, field) in [

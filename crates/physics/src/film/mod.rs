@@ -17,10 +17,10 @@
 //! and is positively homogeneous of degree one in `w`. Force is therefore
 //! `mu * |w| * f(ex, ey, angle(w))`: a function of three variables for any speed and viscosity.
 
+mod banded_cholesky;
 pub mod finite;
 pub mod map;
 pub mod short;
-mod banded_cholesky;
 
 use nalgebra::{Matrix2, Matrix2x4, Vector2};
 use serde::{Deserialize, Serialize};
@@ -67,10 +67,7 @@ impl Running {
         PhysicsError::check_finite("running.omega_rad_s", self.omega_rad_s)?;
         PhysicsError::check_finite("running.viscosity_pa_s", self.viscosity_pa_s)?;
         if self.viscosity_pa_s < 0.0 {
-            return Err(PhysicsError::invalid(
-                "running.viscosity_pa_s",
-                format!("must not be negative, got {}", self.viscosity_pa_s),
-            ));
+            return Err(PhysicsError::invalid("running.viscosity_pa_s", format!("must not be negative, got {}", self.viscosity_pa_s)));
         }
         Ok(())
     }
@@ -112,11 +109,7 @@ pub trait Film {
 
     /// Force and Jacobian. The default uses central differences of [`Film::force`] with steps
     /// of `1e-6 c` and `1e-6 c omega`; models with an analytic Jacobian override it.
-    fn force_jacobian(
-        &mut self,
-        state: &FilmState,
-        running: &Running,
-    ) -> Result<ForceJacobian, PhysicsError> {
+    fn force_jacobian(&mut self, state: &FilmState, running: &Running) -> Result<ForceJacobian, PhysicsError> {
         let c = self.geometry().clearance_m;
         let force_n = self.force(state, running)?;
         let steps = [1e-6 * c, 1e-6 * c, 1e-6 * c * running.omega_rad_s.abs().max(1.0), 1e-6 * c * running.omega_rad_s.abs().max(1.0)];
@@ -135,12 +128,7 @@ pub trait Film {
 
     /// Added-mass (fluid inertia) matrix estimate at this state, kg, in the convention
     /// `dF = -M dr''`. `None` when the model has no inertia estimate.
-    fn added_mass(
-        &mut self,
-        _state: &FilmState,
-        _running: &Running,
-        _density_kg_m3: f64,
-    ) -> Result<Option<Matrix2<f64>>, PhysicsError> {
+    fn added_mass(&mut self, _state: &FilmState, _running: &Running, _density_kg_m3: f64) -> Result<Option<Matrix2<f64>>, PhysicsError> {
         Ok(None)
     }
 }
@@ -157,20 +145,12 @@ pub fn component_mut(state: &mut FilmState, j: usize) -> &mut f64 {
 
 /// Checks a state is finite and inside the clearance circle.
 pub fn check_state(state: &FilmState, clearance_m: f64) -> Result<f64, PhysicsError> {
-    for (name, v) in [
-        ("film state x_m", state.x_m),
-        ("film state y_m", state.y_m),
-        ("film state vx_m_s", state.vx_m_s),
-        ("film state vy_m_s", state.vy_m_s),
-    ] {
+    for (name, v) in [("film state x_m", state.x_m), ("film state y_m", state.y_m), ("film state vx_m_s", state.vx_m_s), ("film state vy_m_s", state.vy_m_s)] {
         PhysicsError::check_finite(name, v)?;
     }
     let eps = state.eccentricity(clearance_m);
     if eps >= 1.0 {
-        return Err(PhysicsError::EccentricityLimit {
-            eccentricity: eps,
-            context: format!("at x = {:.4e} m, y = {:.4e} m", state.x_m, state.y_m),
-        });
+        return Err(PhysicsError::EccentricityLimit { eccentricity: eps, context: format!("at x = {:.4e} m, y = {:.4e} m", state.x_m, state.y_m) });
     }
     Ok(eps)
 }

@@ -165,7 +165,6 @@ struct Kinematics {
     u: Vector2<f64>,
 }
 
-
 /// Unit vector `u = (cos beta, sin beta)` at the start of the active arc `[beta, beta + pi]`.
 ///
 /// `u = -w/|w|`. When `w = 0` the force vanishes and the arc is undefined; the arc the static
@@ -294,17 +293,9 @@ impl Film for ShortBearing {
         Ok(ForceJacobian { force_n, jacobian })
     }
 
-    fn added_mass(
-        &mut self,
-        state: &FilmState,
-        running: &Running,
-        density_kg_m3: f64,
-    ) -> Result<Option<Matrix2<f64>>, PhysicsError> {
+    fn added_mass(&mut self, state: &FilmState, running: &Running, density_kg_m3: f64) -> Result<Option<Matrix2<f64>>, PhysicsError> {
         if !density_kg_m3.is_finite() || density_kg_m3 <= 0.0 {
-            return Err(PhysicsError::invalid(
-                "oil density",
-                format!("must be positive and finite for the added mass, got {density_kg_m3} kg/m^3"),
-            ));
+            return Err(PhysicsError::invalid("oil density", format!("must be positive and finite for the added mass, got {density_kg_m3} kg/m^3")));
         }
         let kin = self.prepare(state, running)?;
         let rot = arc_rotation(&kin.u);
@@ -469,12 +460,7 @@ pub fn linear_point(geometry: &BearingGeometry, running: &Running, load_n: f64) 
 
     // (r, t) frame: r along the line of centres, t 90 degrees ahead in the rotation direction.
     let kp = p * omega / c;
-    let k_rt = Matrix2::new(
-        kp * 2.0 * eps * (1.0 + e2) / s6,
-        kp * PI / (4.0 * s3),
-        -kp * PI * (1.0 + 2.0 * e2) / (4.0 * s5),
-        kp * eps / s4,
-    );
+    let k_rt = Matrix2::new(kp * 2.0 * eps * (1.0 + e2) / s6, kp * PI / (4.0 * s3), -kp * PI * (1.0 + 2.0 * e2) / (4.0 * s5), kp * eps / s4);
     let cp = p / c;
     let c_cross = -cp * 2.0 * eps / s4;
     let c_rt = Matrix2::new(cp * PI * (1.0 + 2.0 * e2) / (2.0 * s5), c_cross, c_cross, cp * PI / (2.0 * s3));
