@@ -498,6 +498,21 @@ pub fn diagnose_prepared(p: &Prepared, rig: &RigConfig, options: &DiagnosisOptio
             ));
         }
     }
+    // With fewer than three excitation lines, K and C already fit the lines exactly (two
+    // complex equations per force axis, four real unknowns): a frequency dependence has
+    // nothing at the lines to be judged on, and whatever it earns comes from the content
+    // between them (harmonics, ripple, noise). It is reported, never counted.
+    if p.lines_hz.len() < 3 {
+        for s in &mut structure {
+            if s.name == Generic::FrequencyDependence && s.remains {
+                s.remains = false;
+                s.description.push_str(&format!(
+                    " (not counted: with {} excitation line(s) K and C fit the lines exactly, so what a frequency dependence earns comes from content between them; excite a band to judge it)",
+                    p.lines_hz.len()
+                ));
+            }
+        }
+    }
     let remaining_structure: Vec<&StructureTest> = structure.iter().filter(|s| s.remains).collect();
 
     let mut coefficients = coefficient_report(&ctx, &baseline, &chosen);

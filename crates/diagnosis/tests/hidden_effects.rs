@@ -235,6 +235,20 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
     assert!(failures.is_empty(), "{} of {} cases wrong:\n{}", failures.len(), results.len(), failures.join("\n"));
 }
 
+/// The command line's own first try: `oilfilm simulate` (the paper's two-tone, 23 and 37 Hz)
+/// then `oilfilm diagnose`. With two lines K and C fit the lines exactly, so nothing
+/// frequency-dependent can be judged, and a record without an effect is `none`, not
+/// `unexplained` structure made of the content between the lines.
+#[test]
+fn a_two_tone_record_without_an_effect_is_none() {
+    let rig = oilfilm_physics::config::RigConfig::zhou2004().expect("built-in rig");
+    let (speed_rpm, load_n) = (rig.operating.speed_rpm, rig.operating.bearing_load_n);
+    let truth = Truth { effect: "none", parameter: None, channel: None, speed_rpm, load_n };
+    let d = run(&Case { rig, truth, seconds: 6.0, plan: oilfilm_identification::excitation::ExcitationPlan::two_tone(23.0, 37.0, 100.0) });
+    println!("two-tone, no effect: {} | {}", d.cause.name(), d.reason);
+    assert_eq!(d.cause, Cause::None, "{}", d.reason);
+}
+
 #[test]
 fn too_short_single_frequency_or_noisy_records_give_insufficient_data_with_a_reason() {
     let mut r = rng(99);
