@@ -406,7 +406,8 @@ pub(crate) fn node_params(
         return Ok((conditioner, estimator, ParamsFrom::Defaults));
     }
     let name = args.file.display();
-    let recorded = oilfilm_graph::runner::bag::recorded_parameters_of(&oilfilm_bag::Bag::open(&args.file)?)?;
+    let recorded =
+        oilfilm_graph::runner::bag::recorded_parameters_with(&oilfilm_bag::Bag::open(&args.file)?, ReadOptions { allow_partial: args.allow_partial })?;
     let c = recorded.of::<ConditionerParams>("conditioner")?;
     let e = recorded.of::<EstimatorParams>("estimator")?;
     for (node, what) in [c.as_ref().map(|c| &c.0), e.as_ref().map(|e| &e.0)].into_iter().zip(["conditioner", "estimator"]) {

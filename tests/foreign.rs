@@ -112,7 +112,14 @@ fn one_record_in_four_formats_gives_the_same_estimates_bit_for_bit() {
     let window = ["--params", PARAMS, "--window", "10000", "--hop", "5000", "--json"];
     let run = |first: &[&str], more: &[&str]| -> serde_json::Value {
         let args: Vec<&str> = ["identify"].iter().chain(first).chain(more).chain(&window).copied().collect();
-        serde_json::from_slice(&ok(&args).stdout).expect("JSON")
+        let mut v: serde_json::Value = serde_json::from_slice(&ok(&args).stdout).expect("JSON");
+        // How much of a bag was read says nothing of the estimates; a file has no such keys.
+        if let Some(o) = v.as_object_mut() {
+            for k in ["bag_read", "complete", "shortfalls"] {
+                o.remove(k);
+            }
+        }
+        v
     };
     let reference_bag = f.dir.join("ascii-bag");
     let out = ok(&["import", s(&f.ascii), "-o", s(&reference_bag)]);

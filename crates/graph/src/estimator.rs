@@ -12,7 +12,7 @@
 use std::collections::VecDeque;
 
 use nalgebra::Matrix2;
-use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver, WindowFeed};
+use oilfilm_identification::estimator::{self, EstimatorConfig, ModelOrder, Signals, Solver, WindowFeed, MAX_WINDOW_SAMPLES};
 use oilfilm_identification::pipeline::{window_report_fed, ReportFeed, WindowReport};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, Header, RigStatus, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
@@ -77,9 +77,9 @@ impl NodeParams for EstimatorParams {
         let kcm = ModelOrder::Kcm.min_samples();
         vec![
             Spec::fixed("rig", "rig file (TOML): geometry and oil law for the dimensionless coefficients and the operating point; empty: the built-in Zhou et al. (2004) rig", Rule::Any),
-            Spec::live("window", "samples per window (the paper: 50 000 = 10 s at 5 kHz)", Rule::Integer { min: kc as i64, max: 100_000_000 })
+            Spec::live("window", "samples per window (the paper: 50 000 = 10 s at 5 kHz)", Rule::Integer { min: kc as i64, max: MAX_WINDOW_SAMPLES as i64 })
                 .with_constraints(if kcm == 112 { "at least the model's minimum: 80 samples for kc, 112 for kcm (16 per unknown of a row, with its intercept)" } else { "at least the model's minimum number of samples" }),
-            Spec::live("hop", "samples between window starts (hop = window: windows end to end; less: they overlap)", Rule::Integer { min: 1, max: 100_000_000 }),
+            Spec::live("hop", "samples between window starts (hop = window: windows end to end; less: they overlap)", Rule::Integer { min: 1, max: MAX_WINDOW_SAMPLES as i64 }),
             Spec::live("model", "kc: 8 coefficients (stiffness, damping); kcm: 12 (plus added mass)", Rule::OneOf(&["kc", "kcm"])),
             Spec::live("solver", "least squares by qr (default), svd, or normal_equations (the paper's, for comparison only)", Rule::OneOf(&["qr", "svd", "normal_equations"])),
             Spec::live("max_condition", "largest condition number of a window's regressors before it is refused", Rule::number(1.0, 1e300)),

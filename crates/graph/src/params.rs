@@ -693,8 +693,8 @@ mod tests {
         // A window of 1e12 samples (it once aborted the process allocating 727 GB): refused
         // with its range before anything is allocated.
         let huge = parse_args("estimator", args(&["--ros-args", "-p", "window:=1000000000000"])).unwrap();
-        let e = load::<EstimatorParams>(&huge).unwrap().0.config(5000.0).unwrap_err().to_string();
-        assert!(e.contains("window") && e.contains("2 to 10000000 samples") && e.contains("1000000000000"), "{e}");
+        let e = load::<EstimatorParams>(&huge).unwrap_err().to_string();
+        assert!(e.contains("window") && e.contains("10000000") && e.contains("1000000000000"), "{e}");
         // An alias bomb: refused before the parser expands it.
         std::fs::write(&file, "a: &a [x, x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a]\nestimator:\n  ros__parameters:\n    window: 1000\n").unwrap();
         let e = load::<EstimatorParams>(&node).unwrap_err().to_string();

@@ -511,9 +511,12 @@ fn bad_input_gives_clear_errors_and_never_panics() {
     c.window = 0;
     assert!(matches!(c.validate(), Err(IdentificationError::InvalidParameter { field, .. }) if field == "window"));
 
-    // Absurd sizes: a huge hop gives one window, a window too large to buffer is an error.
-    let ws = estimate_windows(&rec.signals(), &config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap();
+    // Absurd sizes: the largest hop gives one window; a hop (or window) beyond the largest a
+    // config takes is refused by name before anything is allocated.
+    let ws = estimate_windows(&rec.signals(), &config(4_000, oilfilm_identification::estimator::MAX_WINDOW_SAMPLES, ModelOrder::Kc, Solver::Qr)).unwrap();
     assert_eq!(ws.len(), 1);
+    let e = estimate_windows(&rec.signals(), &config(4_000, usize::MAX, ModelOrder::Kc, Solver::Qr)).unwrap_err();
+    assert!(matches!(&e, IdentificationError::InvalidParameter { field, .. } if field == "hop"), "{e}");
 
     // Kcm without accelerations.
     let mut s = rec.signals();

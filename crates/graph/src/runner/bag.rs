@@ -231,11 +231,17 @@ pub fn recorded_parameters(events: &[(u64, oilfilm_msgs::ParameterEvent)], first
 /// [`recorded_parameters`] of the bag at `dir` (an empty set when it has no
 /// `/parameter_events`: bags recorded before the recorder kept them).
 pub fn recorded_parameters_of(bag: &oilfilm_bag::Bag) -> Result<RecordedParameters, NodeError> {
+    recorded_parameters_with(bag, oilfilm_bag::ReadOptions::STRICT)
+}
+
+/// [`recorded_parameters_of`] read with `options`: with `allow_partial`, from what is readable
+/// (the shortfalls are the main read's to report, not this one's).
+pub fn recorded_parameters_with(bag: &oilfilm_bag::Bag, options: oilfilm_bag::ReadOptions) -> Result<RecordedParameters, NodeError> {
     use oilfilm_msgs::RosMessage;
     let is_event = |_: &str, ty: &str| ty == oilfilm_msgs::ParameterEvent::TYPE_NAME;
-    let events: Vec<(u64, oilfilm_msgs::ParameterEvent)> =
-        bag.read_topics(&is_event, &|m| m.decode::<oilfilm_msgs::ParameterEvent>().map(|e| (m.log_time, e)), 1, |s| s.collect())?;
+    let (events, _): (Vec<(u64, oilfilm_msgs::ParameterEvent)>, _) =
+        bag.read_topics_with(options, &is_event, &|m| m.decode::<oilfilm_msgs::ParameterEvent>().map(|e| (m.log_time, e)), 1, |s| s.collect())?;
     let is_frame = |_: &str, ty: &str| ty == DaqFrame::TYPE_NAME;
-    let first_frame: Option<u64> = bag.read_topics(&is_frame, &|m| Ok(m.log_time), 1, |s| s.next())?;
+    let (first_frame, _): (Option<u64>, _) = bag.read_topics_with(options, &is_frame, &|m| Ok(m.log_time), 1, |s| s.next())?;
     Ok(recorded_parameters(&events, first_frame))
 }
