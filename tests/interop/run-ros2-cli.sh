@@ -2,7 +2,7 @@
 # Our live graph and `oilfilm play` through the real `ros2` command line (test_ros2_cli.py).
 # Uses the system's `ros2` when ROS 2 is installed (ROS_DISTRO set and `ros2` on PATH);
 # otherwise installs ros2cli into .venv-ros from the source tarballs in
-# $OILFILM_ROS2CLI (default ../shared/tools/ros2cli; see its README). Pass the binaries'
+# $OILFILM_ROS2CLI (default tests/data/ros2cli, a copy of ../shared/tools/ros2cli; see its README). Pass the binaries'
 # directory as $1 (default target/debug).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -16,7 +16,9 @@ trap 'rm -rf "$work"' EXIT
 target/debug/examples/write_sim_rig "$work/sim_rig" 6 >/dev/null
 eval "$(bash tests/interop/setup-ros-venv.sh)"
 if [ -z "$system_ros2" ]; then
-  tools=${OILFILM_ROS2CLI:-$(pwd)/../shared/tools/ros2cli}
+  # The tarballs travel with the repository (tests/data/ros2cli, with their licences and
+  # sources): CI runs on a clean clone that has nothing beside it.
+  tools=${OILFILM_ROS2CLI:-$(pwd)/tests/data/ros2cli}
   [ -x "$(dirname "$OILFILM_ROS_PYTHON_BIN")/ros2" ] || bash "$tools/install.sh" "$(dirname "$(dirname "$OILFILM_ROS_PYTHON_BIN")")" >&2
   export PATH=$(dirname "$OILFILM_ROS_PYTHON_BIN"):$PATH
   export ROS_DISTRO=kilted
