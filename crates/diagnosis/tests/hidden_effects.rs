@@ -219,19 +219,7 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
             }
         }
     }
-    println!("\nconfusion matrix (rows: hidden, columns: named)");
-    print!("{:<24}", "");
-    for c in &named_classes {
-        print!(" {:>5}", &c[..5.min(c.len())]);
-    }
-    println!();
-    for (r, row) in matrix.iter().enumerate() {
-        print!("{:<24}", CLASSES[r]);
-        for v in row {
-            print!(" {v:>5}");
-        }
-        println!();
-    }
+    print_confusion("rows: hidden, columns: named", &CLASSES, &named_classes, &matrix);
     assert!(failures.is_empty(), "{} of {} cases wrong:\n{}", failures.len(), results.len(), failures.join("\n"));
 }
 

@@ -186,19 +186,7 @@ fn outside_records_are_named_with_their_parameters_and_the_updated_model_predict
         }
         println!("{id:<8} {expected:<24} {got:<24} {:>6.2}% {:>6.2}%  {}", 100.0 * dk, 100.0 * dc, param_text.join(", "));
     }
-    println!("\nconfusion matrix (rows: expected, columns: named)");
-    print!("{:<24}", "");
-    for c in &named_classes {
-        print!(" {:>5}", &c[..5.min(c.len())]);
-    }
-    println!();
-    for (r, row) in matrix_counts.iter().enumerate() {
-        print!("{:<24}", classes[r]);
-        for v in row {
-            print!(" {v:>5}");
-        }
-        println!();
-    }
+    crate::common::print_confusion("rows: expected, columns: named", &classes, &named_classes, &matrix_counts);
     println!("{right} of {} named as expected", results.len());
     if right < 27 {
         failures.push(format!("only {right} of 30 named as expected (at least 27)"));

@@ -61,3 +61,20 @@ pub fn run(case: &Case) -> Diagnosis {
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
+
+/// Prints a confusion matrix: `counts[r][c]` records of class `rows[r]` named `columns[c]`.
+pub fn print_confusion(title: &str, rows: &[&str], columns: &[&str], counts: &[Vec<usize>]) {
+    println!("\nconfusion matrix ({title})");
+    print!("{:<24}", "");
+    for c in columns {
+        print!(" {:>5}", &c[..5.min(c.len())]);
+    }
+    println!();
+    for (r, row) in counts.iter().enumerate() {
+        print!("{:<24}", rows[r]);
+        for v in row {
+            print!(" {v:>5}");
+        }
+        println!();
+    }
+}
