@@ -150,7 +150,9 @@ class Participants:
     sample was lost between RustDDS (ros2-client's DDS) and Fast DDS and never repaired (not
     proven); the services themselves answer. A fresh participant asks every peer for its endpoints again, as a
     new `ros2 param` process does. Each service reached only that way is named in the
-    output and in the last line (ADR 0017, amendment)."""
+    output and in the last line (ADR 0017, amendment). The node list falls back the same way:
+    a CI run and 1 run in 6 here with a busy core saw the first participant miss both the
+    estimator's services and its ros_discovery_info writers, so its name never came."""
 
     def __init__(self, executor, node):
         self.first = (executor, node)
@@ -272,6 +274,17 @@ def main():
         want_nodes = {("exciter", NS), ("daq", NS), ("conditioner", NS), ("estimator", NS)}
         spin_until(executor, lambda: want_nodes <= set(node.get_node_names_and_namespaces()), 30)
         seen = set(node.get_node_names_and_namespaces())
+        if not want_nodes <= seen:
+            # The same lost discovery sample as a service's (Participants): the first
+            # participant never discovered a node's ros_discovery_info writers, so none of its
+            # repeated announcements reach it (seen with the same node's parameter services
+            # missing too). Asked as a new `ros2 node list` process would.
+            print(f"WARNING: the first participant lists only {sorted(n for n, ns in seen if ns == NS)} in {NS} after 30 s; "
+                  "asking a fresh participant", file=sys.stderr)
+            fresh_executor, fresh = parts.fresh_one()
+            spin_until(fresh_executor, lambda: want_nodes <= set(fresh.get_node_names_and_namespaces()), 30)
+            seen = set(fresh.get_node_names_and_namespaces())
+            parts.rediscovered.append("the node list")
         check(want_nodes <= seen, "rclpy sees our four nodes in /oilfilm" +
               ("" if want_nodes <= seen else f" (seen: {sorted(n for n, ns in seen if ns == NS)})"))
         spin_until(executor, lambda: all(node.count_publishers(f"{NS}/{t}") > 0 for t in TOPICS), 30)
@@ -418,7 +431,7 @@ def main():
         node.destroy_node()
         rclpy.shutdown()
     lost_subscriber(bin_dir)
-    note = f" ({len(parts.rediscovered)} service(s) reached from a fresh participant only: {', '.join(parts.rediscovered)})" if parts.rediscovered else ""
+    note = f" (answered by a fresh participant only: {', '.join(parts.rediscovered)})" if parts.rediscovered else ""
     print("rclpy live interop: " + ("ok" if not failures else f"{len(failures)} failure(s)") + note)
     return 1 if failures else 0
 
