@@ -7,7 +7,7 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use crate::error::{ForeignError, Result};
+use crate::error::{listed, shown, ForeignError, Result};
 use crate::map::CsvOptions;
 
 /// A CSV file opened at its first data row.
@@ -90,10 +90,8 @@ impl CsvRows {
                 let hits: Vec<usize> = self.header.iter().enumerate().filter(|(_, h)| *h == name).map(|(i, _)| i).collect();
                 match hits.as_slice() {
                     [one] => Ok(*one),
-                    [] => {
-                        Err(bad(format!("no column `{name}` in the header ({})", self.header.iter().map(|h| format!("`{h}`")).collect::<Vec<_>>().join(", "))))
-                    }
-                    many => Err(bad(format!("the header names `{name}` {} times (columns {:?})", many.len(), many))),
+                    [] => Err(bad(format!("no column `{name}` in the header ({})", listed(self.header.iter().map(|h| format!("`{}`", shown(h))))))),
+                    many => Err(bad(format!("the header names `{name}` {} times (columns {})", many.len(), listed(many.iter().map(usize::to_string))))),
                 }
             }
             (None, Some(i)) if i < self.header.len() => Ok(i),
@@ -128,11 +126,13 @@ impl CsvRows {
     fn parse(&self, r: &csv::ByteRecord, line: u64, column: usize, label: &str) -> Result<f64> {
         let at = || Some(format!("line {line}, column {column}"));
         let field = r.get(column).ok_or_else(|| ForeignError::record(&self.path, Some(label.to_string()), at(), "missing".to_string()))?;
-        let text = std::str::from_utf8(field).map_err(|_| ForeignError::record(&self.path, Some(label.to_string()), at(), "not UTF-8 text"))?.trim();
-        match text.parse::<f64>() {
+        let whole = std::str::from_utf8(field).map_err(|_| ForeignError::record(&self.path, Some(label.to_string()), at(), "not UTF-8 text"))?.trim();
+        // As messages quote it.
+        let text = shown(whole);
+        match whole.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
             Ok(v) => Err(ForeignError::record(&self.path, Some(label.to_string()), at(), format!("`{text}` is {v}: a value must be finite"))),
-            Err(_) if comma_decimal(text) => Err(ForeignError::record(
+            Err(_) if comma_decimal(whole) => Err(ForeignError::record(
                 &self.path,
                 Some(label.to_string()),
                 at(),

@@ -30,3 +30,44 @@ impl ForeignError {
         ForeignError::Io { what: what.into(), source }
     }
 }
+
+/// The longest name or text of the file quoted in a message, characters.
+const SHOWN_CHARS: usize = 64;
+
+/// The most names a message lists.
+const LISTED: usize = 12;
+
+/// A name or text read from the file, as a message quotes it: whole when short, else its
+/// start and its length (a damaged file's "name" can be a megabyte of anything).
+pub(crate) fn shown(text: &str) -> String {
+    if text.chars().count() <= SHOWN_CHARS {
+        return text.to_string();
+    }
+    let start: String = text.chars().take(SHOWN_CHARS - 4).collect();
+    format!("{start}... ({} bytes)", text.len())
+}
+
+/// Names of the file for a message: the first few, and how many there are in all.
+pub(crate) fn listed(names: impl IntoIterator<Item = String>) -> String {
+    let names: Vec<String> = names.into_iter().collect();
+    if names.len() <= LISTED {
+        return names.join(", ");
+    }
+    format!("{}, ... ({} in all)", names[..LISTED].join(", "), names.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{listed, shown};
+
+    #[test]
+    fn long_names_and_lists_are_shortened() {
+        assert_eq!(shown("probe_a_x"), "probe_a_x");
+        let long = "x".repeat(5000);
+        let s = shown(&long);
+        assert!(s.starts_with("xxxx") && s.ends_with("... (5000 bytes)") && s.len() < 90, "{s}");
+        assert_eq!(listed(["a".to_string(), "b".to_string()]), "a, b");
+        let l = listed((0..100).map(|i| i.to_string()));
+        assert!(l.starts_with("0, 1, 2") && l.ends_with("11, ... (100 in all)"), "{l}");
+    }
+}

@@ -15,7 +15,11 @@ use std::path::{Path, PathBuf};
 
 use flate2::bufread::ZlibDecoder;
 
-use crate::error::{ForeignError, Result};
+use crate::error::{listed, shown, ForeignError, Result};
+
+/// Structs and cells nested deeper than this are refused (each level is a recursion: a
+/// damaged or hostile file must not exhaust the stack).
+const MAX_DEPTH: usize = 32;
 
 const MI_MATRIX: u32 = 14;
 const MI_COMPRESSED: u32 = 15;
@@ -219,7 +223,8 @@ impl Parser<'_> {
     /// Parses the miMATRIX element whose data (after its tag) starts at `r.pos()` and is
     /// `size` bytes; `name` is the name it is known by (a field's), `compressed` where the
     /// stream lives when inflated.
-    fn matrix(&mut self, r: &mut dyn Source, size: u64, name: Option<String>, compressed: Option<(u64, u64)>) -> std::result::Result<(), String> {
+    /// `depth` counts the structs and cells it is inside.
+    fn matrix(&mut self, r: &mut dyn Source, size: u64, name: Option<String>, compressed: Option<(u64, u64)>, depth: usize) -> std::result::Result<(), String> {
         let end = r.pos() + size;
         if size == 0 {
             // An empty array (an empty struct field).
@@ -235,8 +240,15 @@ impl Parser<'_> {
         let (_, dims) = self.small_element(r, "dimensions")?;
         let dims: Vec<u64> = dims.chunks_exact(4).map(|c| u64::from(self.u32([c[0], c[1], c[2], c[3]]))).collect();
         let (_, own) = self.small_element(r, "name")?;
-        let name = name.unwrap_or_else(|| String::from_utf8_lossy(&own).into_owned());
-        let count: u64 = dims.iter().product();
+        // MATLAB's names have at most 63 characters: a longer one is shortened as messages
+        // quote it (no map could name it whole anyway).
+        let name = name.unwrap_or_else(|| shown(&String::from_utf8_lossy(&own)));
+        let dims_text = || dims.iter().map(u64::to_string).collect::<Vec<_>>().join("x");
+        // Checked here, so that `Array::len` cannot overflow later.
+        let count = dims.iter().try_fold(1u64, |a, &d| a.checked_mul(d)).ok_or_else(|| format!("`{name}`: its dimensions {} overflow", dims_text()))?;
+        if matches!(class, 1 | 2) && depth >= MAX_DEPTH {
+            return Err(format!("`{name}`: structs and cells nested deeper than {MAX_DEPTH} levels"));
+        }
         match class {
             6..=15 => {
                 let (storage, bytes, inline) = self.tag(r).map_err(|e| format!("`{name}`: reading its values: {e}"))?;
@@ -254,7 +266,7 @@ impl Parser<'_> {
                     }
                     None => None,
                 };
-                if bytes != count * esize {
+                if count.checked_mul(esize) != Some(bytes) {
                     return Err(format!("`{name}`: {bytes} bytes of values for {count} elements of {esize} bytes"));
                 }
                 let kind = if complex {
@@ -274,27 +286,41 @@ impl Parser<'_> {
                     return Err(format!("`{name}`: field names of length 0"));
                 }
                 let fields: Vec<String> =
-                    if len == 0 { Vec::new() } else { names.chunks(len).map(|c| String::from_utf8_lossy(c).trim_end_matches('\0').to_string()).collect() };
+                    if len == 0 { Vec::new() } else { names.chunks(len).map(|c| shown(String::from_utf8_lossy(c).trim_end_matches('\0'))).collect() };
+                // Each field of each element is an element of at least its 8-byte tag: a count
+                // the bytes cannot hold is refused before it is looped over.
+                let elements = count.saturating_mul(fields.len() as u64);
+                if elements.saturating_mul(8) > end.saturating_sub(r.pos()) {
+                    return Err(format!(
+                        "`{name}`: {} ({count} elements of {} fields) cannot fit in its {} bytes",
+                        dims_text(),
+                        fields.len(),
+                        end.saturating_sub(r.pos())
+                    ));
+                }
                 self.arrays.push(Array { name: name.clone(), dims: dims.clone(), kind: Kind::Other("a struct".into()), data: None });
-                for k in 0..count {
+                for k in 0..if fields.is_empty() { 0 } else { count } {
                     for f in &fields {
                         let (t, size, _) = self.tag(r).map_err(|e| format!("`{name}.{f}`: {e}"))?;
                         if t != MI_MATRIX {
                             return Err(format!("`{name}.{f}`: expected a matrix element, found type {t}"));
                         }
                         let full = if count == 1 { format!("{name}.{f}") } else { format!("{name}({}).{f}", k + 1) };
-                        self.matrix(r, size, Some(full), compressed)?;
+                        self.matrix(r, size, Some(full), compressed, depth + 1)?;
                     }
                 }
             }
             1 => {
+                if count.saturating_mul(8) > end.saturating_sub(r.pos()) {
+                    return Err(format!("`{name}`: {} cells cannot fit in its {} bytes", dims_text(), end.saturating_sub(r.pos())));
+                }
                 self.arrays.push(Array { name: name.clone(), dims: dims.clone(), kind: Kind::Other("a cell array".into()), data: None });
                 for k in 0..count {
                     let (t, size, _) = self.tag(r).map_err(|e| format!("`{name}{{{}}}`: {e}", k + 1))?;
                     if t != MI_MATRIX {
                         return Err(format!("`{name}{{{}}}`: expected a matrix element, found type {t}", k + 1));
                     }
-                    self.matrix(r, size, Some(format!("{name}{{{}}}", k + 1)), compressed)?;
+                    self.matrix(r, size, Some(format!("{name}{{{}}}", k + 1)), compressed, depth + 1)?;
                 }
             }
             other => self.arrays.push(Array { name: name.clone(), dims, kind: Kind::Other(class_name(other).into()), data: None }),
@@ -340,7 +366,7 @@ impl MatFile {
         let mut r = FileSource { r: BufReader::with_capacity(1 << 16, file), pos: 0 };
         let bad = |at: Option<u64>, m: String| ForeignError::record(path, None, at.map(|a| format!("byte {a}")), m);
         if file_len < 128 || r.read_exact(&mut header).is_err() {
-            return Err(bad(None, format!("{file_len} bytes: shorter than a MAT-file's 128-byte header")));
+            return Err(bad(Some(file_len), format!("the file ends here, {file_len} bytes in: shorter than a MAT-file's 128-byte header")));
         }
         let text = String::from_utf8_lossy(&header[..116]);
         if text.starts_with("MATLAB 7.3 MAT-file") || header[..8] == *b"\x89HDF\r\n\x1a\n" {
@@ -370,14 +396,14 @@ impl MatFile {
                 return Err(bad(Some(at), format!("a variable of {size} bytes, but the file ends {} bytes later: the file is truncated", file_len - data_at)));
             }
             match t {
-                MI_MATRIX => p.matrix(&mut r, size, None, None).map_err(|m| bad(Some(at), m))?,
+                MI_MATRIX => p.matrix(&mut r, size, None, None, 0).map_err(|m| bad(Some(at), m))?,
                 MI_COMPRESSED => {
                     let mut z = inflater(path, data_at, size).map_err(io)?;
                     let (inner, inner_size, _) = p.tag(&mut z).map_err(|e| bad(Some(at), format!("a compressed variable cannot be inflated: {e}")))?;
                     if inner != MI_MATRIX {
                         return Err(bad(Some(at), format!("a compressed element holds type {inner}, not a variable")));
                     }
-                    p.matrix(&mut z, inner_size, None, Some((data_at, size))).map_err(|m| bad(Some(at), format!("{m} (in a compressed variable)")))?;
+                    p.matrix(&mut z, inner_size, None, Some((data_at, size)), 0).map_err(|m| bad(Some(at), format!("{m} (in a compressed variable)")))?;
                     r.skip(size).map_err(io)?;
                 }
                 other => return Err(bad(Some(at), format!("a top-level element of type {other}, not a variable"))),
@@ -420,7 +446,7 @@ impl MatFile {
         if v.is_empty() {
             "none".into()
         } else {
-            v.join(", ")
+            listed(v)
         }
     }
 

@@ -258,7 +258,12 @@ impl ForeignRecord {
                                 path,
                                 Some(c.label()),
                                 Some(format!("line 2, column {col}")),
-                                format!("the units row says `{said}`, the map's {}.unit `{}`: fix the map (or give its scale)", c.key, c.unit.name()),
+                                format!(
+                                    "the units row says `{}`, the map's {}.unit `{}`: fix the map (or give its scale)",
+                                    crate::error::shown(&said),
+                                    c.key,
+                                    c.unit.name()
+                                ),
                             ));
                         }
                     }

@@ -20,7 +20,7 @@ use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
-use crate::error::{ForeignError, Result};
+use crate::error::{listed, shown, ForeignError, Result};
 
 const TOC_META_DATA: u32 = 1 << 1;
 const TOC_NEW_OBJ_LIST: u32 = 1 << 2;
@@ -331,13 +331,15 @@ impl TdmsFile {
                 }
                 for _ in 0..count {
                     let object_path = m.string().ok_or_else(|| short(&m))?.map_err(|()| bad(segment, pos, "an object's path is not UTF-8".into()))?;
+                    // As messages quote it (a damaged file's path can be long).
+                    let quoted = shown(&object_path);
                     let id = match by_path.get(&object_path) {
                         Some(&id) => id,
                         None => {
                             let names = split_path(&object_path)
-                                .ok_or_else(|| bad(segment, pos, format!("object path `{object_path}` is not of the form /'group'/'channel'")))?;
+                                .ok_or_else(|| bad(segment, pos, format!("object path `{quoted}` is not of the form /'group'/'channel'")))?;
                             if names.len() > 2 {
-                                return Err(bad(segment, pos, format!("object path `{object_path}` is deeper than group/channel")));
+                                return Err(bad(segment, pos, format!("object path `{quoted}` is deeper than group/channel")));
                             }
                             let id = objects.len();
                             objects.push(Object {
@@ -354,7 +356,7 @@ impl TdmsFile {
                     let index = match index_len {
                         NO_DATA => None,
                         SAME_AS_BEFORE => {
-                            Some(*last_index.get(&id).ok_or_else(|| bad(segment, pos, format!("`{object_path}` repeats a raw data index it never had")))?)
+                            Some(*last_index.get(&id).ok_or_else(|| bad(segment, pos, format!("`{quoted}` repeats a raw data index it never had")))?)
                         }
                         DAQMX_FORMAT_CHANGING | DAQMX_DIGITAL_LINE => {
                             let (data_type, _dim, n) =
@@ -378,15 +380,15 @@ impl TdmsFile {
                             let dim = m.u32().ok_or_else(|| short(&m))?;
                             let n = m.u64().ok_or_else(|| short(&m))?;
                             if dim != 1 {
-                                return Err(bad(segment, pos, format!("`{object_path}` has raw data of dimension {dim} (TDMS writes 1)")));
+                                return Err(bad(segment, pos, format!("`{quoted}` has raw data of dimension {dim} (TDMS writes 1)")));
                             }
                             let bytes = if data_type == TYPE_STRING {
                                 m.u64().ok_or_else(|| short(&m))?
                             } else {
                                 let size = type_size(data_type).ok_or_else(|| {
-                                    bad(segment, pos, format!("`{object_path}` holds {}, which has no fixed size this reader knows", type_name(data_type)))
+                                    bad(segment, pos, format!("`{quoted}` holds {}, which has no fixed size this reader knows", type_name(data_type)))
                                 })?;
-                                n.checked_mul(size).ok_or_else(|| bad(segment, pos, format!("`{object_path}`: {n} values overflow")))?
+                                n.checked_mul(size).ok_or_else(|| bad(segment, pos, format!("`{quoted}`: {n} values overflow")))?
                             };
                             Some(RawIndex { data_type, count: n, bytes })
                         }
@@ -405,10 +407,12 @@ impl TdmsFile {
                     let properties = m.u32().ok_or_else(|| short(&m))?;
                     for _ in 0..properties {
                         let name =
-                            m.string().ok_or_else(|| short(&m))?.map_err(|()| bad(segment, pos, format!("a property name of `{object_path}` is not UTF-8")))?;
+                            m.string().ok_or_else(|| short(&m))?.map_err(|()| bad(segment, pos, format!("a property name of `{quoted}` is not UTF-8")))?;
                         let code = m.u32().ok_or_else(|| short(&m))?;
-                        let value =
-                            m.value(code).ok_or_else(|| short(&m))?.map_err(|why| bad(segment, pos, format!("`{object_path}` property `{name}`: {why}")))?;
+                        let value = m
+                            .value(code)
+                            .ok_or_else(|| short(&m))?
+                            .map_err(|why| bad(segment, pos, format!("`{quoted}` property `{}`: {why}", shown(&name))))?;
                         let props = &mut objects[id].properties;
                         props.retain(|(n, _)| *n != name);
                         props.push((name, value));
@@ -420,12 +424,19 @@ impl TdmsFile {
                 // DAQmx raw data is one buffer of the card's codes shared by its channels, laid
                 // out by scaler records; it is not read (`stream` says so), only marked.
                 for (id, ix) in &active {
-                    objects[*id].data_type = Some(TYPE_DAQMX);
-                    objects[*id].len += ix.count;
+                    let o = &mut objects[*id];
+                    o.data_type = Some(TYPE_DAQMX);
+                    o.len = o
+                        .len
+                        .checked_add(ix.count)
+                        .ok_or_else(|| bad(segment, pos, format!("`{}` claims more values than a file can hold", shown(&o.path))))?;
                 }
             } else if toc & (TOC_RAW_DATA | TOC_DAQMX_RAW_DATA) != 0 && end > raw_start {
                 let raw = end - raw_start;
-                let chunk: u64 = active.iter().map(|(_, ix)| ix.bytes).sum();
+                // The sizes are the file's own words (a string's byte count is not checked
+                // against its value count): summed checked.
+                let overflow = || bad(segment, pos, "its objects' raw data sizes overflow: the metadata is damaged".into());
+                let chunk = active.iter().try_fold(0u64, |a, (_, ix)| a.checked_add(ix.bytes)).ok_or_else(overflow)?;
                 if chunk == 0 {
                     return Err(bad(segment, pos, format!("{raw} bytes of raw data but no object with data in the segment")));
                 }
@@ -443,11 +454,16 @@ impl TdmsFile {
                         return Err(bad(
                             segment,
                             pos,
-                            format!("interleaved data with `{}` holding {} {} values against {n}", objects[*id].path, ix.count, type_name(ix.data_type)),
+                            format!(
+                                "interleaved data with `{}` holding {} {} values against {n}",
+                                shown(&objects[*id].path),
+                                ix.count,
+                                type_name(ix.data_type)
+                            ),
                         ));
                     }
                 }
-                let row: u64 = active.iter().map(|(_, ix)| ix.bytes / ix.count.max(1)).sum();
+                let row = active.iter().try_fold(0u64, |a, (_, ix)| a.checked_add(ix.bytes / ix.count.max(1))).ok_or_else(overflow)?;
                 for c in 0..raw / chunk {
                     let base = raw_start + c * chunk;
                     let mut at = base;
@@ -457,7 +473,12 @@ impl TdmsFile {
                             return Err(bad(
                                 segment,
                                 pos,
-                                format!("`{}` changes its data type from {} to {}", o.path, type_name(o.data_type.unwrap_or(0)), type_name(ix.data_type)),
+                                format!(
+                                    "`{}` changes its data type from {} to {}",
+                                    shown(&o.path),
+                                    type_name(o.data_type.unwrap_or(0)),
+                                    type_name(ix.data_type)
+                                ),
                             ));
                         }
                         if ix.count > 0 {
@@ -473,13 +494,20 @@ impl TdmsFile {
                         if run.count == 0 {
                             continue;
                         }
-                        o.len += run.count;
+                        o.len = o
+                            .len
+                            .checked_add(run.count)
+                            .ok_or_else(|| bad(segment, pos, format!("`{}` claims more values than a file can hold", shown(&o.path))))?;
                         match o.runs.last_mut() {
                             // A contiguous continuation (the next chunk of a channel alone in
                             // its segments) extends the run before it.
                             Some(last)
-                                if last.stride == size && run.stride == size && last.big_endian == big && last.offset + last.count * size == run.offset =>
+                                if last.stride == size
+                                    && run.stride == size
+                                    && last.big_endian == big
+                                    && last.count.checked_mul(size).and_then(|b| last.offset.checked_add(b)) == Some(run.offset) =>
                             {
+                                // Both counts are within `o.len`, which did not overflow.
                                 last.count += run.count
                             }
                             _ => o.runs.push(run),
@@ -530,11 +558,11 @@ impl TdmsFile {
 
     /// The channel names of the file, for a message.
     pub fn channel_names(&self) -> String {
-        let names: Vec<String> = self.objects.iter().filter(|o| o.channel.is_some()).map(|o| format!("`{}`", o.name())).collect();
+        let names: Vec<String> = self.objects.iter().filter(|o| o.channel.is_some()).map(|o| format!("`{}`", shown(&o.name()))).collect();
         if names.is_empty() {
             "none".into()
         } else {
-            names.join(", ")
+            listed(names)
         }
     }
 
@@ -592,7 +620,7 @@ impl ChannelStream {
                 self.done_in_run = 0;
                 continue;
             }
-            let rows = left.min((max - got) as u64).min((READ_BYTES / run.stride).max(1));
+            let rows = left.min((max - got) as u64).min((READ_BYTES / run.stride.max(1)).max(1));
             let start = run.offset + self.done_in_run * run.stride;
             let bytes = (rows - 1) * run.stride + self.size;
             self.buf.resize(bytes as usize, 0);

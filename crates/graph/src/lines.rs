@@ -31,21 +31,25 @@ pub enum LinesEnd {
     Broken(std::io::Error),
 }
 
-/// The longest line kept, bytes: the rest of a longer line is dropped (so it is refused as
-/// malformed rather than filling the memory).
+/// The longest line kept, bytes: the rest of a longer line is dropped, and the line is
+/// handed on marked as cut, to be refused ([`ReplayCore::push_cut_line`]) rather than fill
+/// the memory or be read without its end.
 pub const MAX_LINE_BYTES: usize = 64 * 1024;
 
 /// Reads `stream` line by line and hands each line ended by LF (the LF, and a CR before it,
 /// included), numbered from 1, to `on_line`, until the end of the stream, a read error or
-/// `stop()`. A read that times out (a socket with a read timeout) only gives `stop()` a
-/// chance: the part of a line read so far is kept. Bytes that are not UTF-8 become U+FFFD
-/// (and the row is then refused by the reader with its column). `Err` only from `on_line`.
+/// `stop()`. The third argument says the line was longer than [`MAX_LINE_BYTES`]: only its
+/// first [`MAX_LINE_BYTES`] were kept. A read that times out (a socket with a read timeout)
+/// only gives `stop()` a chance: the part of a line read so far is kept. Bytes that are not
+/// UTF-8 become U+FFFD (and the row is then refused by the reader with its column). `Err`
+/// only from `on_line`.
 pub fn read_lines(
     mut stream: impl BufRead,
     stop: &dyn Fn() -> bool,
-    on_line: &mut dyn FnMut(usize, &str) -> Result<(), NodeError>,
+    on_line: &mut dyn FnMut(usize, &str, bool) -> Result<(), NodeError>,
 ) -> Result<LinesEnd, NodeError> {
     let mut line: Vec<u8> = Vec::new();
+    let mut cut = false;
     let mut number = 0;
     loop {
         if stop() {
@@ -62,6 +66,9 @@ pub fn read_lines(
                     None => (available, false),
                 };
                 let room = MAX_LINE_BYTES.saturating_sub(line.len());
+                // The line end does not count: a line of exactly MAX_LINE_BYTES is whole.
+                let content = chunk.len() - usize::from(complete);
+                cut |= content > room;
                 line.extend_from_slice(&chunk[..chunk.len().min(room)]);
                 (chunk.len(), complete)
             }
@@ -71,8 +78,9 @@ pub fn read_lines(
         stream.consume(used);
         if complete {
             number += 1;
-            on_line(number, &String::from_utf8_lossy(&line))?;
+            on_line(number, &String::from_utf8_lossy(&line), cut)?;
             line.clear();
+            cut = false;
         }
     }
 }
@@ -228,9 +236,9 @@ pub fn run_ascii_source(
         deliver(out, &mut warnings.borrow_mut(), emit)
     };
     let mut last_line = 0;
-    let end = read_lines(stream, &stop_or_done, &mut |number, line| {
+    let end = read_lines(stream, &stop_or_done, &mut |number, line, cut| {
         last_line = number;
-        let out = core.push_line(number, line)?;
+        let out = if cut { core.push_cut_line(number)? } else { core.push_line(number, line)? };
         paced(out, emit)
     })?;
     match end {
@@ -305,9 +313,9 @@ pub fn run_tcp_source(
         }
         let mut last_line = 0;
         let mut warnings = WarnLimiter::new(Duration::from_secs(1));
-        let end = read_lines(BufReader::new(stream), stop, &mut |number, line| {
+        let end = read_lines(BufReader::new(stream), stop, &mut |number, line, cut| {
             last_line = number;
-            let out = core.push_line(number, line)?;
+            let out = if cut { core.push_cut_line(number)? } else { core.push_line(number, line)? };
             deliver(out, &mut warnings, emit)
         });
         flush_warnings(&name, &mut warnings);

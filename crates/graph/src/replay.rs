@@ -44,6 +44,7 @@ use oilfilm_physics::daq::{Calibration, ChannelId};
 
 use crate::daq::DaqParams;
 use crate::error::NodeError;
+use crate::lines::MAX_LINE_BYTES;
 use crate::stamp::Stamp;
 
 /// What one line (or the end of a stream) gave.
@@ -165,6 +166,24 @@ impl ReplayCore {
             }
         }
         Ok(out)
+    }
+
+    /// Line `number` was longer than [`MAX_LINE_BYTES`] (and only that much of it was kept):
+    /// a data row is reported and skipped as malformed, as any bad row is; in the header it is
+    /// fatal, as any header error is. Its end was not read, so it is not read at all: a row
+    /// cut there could look whole.
+    pub fn push_cut_line(&mut self, number: usize) -> Result<Produced, NodeError> {
+        let e = NodeError::BadRecord {
+            source_name: self.source_name().to_string(),
+            line: number,
+            column: MAX_LINE_BYTES + 1,
+            reason: format!("the line is longer than {MAX_LINE_BYTES} bytes: refused, and nothing of it past that was kept"),
+        };
+        if self.reader.header().is_none() {
+            return Err(e);
+        }
+        self.malformed += 1;
+        Ok(Produced { frames: Vec::new(), bad_row: Some(e) })
     }
 
     /// The end of the stream (end of file, connection closed) after line `last_line`: the

@@ -312,7 +312,8 @@ fn a_bad_header_is_fatal_with_its_position() {
 fn read_lines_numbers_lines_keeps_line_ends_and_reports_an_unterminated_last_line() {
     let mut got = Vec::new();
     let text: &[u8] = b"a\r\n\nb\xff c\nlast";
-    let end = read_lines(BufReader::with_capacity(2, text), &|| false, &mut |n, l| {
+    let end = read_lines(BufReader::with_capacity(2, text), &|| false, &mut |n, l, cut| {
+        assert!(!cut);
         got.push((n, l.to_string()));
         Ok(())
     })

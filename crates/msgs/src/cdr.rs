@@ -192,10 +192,12 @@ impl<'a> CdrReader<'a> {
 
     /// A sequence's element count, refused if the remaining bytes cannot hold that many
     /// elements of at least `min_element_bytes` each (so a corrupt count cannot allocate).
+    /// The refusal's offset is the count's own.
     pub fn len(&mut self, field: &str, min_element_bytes: usize) -> Result<usize, CdrError> {
         let n = u32::from_le_bytes(self.primitive::<4>(field)?) as usize;
         if n.saturating_mul(min_element_bytes.max(1)) > self.remaining() {
-            return Err(self.error(field, format!("count {n} exceeds the {} bytes left", self.remaining())));
+            let what = format!("count {n} exceeds the {} bytes left", self.remaining());
+            return Err(CdrError { field: field.to_string(), offset: self.pos - 4, what });
         }
         Ok(n)
     }
@@ -352,8 +354,11 @@ macro_rules! bulk_element {
 }
 bulk_element!(u8, i8, u16, i16, u32, i32, u64, i64, f32, f64);
 
+/// The error of element `i` of sequence or array `field`: `field[i]`, followed by the path
+/// inside the element when it is a message (`new_parameters[1].value.string_value`).
 fn element_error(e: CdrError, field: &str, i: usize) -> CdrError {
-    CdrError { field: format!("{field}[{i}]"), ..e }
+    let inner = e.field.strip_prefix(field).unwrap_or("");
+    CdrError { field: format!("{field}[{i}]{inner}"), ..e }
 }
 
 impl<T: CdrElement> CdrField for Vec<T> {
