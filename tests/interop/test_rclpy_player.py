@@ -9,12 +9,17 @@ with use_sim_time=true checks that:
    and what it carries is the bag's log time: never backwards, ending at the bag's last log
    time, and the node's own clock (rclpy's TimeSource) follows it there;
 2. every topic's messages arrive, all of them, in order, with the recorded values and the
-   recorded header stamps (replayed messages keep the stamps of the run).
+   recorded header stamps (replayed messages keep the stamps of the run);
+3. one of our nodes (an estimator, in a namespace of its own so that it adds nothing to the
+   played topics) started with `-p use_sim_time:=true` follows /clock too: a parameter set on
+   it after the play is announced on /parameter_events and logged on /rosout stamped with
+   the bag's last log time, not the wall clock's.
 
 Run through run-rclpy-player.sh.
 """
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -22,6 +27,9 @@ import time
 import rclpy
 import yaml
 from rclpy.parameter import Parameter
+from rcl_interfaces.msg import Log, ParameterEvent, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.srv import SetParameters
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
@@ -36,6 +44,9 @@ TYPES = {
 }
 
 failures = []
+# Our node that follows /clock (3.), away from the played topics' namespace.
+FOLLOWER_NS = "/oilfilm_sim_time"
+FOLLOWER = "estimator"
 
 
 def check(cond, what):
@@ -73,6 +84,22 @@ def main():
                      durability=DurabilityPolicy.VOLATILE)
     for t, (ty, _) in topics.items():
         node.create_subscription(TYPES[ty], t, lambda m, t=t: got[t].append(m), qos)
+    # 3. Our estimator with use_sim_time, and what it says about its time.
+    follower_name = f"{FOLLOWER_NS}/{FOLLOWER}"
+    events, logs = [], []
+    # Volatile: a transient-local reader would be incompatible with rclpy's own (volatile)
+    # /parameter_events writer, and rmw would warn of it.
+    node.create_subscription(ParameterEvent, "/parameter_events", lambda m: events.append(m) if m.node == follower_name else None,
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
+    node.create_subscription(Log, "/rosout", lambda m: logs.append(m) if m.name.endswith(FOLLOWER) else None,
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    follower_log = open(os.path.join(os.path.dirname(bag), "follower.log"), "w")
+    follower = subprocess.Popen([os.path.join(bin_dir, "oilfilm-estimator"), "--ros-args", "-r", f"__node:={FOLLOWER}",
+                                 "-r", f"__ns:={FOLLOWER_NS}", "-p", "use_sim_time:=true"],
+                                stdout=follower_log, stderr=subprocess.STDOUT)
+    setter = node.create_client(SetParameters, f"{follower_name}/set_parameters")
+    found = setter.wait_for_service(timeout_sec=30.0)
+    check(found, f"{follower_name} (use_sim_time:=true) serves its parameters")
     deadline = time.monotonic() + 1.0
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
@@ -102,6 +129,35 @@ def main():
     check(bool(clocks) and clocks[0] >= min(m["log_time"] for m in expected), "/clock starts at the bag's log time")
     now = node.get_clock().now().nanoseconds
     check(now == last_log, f"the use_sim_time node's clock follows /clock to the bag's end ({now} vs {last_log})")
+
+    try:
+        if found:
+            request = SetParameters.Request(parameters=[ParameterMsg(name="max_condition", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2e6))])
+            future = setter.call_async(request)
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 20 and not (future.done() and any(e.changed_parameters for e in events)
+                                                      and any("max_condition" in m.msg for m in logs)):
+                executor.spin_once(timeout_sec=0.05)
+            check(future.done() and future.result().results[0].successful, "the set on our use_sim_time node is applied")
+            changed = [e for e in events if any(p.name == "max_condition" for p in e.changed_parameters)]
+            wall = time.time_ns()
+            check(bool(changed) and ns(changed[-1].stamp) == last_log,
+                  f"our use_sim_time node stamps its parameter event with /clock's time, the bag's last log time "
+                  f"({ns(changed[-1].stamp) if changed else None} vs {last_log}; the wall clock: {wall})")
+            said = [m for m in logs if "max_condition" in m.msg]
+            check(bool(said) and ns(said[-1].stamp) == last_log,
+                  f"and its /rosout line about it ({ns(said[-1].stamp) if said else None} vs {last_log})")
+    finally:
+        follower.send_signal(signal.SIGINT)
+        try:
+            check(follower.wait(timeout=20) == 0, "our use_sim_time node exits 0 on SIGINT")
+        except subprocess.TimeoutExpired:
+            follower.kill()
+            check(False, "our use_sim_time node exits on SIGINT within 20 s")
+        follower_log.close()
+        if failures:
+            with open(follower_log.name, errors="replace") as f:
+                sys.stderr.write(f"{follower_name}'s output:\n" + f.read()[-4000:])
 
     for t, (ty, want) in topics.items():
         have = got[t]
