@@ -30,7 +30,7 @@ bag_venv_pid=$!
 ( bash tests/interop/setup-foreign-venv.sh >target/setup-foreign-venv.log 2>&1; echo "$?" >target/setup-foreign-venv.status ) &
 foreign_venv_pid=$!
 
-echo "== format and lints (cargo fmt --check, cargo clippy -D warnings)"
+echo "== format (cargo fmt --all --check)"
 set +e
 cargo fmt --all --check >target/fmt-output.txt 2>&1
 fmt_status=$?
@@ -43,40 +43,68 @@ else
   head -40 target/fmt-output.txt
   echo "FAILED: cargo fmt --all --check (run cargo fmt --all)"
 fi
-set +e
-cargo clippy --workspace --all-targets --profile test -- -D warnings 2>&1 | tail -60
-clippy_status=${PIPESTATUS[0]}
-set -e
-if [ "$clippy_status" -eq 0 ]; then
-  passed=$((passed + 1))
-  echo "ok: cargo clippy --workspace --all-targets -- -D warnings"
-else
-  failed=$((failed + 1))
-  echo "FAILED: cargo clippy --workspace --all-targets -- -D warnings"
-fi
-phase "format and lints"
+phase "format"
 
-echo "== Rust tests (built optimised: see [profile.test] in Cargo.toml)"
+echo "== build, linted on the way (clippy-driver compiles our crates; optimised: see [profile.test] in Cargo.toml)"
+# clippy-driver is rustc with clippy's lints: as cargo's RUSTC_WORKSPACE_WRAPPER it compiles
+# the workspace's crates for real (the dependencies go to rustc) and lints them as it does,
+# so the lint gate costs no second build of everything (`cargo clippy` checks every crate
+# again, dependencies included). Any warning, clippy's or rustc's, fails the gate, as
+# `cargo clippy --workspace --all-targets -- -D warnings` would; the tests still run.
+# Exported, so every later cargo command (here and in the interop scripts) builds with the
+# same compiler and finds the build fresh.
+clippy_driver=$(rustup which clippy-driver 2>/dev/null || command -v clippy-driver || true)
+if [ -z "$clippy_driver" ]; then
+  rustup component add clippy >/dev/null 2>&1 || true
+  clippy_driver=$(rustup which clippy-driver 2>/dev/null || true)
+fi
+if [ -n "$clippy_driver" ]; then
+  export RUSTC_WORKSPACE_WRAPPER=$clippy_driver
+else
+  echo "no clippy-driver (rustup component add clippy failed): built with rustc alone"
+fi
 # A clean clone gains nothing from incremental caches, and they cost several GB of
 # disk (a CI run once died of a full disk while linking). Set it to 1 to keep them.
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 set +e
-# --no-fail-fast: a failing test binary must not keep the later ones from running (without it
-# a run once reported 235 passed and 1 failed, and never ran some 110 other tests).
-cargo test --workspace --profile test --no-fail-fast -- --nocapture 2>&1 | tee target/test-output.txt
-rust_status=${PIPESTATUS[0]}
+cargo test --workspace --profile test --no-run >target/build-output.txt 2>&1
+build_status=$?
 set -e
-read -r rp rf rs < <(grep -E "^test result:" target/test-output.txt | awk '
-  { for (i = 1; i <= NF; i++) { if ($i ~ /passed;/) p += $(i-1); if ($i ~ /failed;/) f += $(i-1); if ($i ~ /ignored;/) s += $(i-1) } }
-  END { printf "%d %d %d\n", p, f, s }')
-passed=$((passed + rp))
-failed=$((failed + rf))
-if [ "$rust_status" -ne 0 ] && [ "$rf" -eq 0 ]; then
-  # A build failure or a crash counts as a failure even if no test reported one.
+grep -vE '^ *(Compiling|Executable|Finished|Blocking|Downloaded|Downloading|Updating|Locking|Adding) ' target/build-output.txt | tail -200
+lint_count=$(grep -cE '^(warning|error)(\[[a-zA-Z0-9_:]+\])?: ' target/build-output.txt || true)
+if [ -n "$clippy_driver" ] && [ "$lint_count" -eq 0 ] && [ "$build_status" -eq 0 ]; then
+  passed=$((passed + 1))
+  echo "ok: the workspace builds with no warning from rustc or clippy (cargo clippy --workspace --all-targets -- -D warnings)"
+else
   failed=$((failed + 1))
+  echo "FAILED: lints: $lint_count warning or error line(s) from rustc or clippy above${clippy_driver:-, and clippy is not installed}"
+fi
+phase "build and lints"
+if [ "$build_status" -ne 0 ]; then
+  echo "FAILED: the build (cargo test --workspace --profile test --no-run); nothing else can run"
+  echo
+  echo "all: $passed passed, $((failed + 1)) failed, 0 skipped"
+  exit 1
 fi
 
-phase "Rust build and tests"
+# The Rust tests keep the CPU busy; the interop tests mostly wait (DDS discovery, real-time
+# runs, Python start-up). So the Rust tests run in the background while the interop tests
+# run below, each DDS test in a domain of its own range (Rust 1..170 and 220..232, interop
+# 170..220), and their output is printed when both are done. Nothing below may take cargo's
+# lock while they run: the interop scripts use the binaries built above.
+export OILFILM_BUILT=1
+echo "== Rust tests (in the background; their output follows the interop tests)"
+rust_started=$SECONDS
+rm -f target/test-status target/test-seconds
+(
+  set +e
+  # --no-fail-fast: a failing test binary must not keep the later ones from running (without
+  # it a run once reported 235 passed and 1 failed, and never ran some 110 other tests).
+  cargo test --workspace --profile test --no-fail-fast -- --nocapture >target/test-output.txt 2>&1
+  echo "$?" >target/test-status
+  echo "$((SECONDS - rust_started))" >target/test-seconds
+) &
+rust_pid=$!
 
 echo "== ROS 2 interop (rclpy and rosidl from PyPI, in .venv-ros)"
 wait "$ros_venv_pid" "$bag_venv_pid" "$foreign_venv_pid" || true
@@ -115,6 +143,21 @@ phase "bag interop"
 echo "== Records from other tools (npTDMS, scipy, pandas from PyPI, in .venv-foreign)"
 interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
 phase "foreign-record interop"
+
+echo "== Rust tests (their output)"
+wait "$rust_pid" || true
+cat target/test-output.txt
+rust_status=$(cat target/test-status 2>/dev/null || echo 1)
+read -r rp rf rs < <(grep -E "^test result:" target/test-output.txt | awk '
+  { for (i = 1; i <= NF; i++) { if ($i ~ /passed;/) p += $(i-1); if ($i ~ /failed;/) f += $(i-1); if ($i ~ /ignored;/) s += $(i-1) } }
+  END { printf "%d %d %d\n", p, f, s }')
+passed=$((passed + rp))
+failed=$((failed + rf))
+if [ "$rust_status" -ne 0 ] && [ "$rf" -eq 0 ]; then
+  # A crash counts as a failure even if no test reported one.
+  failed=$((failed + 1))
+fi
+echo "== time: the Rust tests took $(cat target/test-seconds 2>/dev/null || echo '?') s, beside the interop tests (total $SECONDS s)"
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
 [ "$failed" -eq 0 ]

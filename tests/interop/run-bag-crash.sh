@@ -10,8 +10,6 @@ cd "$(dirname "$0")/../.."
 py=$(bash tests/interop/setup-bag-venv.sh)
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-bag-crash.XXXXXX")
 trap 'rm -rf "$work"' EXIT
-cargo build --quiet --profile test -p oilfilm-nodes --bins
-cargo build --quiet --profile test -p oilfilm-bag --example read_bag
-cargo build --quiet --profile test -p oilfilm --bin oilfilm
+bash tests/interop/build-binaries.sh
 OILFILM_BIN=$(pwd)/target/debug OILFILM_READ_BAG=$(pwd)/target/debug/examples/read_bag OILFILM_WORK=$work \
   "$py" -m pytest -q -p no:cacheprovider --basetemp "$work/pytest" tests/interop/test_bag_crash.py

@@ -9,8 +9,7 @@ cd "$(dirname "$0")/../.."
 py=$(bash tests/interop/setup-bag-venv.sh)
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-bag-interop.XXXXXX")
 trap 'rm -rf "$work"' EXIT
-cargo build --quiet --profile test -p oilfilm-bag --examples
-cargo build --quiet --profile test -p oilfilm --bin oilfilm
+bash tests/interop/build-binaries.sh
 bin=target/debug/examples
 "$bin/write_sim_rig" "$work/sim_rig" 2
 # The other chunk compressions and a bag split into several files, for pymcap-cli doctor.

@@ -9,6 +9,6 @@ cd "$(dirname "$0")/../.."
 py=$(bash tests/interop/setup-foreign-venv.sh)
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-foreign-interop.XXXXXX")
 trap 'rm -rf "$work"' EXIT
-cargo build --quiet --profile test -p oilfilm --bin oilfilm
+bash tests/interop/build-binaries.sh
 OILFILM_BIN=$(pwd)/target/debug/oilfilm \
   "$py" -m pytest -q -p no:cacheprovider --durations=5 --basetemp "$work/pytest" tests/interop/test_foreign_files.py

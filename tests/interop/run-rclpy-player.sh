@@ -6,12 +6,12 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 bin_dir=${1:-target/debug}
 [ -x "$bin_dir/oilfilm" ] || { echo "no oilfilm binary in $bin_dir (build it first)" >&2; exit 1; }
-cargo build --quiet --profile test -p oilfilm-bag --example write_sim_rig
+bash tests/interop/build-binaries.sh
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-rclpy-player.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 target/debug/examples/write_sim_rig "$work/sim_rig" 2 >/dev/null
 eval "$(bash tests/interop/setup-ros-venv.sh)"
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((100 + RANDOM % 100))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 50))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"

@@ -10,7 +10,7 @@ bin_dir=${1:-target/debug}
 [ -x "$bin_dir/oilfilm" ] && [ -x "$bin_dir/oilfilm-daq" ] || { echo "no oilfilm binaries in $bin_dir (build them first)" >&2; exit 1; }
 system_ros2=
 if [ -n "${ROS_DISTRO:-}" ] && command -v ros2 >/dev/null; then system_ros2=$(command -v ros2); fi
-cargo build --quiet --profile test -p oilfilm-bag --example write_sim_rig
+bash tests/interop/build-binaries.sh
 work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-ros2-cli.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 target/debug/examples/write_sim_rig "$work/sim_rig" 6 >/dev/null
@@ -23,7 +23,7 @@ if [ -z "$system_ros2" ]; then
   export PATH=$(dirname "$OILFILM_ROS_PYTHON_BIN"):$PATH
   export ROS_DISTRO=kilted
 fi
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((100 + RANDOM % 100))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 50))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only), ros2: $(command -v ros2)"
