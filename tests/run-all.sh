@@ -70,7 +70,8 @@ set +e
 cargo test --workspace --profile test --no-run >target/build-output.txt 2>&1
 build_status=$?
 set -e
-grep -vE '^ *(Compiling|Executable|Finished|Blocking|Downloaded|Downloading|Updating|Locking|Adding) ' target/build-output.txt | tail -200
+# What the build said beyond its progress lines: warnings, errors (none, when all is well).
+{ grep -vE '^ *(Compiling|Executable|Finished|Blocking|Downloaded|Downloading|Updating|Locking|Adding) ' target/build-output.txt || true; } | tail -200
 lint_count=$(grep -cE '^(warning|error)(\[[a-zA-Z0-9_:]+\])?: ' target/build-output.txt || true)
 if [ -n "$clippy_driver" ] && [ "$lint_count" -eq 0 ] && [ "$build_status" -eq 0 ]; then
   passed=$((passed + 1))
