@@ -36,9 +36,42 @@ pub struct AsciiInput {
 
 /// Reads `path` and resolves its rig (`explicit` is `--rig`).
 pub fn load(path: &Path, explicit: Option<&Path>) -> Result<AsciiInput> {
-    let name = path.display().to_string();
     let record = read_record(path)?;
-    let named = record.header.rig.trim().to_string();
+    let (rig, rig_source) = rig_of(path, &record.header, explicit)?;
+    Ok(AsciiInput { record, rig, rig_source })
+}
+
+/// The header of the record in `path` (plain or gzip), reading no further than its column
+/// line: the error of a header that cannot be interpreted names its line and column.
+pub fn read_header(path: &Path) -> Result<ascii::Header> {
+    let name = path.display().to_string();
+    let stream = oilfilm_graph::lines::open_ascii(&name)?;
+    let mut reader = ascii::LineReader::new(&name);
+    let done = std::cell::Cell::new(false);
+    let (mut header, mut failed, mut last) = (None, None, 0);
+    oilfilm_graph::lines::read_lines(stream, &|| done.get(), &mut |number, line, _cut| {
+        last = number;
+        match reader.feed(number, line) {
+            Ok(ascii::Fed::Header(h)) => header = Some(h),
+            Ok(_) => return Ok(()),
+            // Every later line would give the same error.
+            Err(e) => failed = Some(e),
+        }
+        done.set(true);
+        Ok(())
+    })?;
+    match (header, failed) {
+        (Some(h), _) => Ok(h),
+        (None, Some(e)) => Err(e.into()),
+        (None, None) => Err(reader.finish(last.max(1)).err().map_or_else(|| anyhow::anyhow!("{name}: the file ends in its header"), Into::into)),
+    }
+}
+
+/// The rig `header` names for the record in `path`, or `explicit` (`--rig`), and where it
+/// came from.
+pub fn rig_of(path: &Path, header: &ascii::Header, explicit: Option<&Path>) -> Result<(RigConfig, String)> {
+    let name = path.display().to_string();
+    let named = header.rig.trim().to_string();
     let beside = |n: &str| -> Option<PathBuf> {
         let p = Path::new(n);
         let candidate = if p.is_absolute() { p.to_path_buf() } else { path.parent().unwrap_or(Path::new(".")).join(p) };
@@ -70,5 +103,5 @@ pub fn load(path: &Path, explicit: Option<&Path>) -> Result<AsciiInput> {
             }
         }
     };
-    Ok(AsciiInput { record, rig, rig_source })
+    Ok((rig, rig_source))
 }

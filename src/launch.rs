@@ -107,15 +107,19 @@ impl Notes {
     }
 }
 
-/// How estimates are printed.
-struct Printer {
+/// How estimates are printed (here and by `identify --stream`).
+pub(crate) struct Printer {
     verbose: bool,
     json: bool,
     notes: Notes,
 }
 
 impl Printer {
-    fn print(&mut self, e: &CoefficientEstimate) {
+    pub(crate) fn new(verbose: bool, json: bool) -> Self {
+        Self { verbose, json, notes: Notes::default() }
+    }
+
+    pub(crate) fn print(&mut self, e: &CoefficientEstimate) {
         if self.json {
             match serde_json::to_string(e) {
                 Ok(line) => println!("{line}"),
@@ -135,7 +139,7 @@ impl Printer {
         }
     }
 
-    fn summary(&self) {
+    pub(crate) fn summary(&self) {
         for (note, n) in self.notes.repeated() {
             let short: String = note.chars().take(100).collect();
             println!("note repeated on {n} estimates: {short}{}", if short.len() < note.len() { "..." } else { "" });
@@ -172,7 +176,7 @@ pub fn run(args: &LaunchArgs) -> Result<()> {
     let say = |line: String| if args.json { eprintln!("{line}") } else { println!("{line}") };
     say(format!("launched {} from {} in namespace {namespace}; estimates print as they arrive", graph.names().join(", "), args.file.display()));
     say(format!("frame: {}", oilfilm_identification::pipeline::FRAME));
-    let mut printer = Printer { verbose: args.verbose, json: args.json, notes: Notes::default() };
+    let mut printer = Printer::new(args.verbose, args.json);
     let started = Instant::now();
     let mut failure = None;
     let mut count = 0u64;

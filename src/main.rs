@@ -10,6 +10,7 @@ mod diagnose_report;
 mod figures;
 mod foreign_input;
 mod identify_corrected;
+mod identify_stream;
 mod import;
 mod launch;
 mod record;

@@ -205,22 +205,22 @@ pub struct IdentifyArgs {
     pub(crate) source: RigSource,
     /// Shaft speed, rpm, if the record does not state it.
     #[arg(long)]
-    speed_rpm: Option<f64>,
+    pub(crate) speed_rpm: Option<f64>,
     /// Samples per window (default 50 000, the paper's; a shorter record is one window).
     #[arg(long)]
-    window: Option<usize>,
+    pub(crate) window: Option<usize>,
     /// Samples between window starts (default: the window).
     #[arg(long)]
-    hop: Option<usize>,
+    pub(crate) hop: Option<usize>,
     /// Model order (default kc; for a bag: the params file's, else kc).
     #[arg(long, value_enum)]
-    model: Option<ModelArg>,
+    pub(crate) model: Option<ModelArg>,
     /// Solver (default qr; for a bag: the params file's, else qr).
     #[arg(long, value_enum)]
-    solver: Option<SolverArg>,
+    pub(crate) solver: Option<SolverArg>,
     /// Skip the de-skew stage (only to see what the multiplex skew does).
     #[arg(long)]
-    no_deskew: bool,
+    pub(crate) no_deskew: bool,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub(crate) json: bool,
@@ -228,18 +228,43 @@ pub struct IdentifyArgs {
     /// measurement effect, an added mass or friction separated, at the start for a drift)
     /// even when no window is refused (a refused window always does this).
     #[arg(long, conflicts_with = "no_correct")]
-    correct: bool,
+    pub(crate) correct: bool,
     /// Never diagnose: the windows as the estimator gives them.
     #[arg(long)]
-    no_correct: bool,
+    pub(crate) no_correct: bool,
     /// For a bag: go on past damaged chunks, files metadata.yaml does not list or lacks and
     /// counts that differ, analysing what is readable and saying what is missing (in the
     /// output and the JSON's `shortfalls`). Without it any of these is an error (exit 4).
     #[arg(long)]
-    allow_partial: bool,
+    pub(crate) allow_partial: bool,
+    /// Identify an ASCII record (or a `--map` record) window by window as it is read, through
+    /// the node graph of launch_configs/replay.launch.yaml in this process (its DAQ,
+    /// conditioner and estimator, its parameters; `--params`, `--window`, `--hop`, `--model`,
+    /// `--solver`, `--speed-rpm`, `--no-deskew` set theirs): memory stays bounded whatever
+    /// the record's length. Each window's estimate prints as it comes (`--json`: one JSON
+    /// object a line, then a summary line). What needs the whole record (`--correct`, the
+    /// drift re-identification) is not available. A record over 256 MB (gzip: 64 MB) is
+    /// streamed without it being asked.
+    #[arg(long, conflicts_with = "no_stream")]
+    pub(crate) stream: bool,
+    /// Identify the record whole even when it is large enough to be streamed (it takes about
+    /// three times the record's size in memory).
+    #[arg(long)]
+    pub(crate) no_stream: bool,
+    /// Tests only: the size, bytes, above which a plain ASCII record is streamed without
+    /// `--stream` (a gzip one above a quarter of it), instead of
+    /// `identify_stream::STREAM_ABOVE_BYTES`; lets a test exercise the switch on a small file.
+    #[arg(long, hide = true, value_name = "BYTES")]
+    pub(crate) stream_above_bytes: Option<u64>,
 }
 
 pub fn run_identify(args: &IdentifyArgs) -> Result<Outcome> {
+    if args.stream {
+        return crate::identify_stream::run(args, None);
+    }
+    if let Some(why) = crate::identify_stream::too_large_to_hold(args)? {
+        return crate::identify_stream::run(args, Some(&why));
+    }
     if let (Some(map), true) = (&args.map, args.replay) {
         return crate::foreign_input::identify(args, map);
     }
@@ -567,7 +592,16 @@ fn replay_bag(args: &IdentifyArgs) -> Result<Outcome> {
 /// `--window`, `--hop`, `--model`, `--solver`, `--speed-rpm` over the estimator's parameters;
 /// `--no-deskew` is refused (the conditioner's `deskew` parameter says it).
 pub(crate) fn apply_estimator_options(args: &IdentifyArgs, estimator: &mut oilfilm_graph::estimator::EstimatorParams) -> Result<()> {
-    let name = args.file.display().to_string();
+    set_estimator_options(args, estimator);
+    if args.no_deskew {
+        let name = args.file.display();
+        bail!("{name}: --no-deskew is for ASCII records; for a bag or a --map record set `deskew: false` in the conditioner's params");
+    }
+    Ok(())
+}
+
+/// `--window`, `--hop`, `--model`, `--solver`, `--speed-rpm` over the estimator's parameters.
+pub(crate) fn set_estimator_options(args: &IdentifyArgs, estimator: &mut oilfilm_graph::estimator::EstimatorParams) {
     if let Some(w) = args.window {
         estimator.window = w as i64;
         estimator.hop = args.hop.unwrap_or(w) as i64;
@@ -592,10 +626,6 @@ pub(crate) fn apply_estimator_options(args: &IdentifyArgs, estimator: &mut oilfi
     if let Some(rpm) = args.speed_rpm {
         estimator.speed_rpm = rpm;
     }
-    if args.no_deskew {
-        bail!("{name}: --no-deskew is for ASCII records; for a bag or a --map record set `deskew: false` in the conditioner's params");
-    }
-    Ok(())
 }
 
 /// The bag's frames through the node conditioner and estimator, printed; `shortfalls`: what

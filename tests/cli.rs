@@ -433,3 +433,138 @@ fn a_bag_that_differs_from_its_metadata_exits_4_unless_partial_is_allowed() {
     assert!(String::from_utf8_lossy(&out.stdout).starts_with("PARTIAL:"), "the table output says it first");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `identify FILE --stream --json`'s lines: the estimates (one JSON object each), then the
+/// summary.
+fn streamed(out: &Output) -> (Vec<serde_json::Value>, serde_json::Value) {
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not a JSON line ({e}): {l}"))).collect();
+    let summary = lines.pop().expect("a summary line");
+    (lines, summary["summary"].clone())
+}
+
+/// `identify --stream` runs the replay graph (launch_configs/replay.launch.yaml: DAQ,
+/// conditioner, estimator) in its own process: its estimates are those of that launch file's
+/// graph run here by the in-memory runner, window for window and bit for bit (the same node
+/// code on the same frames); a gzip copy of the record streams to the same estimates.
+#[test]
+fn identify_stream_gives_the_replay_graphs_estimates_bit_for_bit() {
+    use oilfilm_graph::runner::memory::{shipped, Graph};
+    use oilfilm_graph::topics;
+    use oilfilm_msgs::CoefficientEstimate;
+    let record = scratch("stream.txt");
+    let path = record.to_str().unwrap();
+    let out = oilfilm(&["simulate", "--seconds", "8", "-o", path]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = oilfilm(&["identify", path, "--stream", "--json", "--window", "10000", "--hop", "5000"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let (estimates, summary) = streamed(&out);
+
+    let args = [("file".to_string(), path.to_string()), ("rate_factor".to_string(), "0".to_string())];
+    let overrides = [("estimator", "window", "10000"), ("estimator", "hop", "5000")];
+    let mut g = Graph::from_launch(&shipped("replay.launch.yaml"), &args, &overrides, None).unwrap();
+    let mut tap = g.tap::<CoefficientEstimate>(&topics::ESTIMATES).unwrap();
+    g.run().unwrap();
+    let graph = tap.drain();
+    assert!(graph.len() >= 4 && graph.iter().all(|e| e.solved), "{} graph estimates", graph.len());
+    assert_eq!(estimates.len(), graph.len(), "one line per window of the graph");
+    for (line, e) in estimates.iter().zip(&graph) {
+        let streamed: CoefficientEstimate = serde_json::from_value(line.clone()).expect("an estimate line is a CoefficientEstimate");
+        assert_eq!((streamed.window_start_sample, streamed.solved), (e.window_start_sample, e.solved));
+        for (a, b) in streamed.stiffness_n_m.iter().chain(&streamed.damping_n_s_m).zip(e.stiffness_n_m.iter().chain(&e.damping_n_s_m)) {
+            assert_eq!(a.to_bits(), b.to_bits(), "window at {}: {a:e} streamed, {b:e} in the graph", e.window_start_sample);
+        }
+    }
+    assert_eq!(
+        (summary["windows"].as_u64(), summary["solved"].as_u64(), summary["refused"].as_u64()),
+        (Some(graph.len() as u64), Some(graph.len() as u64), Some(0))
+    );
+    let mean = graph.iter().map(|e| e.stiffness_n_m[0]).sum::<f64>() / graph.len() as f64;
+    let said = summary["mean_stiffness_n_m"][0].as_f64().unwrap();
+    assert!((said - mean).abs() <= 1e-12 * mean.abs(), "mean kxx {said:e} vs {mean:e}");
+    assert!(summary["left_out"].as_str().unwrap().contains("--no-stream") && summary["automatic"].is_null(), "{summary}");
+
+    // The same record gzip-compressed: the DAQ inflates it as it reads.
+    let gz = scratch("stream.txt.gz");
+    let mut enc = flate2::write::GzEncoder::new(std::fs::File::create(&*gz).unwrap(), flate2::Compression::fast());
+    std::io::copy(&mut std::fs::File::open(&*record).unwrap(), &mut enc).unwrap();
+    enc.finish().unwrap();
+    let out = oilfilm(&["identify", gz.to_str().unwrap(), "--stream", "--json", "--window", "10000", "--hop", "5000"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(streamed(&out).0, estimates, "the gzip record's estimates");
+
+    // The table: one line per estimate as it comes, then the summary.
+    let out = oilfilm(&["identify", path, "--stream", "--window", "10000", "--hop", "5000"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    println!("{text}");
+    assert_eq!(text.lines().filter(|l| l.starts_with('#') && l.contains(" K [")).count(), graph.len(), "{text}");
+    assert!(
+        text.contains(&format!("{} window(s): {} solved, 0 refused", graph.len(), graph.len())) && text.contains("mean of the solved windows: K ["),
+        "{text}"
+    );
+}
+
+/// A record with one excitation tone: every window refused by the streamed path as by the
+/// whole one, and exit 3.
+#[test]
+fn identify_stream_refuses_every_window_of_a_single_sine_record() {
+    let record = scratch("sine-stream.txt");
+    let path = record.to_str().unwrap();
+    let out = oilfilm(&["simulate", "--seconds", "6", "--excitation", "sine", "--amplitude-n", "300", "-o", path]);
+    assert!(out.status.success());
+    let out = oilfilm(&["identify", path, "--stream", "--window", "10000", "--hop", "10000"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    println!("{text}");
+    assert_eq!(out.status.code(), Some(3), "every window refused exits 3: {}", String::from_utf8_lossy(&out.stderr));
+    let refused = text.lines().filter(|l| l.contains("REFUSED")).count();
+    assert!(refused >= 1 && text.contains(&format!("{refused} window(s): 0 solved, {refused} refused")), "{text}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refused:"));
+}
+
+/// What needs the whole record, or is for bags, is refused with `--stream`, saying why.
+#[test]
+fn identify_stream_refuses_what_needs_the_whole_record() {
+    let out = oilfilm(&["identify", "any.txt", "--stream", "--correct"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("--correct needs the whole record"), "{err}");
+    let bag = concat!(env!("CARGO_MANIFEST_DIR"), "/bags/sim_rig_multisine");
+    let out = oilfilm(&["identify", bag, "--stream"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("is a directory") && err.contains("--replay"), "{err}");
+    let out = oilfilm(&["identify", "any.txt", "--stream", "--no-stream"]);
+    assert_eq!(out.status.code(), Some(2), "clap refuses both");
+}
+
+/// A record over the size `identify` holds whole is streamed without `--stream`, and the
+/// output says so, what was left out and how to get it; `--no-stream` holds it whole. The
+/// size is lowered for the test with the hidden `--stream-above-bytes`.
+#[test]
+fn a_record_over_the_size_is_streamed_without_being_asked() {
+    let record = scratch("large.txt");
+    let path = record.to_str().unwrap();
+    let out = oilfilm(&["simulate", "--seconds", "4", "-o", path]);
+    assert!(out.status.success());
+    let size = std::fs::metadata(&*record).unwrap().len();
+    let (above, exact) = ((size - 1).to_string(), size.to_string());
+    let out = oilfilm(&["identify", path, "--stream-above-bytes", &above, "--window", "10000", "--hop", "5000"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    println!("{text}");
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("streamed window by window") && text.contains("left out: the drift re-identification") && text.contains("--no-stream"), "{text}");
+    assert!(text.contains("solved, 0 refused"), "{text}");
+    // At the size exactly, and with --no-stream, the whole record.
+    for args in [vec!["--stream-above-bytes", exact.as_str()], vec!["--stream-above-bytes", above.as_str(), "--no-stream"]] {
+        let mut all = vec!["identify", path, "--window", "10000", "--hop", "5000"];
+        all.extend(&args);
+        let out = oilfilm(&all);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success() && !text.contains("streamed") && text.contains("usable after filter edges"), "{args:?}: {text}");
+    }
+    // --correct cannot be streamed: the error says how to get it.
+    let out = oilfilm(&["identify", path, "--stream-above-bytes", &above, "--correct"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("--correct needs the whole record") && err.contains("--no-stream"), "{err}");
+}

@@ -4,10 +4,11 @@
 //! runs.
 //!
 //! `cargo run --release -p oilfilm-bench -- pipeline` (or `physics`, `nodes`, `bag`,
-//! `diagnose`; each takes `--help`).
+//! `diagnose`, `memory`; each takes `--help`).
 
 mod bench_bag;
 mod bench_diagnose;
+mod bench_memory;
 mod bench_nodes;
 mod bench_pipeline;
 
@@ -91,6 +92,26 @@ enum BenchWhat {
         #[arg(long)]
         zstd_sweep: bool,
     },
+    /// Peak memory (RSS) and wall time of `oilfilm identify` as a child process: a ~1 GB
+    /// ASCII record, streamed (the size switches it), beside a smaller record identified
+    /// whole and streamed. Writes the records to a scratch directory and removes them.
+    Memory {
+        /// Size of the large record, GB.
+        #[arg(long, default_value_t = 1.0)]
+        gb: f64,
+        /// Size of the smaller record, MB (identified whole and streamed).
+        #[arg(long, default_value_t = 50.0)]
+        small_mb: f64,
+        /// Seconds of the simulated segment the records repeat.
+        #[arg(long, default_value_t = 20.0)]
+        segment_seconds: f64,
+        /// Scratch directory for the records (default: one in the temp directory).
+        #[arg(long, value_name = "DIR")]
+        dir: Option<PathBuf>,
+        /// The `oilfilm` binary (default: beside this one).
+        #[arg(long, value_name = "FILE")]
+        oilfilm: Option<PathBuf>,
+    },
     /// Film coefficient set at the Zhou point beside ROSS's on the same bearing and grid
     /// (measured in the same run: `bash bench/ross/setup-venv.sh` once), the Lund & Thomsen
     /// comparison, and rig simulation speed.
@@ -116,6 +137,9 @@ fn main() -> Result<()> {
         BenchWhat::Nodes { seconds } => bench_nodes::run(seconds),
         BenchWhat::Diagnose { repeats, seconds, ref records } => bench_diagnose::run(repeats, seconds, records.as_deref()),
         BenchWhat::Bag { seconds, zstd_sweep } => bench_bag::run(seconds, zstd_sweep),
+        BenchWhat::Memory { gb, small_mb, segment_seconds, ref dir, ref oilfilm } => {
+            bench_memory::run(gb, small_mb, segment_seconds, dir.as_deref(), oilfilm.as_deref())
+        }
     }
 }
 

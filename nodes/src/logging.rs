@@ -39,7 +39,14 @@ const DEFAULT_FILTER: &str = "info,rustdds=warn,ros2_client=warn,ros2_client::di
 
 /// Logs to stderr and, once [`attach`] is called, to `/rosout`.
 pub fn init() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_FILTER));
+    init_with(DEFAULT_FILTER);
+}
+
+/// [`init`] with another filter than the nodes' when `RUST_LOG` is unset: a command that runs
+/// the nodes in its own process (`oilfilm identify --stream`) shows their warnings, not
+/// their info lines, beside its own output.
+pub fn init_with(default_filter: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter));
     let fmt = tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_ansi(std::io::stderr().is_terminal());
     let _ = tracing_subscriber::registry().with(filter).with(fmt).with(RosoutLayer).try_init();
 }

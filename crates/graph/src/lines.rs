@@ -193,6 +193,21 @@ impl DroppingSender {
     }
 }
 
+/// How long a [`LineDaq`]'s turn waits for its reader when nothing is waiting: short beside
+/// a DDS node's idle nap, long beside the time to read a line.
+pub const READER_NAP: Duration = Duration::from_millis(1);
+
+/// Opens an ASCII record for the line reader, plain or gzip-compressed (recognised by its
+/// magic bytes, not its name, as `oilfilm identify` reads it), as a stream: the file is
+/// never held whole.
+pub fn open_ascii(path: &str) -> Result<Box<dyn BufRead + Send>, NodeError> {
+    let io = |e| NodeError::Io { what: format!("ascii record `{path}`"), source: e };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut stream = BufReader::with_capacity(1 << 16, file);
+    let gzip = stream.fill_buf().map_err(io)?.starts_with(&[0x1f, 0x8b]);
+    Ok(if gzip { Box::new(BufReader::with_capacity(1 << 16, flate2::bufread::MultiGzDecoder::new(stream))) } else { Box::new(stream) })
+}
+
 /// Pacing of an ASCII replay.
 #[derive(Debug, Clone, Copy)]
 pub struct ReplayPace {
@@ -361,7 +376,8 @@ struct Reader {
 
 /// What a [`LineDaq`] reads.
 enum Source {
-    Ascii(std::fs::File),
+    /// An ASCII record, plain or gzip-compressed (recognised by its magic bytes).
+    Ascii(Box<dyn BufRead + Send>),
     Tcp(String),
     /// A TDMS, .mat or CSV record through its channel map (it has no lines: the reading
     /// thread runs [`run_foreign_source`] instead of the line reader).
@@ -419,9 +435,7 @@ impl LineDaq {
         };
         let core = ReplayCore::new(rig, params, kind, &name)?;
         let source = match params.source.as_str() {
-            "ascii" => {
-                Source::Ascii(std::fs::File::open(&params.file).map_err(|e| NodeError::Io { what: format!("ascii record `{}`", params.file), source: e })?)
-            }
+            "ascii" => Source::Ascii(open_ascii(&params.file)?),
             // Opened here, so that a bad map or file fails the node before it runs.
             "foreign" => Source::Foreign(Box::new(ForeignSource::open(std::path::Path::new(&params.file), std::path::Path::new(&params.map), rig, params)?)),
             _ => Source::Tcp(params.address.clone()),
@@ -451,7 +465,7 @@ impl LineDaq {
                                 tx.send(out).map_err(|_| NodeError::Closed("the DAQ node stopped taking frames".into()))
                             }
                         };
-                        run_ascii_source(BufReader::new(file), &mut core, &pace, &stopped, &mut emit)?
+                        run_ascii_source(file, &mut core, &pace, &stopped, &mut emit)?
                     }
                     // A foreign file, likewise.
                     Source::Foreign(mut source) => {
@@ -477,11 +491,25 @@ impl LineDaq {
         Ok(())
     }
 
-    /// Publishes what the reader delivered; `true` once it has ended.
+    /// Publishes what the reader delivered, at most [`QUEUE_FRAMES`] of its outputs a turn
+    /// (so that a reader as fast as the node cannot make one turn publish without end while
+    /// the nodes downstream wait for theirs: what waits between the nodes stays bounded);
+    /// `true` once it has ended. With nothing delivered yet, waits up to [`READER_NAP`] for
+    /// the reader rather than return at once: a file replay's reader is then the pace, and
+    /// an in-memory runner does not spin on the node while it parses.
     fn deliver(&mut self, ports: &mut DaqPorts<'_>, turn: &mut Turn) -> Result<bool, NodeError> {
         let Some(reader) = &self.reader else { return Ok(false) };
-        loop {
-            match reader.frames.try_recv() {
+        for taken in 0..QUEUE_FRAMES {
+            let next = if taken == 0 {
+                match reader.frames.recv_timeout(READER_NAP) {
+                    Ok(out) => Ok(out),
+                    Err(mpsc::RecvTimeoutError::Timeout) => Err(mpsc::TryRecvError::Empty),
+                    Err(mpsc::RecvTimeoutError::Disconnected) => Err(mpsc::TryRecvError::Disconnected),
+                }
+            } else {
+                reader.frames.try_recv()
+            };
+            match next {
                 Ok(out) => {
                     let dropped = reader.dropped.load(Ordering::SeqCst);
                     for (frame, mut status) in out.frames {
@@ -499,6 +527,7 @@ impl LineDaq {
                 Err(mpsc::TryRecvError::Disconnected) => return Ok(true),
             }
         }
+        Ok(false)
     }
 
     /// Joins the ended reader: its error, or the replay's summary.

@@ -447,3 +447,51 @@ fn a_flooded_queue_drops_and_counts_frames_instead_of_growing() {
     drop(rx);
     assert!(sender.send(one()).is_err(), "a stopped node ends the reading");
 }
+
+/// An ASCII replay in the in-memory runner holds bounded memory whatever the record's length:
+/// the reader reads ahead at most its queue, and a turn of the node hands on at most that
+/// many frames (before, a turn took frames for as long as the reader kept adding them, so a
+/// fast reader could make one turn publish without end before the nodes downstream ran); and
+/// every frame of the record still arrives. Gzip-compressed, the same frames.
+#[test]
+fn an_ascii_replay_hands_on_a_bounded_number_of_frames_a_turn_and_all_of_them() {
+    use flate2::write::GzEncoder;
+    use oilfilm_graph::daq::Daq;
+    use oilfilm_graph::lines::QUEUE_FRAMES;
+    use oilfilm_graph::runner::memory::Graph;
+    use oilfilm_graph::topics;
+    let f = fixture();
+    let dir = std::env::temp_dir().join(format!("oilfilm-daq-sources-bounded-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (plain, gz) = (dir.join("record.txt"), dir.join("record.txt.gz"));
+    std::fs::write(&plain, &f.text).unwrap();
+    let mut enc = GzEncoder::new(std::fs::File::create(&gz).unwrap(), flate2::Compression::fast());
+    enc.write_all(f.text.as_bytes()).unwrap();
+    enc.finish().unwrap();
+    // Frames of one scan: many more frames than the queue holds, each quicker to read than
+    // the reader's queue takes to empty.
+    let block = 1;
+    let mut runs = Vec::new();
+    for file in [&plain, &gz] {
+        let p = DaqParams { file: file.display().to_string(), block_scans: block, rate_factor: 0.0, ..params() };
+        let mut g = Graph::new(topics::NAMESPACE);
+        g.add::<Daq>("daq", &p, Some(&f.rig)).unwrap();
+        let mut tap = g.tap::<DaqFrame>(&topics::DAQ_FRAMES).unwrap();
+        let (mut most, mut frames) = (0, Vec::new());
+        g.run_with(&mut || {
+            // Slower than the reader: its queue is full at every turn.
+            std::thread::sleep(Duration::from_millis(1));
+            let turn = tap.drain();
+            most = most.max(turn.len());
+            frames.extend(turn);
+            Ok(())
+        })
+        .unwrap();
+        assert!(most <= QUEUE_FRAMES, "{}: a turn handed on {most} frames (at most {QUEUE_FRAMES})", file.display());
+        assert_eq!(frames.len(), f.record.len().div_ceil(block as usize), "{}: every frame", file.display());
+        runs.push(bits(&scans(&frames)));
+    }
+    assert_eq!(runs[0], bits(&record_scans(&f.record, &[])), "the record's values");
+    assert_eq!(runs[1], runs[0], "the gzip record gives the same frames");
+    let _ = std::fs::remove_dir_all(&dir);
+}

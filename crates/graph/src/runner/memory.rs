@@ -237,6 +237,13 @@ impl Graph {
     /// bag). A graph that would wait for ever (no node finished, none busy, none with a time
     /// to wake at) is an error.
     pub fn run(&mut self) -> Result<(), NodeError> {
+        self.run_with(&mut || Ok(()))
+    }
+
+    /// [`Graph::run`], calling `between` after every round of turns (and once after the
+    /// nodes are finished): to take what a tap holds as it comes, so that a long run keeps
+    /// nothing it has no more use for. An error from it stops the run.
+    pub fn run_with(&mut self, between: &mut dyn FnMut() -> Result<(), NodeError>) -> Result<(), NodeError> {
         let mut finished = vec![false; self.nodes.len()];
         loop {
             let (mut handled, mut wake) = (0, None::<Stamp>);
@@ -252,6 +259,7 @@ impl Graph {
                     (a, b) => a.or(b),
                 };
             }
+            between()?;
             if handled > 0 {
                 continue;
             }
@@ -268,7 +276,7 @@ impl Graph {
         for node in self.nodes.iter_mut().rev() {
             node.finish(self.now)?;
         }
-        Ok(())
+        between()
     }
 }
 
