@@ -182,13 +182,53 @@ pub struct RecorderStats {
     pub bytes: u64,
     /// Messages per topic, in the topics' order.
     pub per_topic: Vec<u64>,
+    /// Messages missing per topic, in the topics' order: the gaps in the publisher's running
+    /// `sequence` ([`numbered`]), zero for topics without one.
+    pub missing_per_topic: Vec<u64>,
 }
+
+impl RecorderStats {
+    pub fn missing(&self) -> u64 {
+        self.missing_per_topic.iter().sum()
+    }
+}
+
+/// The topics whose publisher numbers its messages one by one in `sequence`: the graph's
+/// own publications. A gap there is a message that never reached the bag: dropped by its
+/// publisher (the DAQ's full queue under a flood), lost on the way, or pushed out of the
+/// reader's history (keep-last [`HISTORY_DEPTH`]) while the writer was behind. `exciter/request` is left out: whoever sends a request numbers it as they like.
+pub fn numbered(namespace_qualified: &str, type_name: &str) -> bool {
+    [topics::EXCITER_COMMAND, topics::DAQ_FRAMES, topics::CONDITIONED, topics::ESTIMATES]
+        .iter()
+        .any(|t| t.type_name == type_name && namespace_qualified.ends_with(&format!("/{}", t.name)))
+}
+
+/// The running `sequence` of a message of a [`numbered`] topic; `None` when it does not
+/// decode (it is recorded all the same, as it came).
+fn sequence_of(type_name: &str, bytes: &[u8]) -> Option<u64> {
+    use oilfilm_msgs::{decode, CoefficientEstimate, ConditionedFrame, DaqFrame, ExciterCommand, RosMessage};
+    match type_name {
+        DaqFrame::TYPE_NAME => decode::<DaqFrame>(bytes).ok().map(|m| m.sequence),
+        ConditionedFrame::TYPE_NAME => decode::<ConditionedFrame>(bytes).ok().map(|m| m.sequence),
+        CoefficientEstimate::TYPE_NAME => decode::<CoefficientEstimate>(bytes).ok().map(|m| m.sequence),
+        ExciterCommand::TYPE_NAME => decode::<ExciterCommand>(bytes).ok().map(|m| m.sequence),
+        _ => None,
+    }
+}
+
+/// The history each topic's reader keeps while the writer is behind: the recorder's queue
+/// limit. Past it the oldest waiting messages are pushed out (counted as missing on the
+/// numbered topics).
+pub const HISTORY_DEPTH: u32 = 10_000;
 
 pub struct RecorderCore {
     writer: BagWriter,
     topics: Vec<RecordTopic>,
     ids: Vec<TopicId>,
     stats: RecorderStats,
+    /// Per topic: whether it is [`numbered`], and the last sequence seen.
+    numbered: Vec<bool>,
+    last_sequence: Vec<Option<u64>>,
 }
 
 impl RecorderCore {
@@ -200,8 +240,10 @@ impl RecorderCore {
                 .map_err(|reason| NodeError::parameter("topics", format!("{}: {reason}", t.name)))?;
             ids.push(writer.add_topic(spec)?);
         }
-        let stats = RecorderStats { per_topic: vec![0; topics.len()], ..Default::default() };
-        Ok(Self { writer, topics, ids, stats })
+        let stats = RecorderStats { per_topic: vec![0; topics.len()], missing_per_topic: vec![0; topics.len()], ..Default::default() };
+        let numbered = topics.iter().map(|t| numbered(&t.name, &t.type_name)).collect();
+        let last_sequence = vec![None; topics.len()];
+        Ok(Self { writer, topics, ids, stats, numbered, last_sequence })
     }
 
     pub fn topics(&self) -> &[RecordTopic] {
@@ -224,6 +266,16 @@ impl RecorderCore {
         self.stats.messages += 1;
         self.stats.bytes += message.0.len() as u64;
         self.stats.per_topic[index] += 1;
+        if self.numbered[index] {
+            if let Some(seq) = sequence_of(&self.topics[index].type_name, &message.0) {
+                // A sequence at or below the last one is a publisher that started again (or a
+                // transient-local history sent anew): counting starts over from it.
+                if let Some(last) = self.last_sequence[index].filter(|&last| seq > last) {
+                    self.stats.missing_per_topic[index] += seq - last - 1;
+                }
+                self.last_sequence[index] = Some(seq);
+            }
+        }
         Ok(())
     }
 
@@ -249,9 +301,18 @@ pub fn poll(core: &mut RecorderCore, inputs: &mut [Input<'_, RawCdr>], clock: &d
 /// The status line: totals, throughput since the last line, and per-topic counts.
 /// `mb_per_s`: MB (10^6 bytes) of CDR per second over the last period.
 pub fn status_line(stats: &RecorderStats, topics: &[RecordTopic], elapsed_s: f64, mb_per_s: f64) -> String {
-    let per_topic: Vec<String> =
-        topics.iter().zip(&stats.per_topic).map(|(t, n)| format!("{} {n}", t.name.rsplit_once("/oilfilm/").map_or(t.name.as_str(), |(_, r)| r))).collect();
-    format!("recording {:.0} s: {} msgs, {:.2} MB, {:.2} MB/s | {}", elapsed_s, stats.messages, stats.bytes as f64 * 1e-6, mb_per_s, per_topic.join(", "))
+    let short = |t: &RecordTopic| t.name.rsplit_once("/oilfilm/").map_or(t.name.clone(), |(_, r)| r.to_string());
+    let per_topic: Vec<String> = topics.iter().zip(&stats.per_topic).map(|(t, n)| format!("{} {n}", short(t))).collect();
+    let missing: Vec<String> = topics.iter().zip(&stats.missing_per_topic).filter(|(_, &n)| n > 0).map(|(t, n)| format!("{} {n}", short(t))).collect();
+    let missing = if missing.is_empty() { String::new() } else { format!(" | MISSING (gaps in sequence): {}", missing.join(", ")) };
+    format!(
+        "recording {:.0} s: {} msgs, {:.2} MB, {:.2} MB/s | {}{missing}",
+        elapsed_s,
+        stats.messages,
+        stats.bytes as f64 * 1e-6,
+        mb_per_s,
+        per_topic.join(", ")
+    )
 }
 
 /// The recorder node: our topics to a bag until it is stopped.
@@ -265,6 +326,8 @@ pub struct Recorder {
     last_status: (Stamp, u64),
     /// The last log time given (each message's is later than the one before).
     last_log: Stamp,
+    /// Missing messages already warned of, and when the last warning went out.
+    warned_missing: (u64, Option<Stamp>),
     closed: Option<PathBuf>,
 }
 
@@ -313,6 +376,7 @@ impl Node for Recorder {
             started: start.now,
             last_status: (start.now, 0),
             last_log: Stamp(i64::MIN),
+            warned_missing: (0, None),
             closed: None,
         })
     }
@@ -328,7 +392,7 @@ impl Node for Recorder {
                 c.raw_input(&RawTopic {
                     name: t.name.clone(),
                     type_name: t.type_name.clone(),
-                    qos: QosProfile::keep_last(10_000, t.qos.reliable, t.qos.transient_local),
+                    qos: QosProfile::keep_last(HISTORY_DEPTH, t.qos.reliable, t.qos.transient_local),
                 })
             })
             .collect()
@@ -337,6 +401,20 @@ impl Node for Recorder {
     fn turn(&mut self, now: Stamp, inputs: &mut Vec<Input<'_, RawCdr>>) -> Result<Turn, NodeError> {
         let taken = self.take(now, inputs)?;
         if let Some(core) = &self.core {
+            // New gaps are warned of (to /rosout too), at most once a second, with the count.
+            let missing = core.stats().missing();
+            let due = self.warned_missing.1.is_none_or(|t| now.seconds_since(t) >= 1.0);
+            if missing > self.warned_missing.0 && due {
+                tracing::warn!(
+                    node = Self::NAME,
+                    "{} message(s) missing from the bag so far, by gaps in their sequence numbers ({} since the last warning): \
+                     dropped by their publisher, lost on the way, or pushed out of the recorder's history of {HISTORY_DEPTH} \
+                     per topic while it was behind",
+                    missing,
+                    missing - self.warned_missing.0
+                );
+                self.warned_missing = (missing, Some(now));
+            }
             let since_s = now.seconds_since(self.last_status.0);
             if self.status_period_s > 0.0 && since_s >= self.status_period_s {
                 let rate = (core.stats().bytes - self.last_status.1) as f64 * 1e-6 / since_s;
@@ -356,7 +434,17 @@ impl Node for Recorder {
         let dir = core.close()?;
         taken?;
         eprintln!("{}", status_line(&stats, &topics, now.seconds_since(self.started), 0.0));
-        tracing::info!(node = Self::NAME, "closed {} ({} messages)", dir.display(), stats.messages);
+        if stats.missing() > 0 {
+            tracing::warn!(
+                node = Self::NAME,
+                "closed {} ({} messages; {} missing by gaps in their sequence numbers)",
+                dir.display(),
+                stats.messages,
+                stats.missing()
+            );
+        } else {
+            tracing::info!(node = Self::NAME, "closed {} ({} messages)", dir.display(), stats.messages);
+        }
         self.closed = Some(dir);
         Ok(())
     }
@@ -373,6 +461,44 @@ mod tests {
         let d = std::env::temp_dir().join(format!("oilfilm-recorder-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         d
+    }
+
+    /// Gaps in a numbered topic's sequence are counted as missing messages (the ones a flood
+    /// pushed out of the reader's history never arrive), a publisher that starts again is
+    /// not a gap, and a topic without a running sequence (rig status, requests) counts none.
+    #[test]
+    fn gaps_in_the_publishers_sequence_are_counted_as_missing() {
+        use oilfilm_msgs::ExciterCommand;
+        let dir = temp_dir("missing");
+        let topics = select_topics("/oilfilm", &["daq/frames".into(), "rig/status".into(), "exciter/request".into()]).unwrap();
+        let mut core = RecorderCore::new(BagWriter::create(&dir, WriterOptions::default()).unwrap(), topics).unwrap();
+        let frame = |k: u64| RawCdr(encode(&DaqFrame { sequence: k, values: vec![1.0; 10], ..Default::default() }));
+        let mut t = 1_700_000_000_000_000_000_i64;
+        let mut at = || {
+            t += 1_000;
+            Stamp(t)
+        };
+        // 0 1 2, then 6 (3, 4, 5 missing), 7, then a restart at 0 1, then 4 (2, 3 missing).
+        for k in [0, 1, 2, 6, 7, 0, 1, 4] {
+            core.record(0, at(), &frame(k)).unwrap();
+        }
+        for k in 0..3 {
+            core.record(1, at(), &RawCdr(encode(&RigStatus { speed_rad_s: f64::from(k), ..Default::default() }))).unwrap();
+        }
+        // Requests are numbered by whoever sends them: 0, 0, 9 is no gap.
+        for k in [0, 0, 9] {
+            core.record(2, at(), &RawCdr(encode(&ExciterCommand { sequence: k, ..Default::default() }))).unwrap();
+        }
+        assert_eq!(core.stats().missing_per_topic, [5, 0, 0]);
+        assert_eq!(core.stats().missing(), 5);
+        let line = status_line(core.stats(), core.topics(), 1.0, 0.0);
+        assert!(line.contains("MISSING (gaps in sequence): daq/frames 5"), "{line}");
+        assert!(
+            numbered("/oilfilm/estimates", "oilfilm_msgs/msg/CoefficientEstimate") && !numbered("/oilfilm/exciter/request", "oilfilm_msgs/msg/ExciterCommand")
+        );
+        // Every message is in the bag all the same.
+        assert_eq!(Bag::open(core.close().unwrap()).unwrap().messages().unwrap().len(), 14);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
