@@ -14,18 +14,6 @@ use oilfilm_physics::daq::ChannelId;
 use oilfilm_physics::effects::*;
 use rand::RngExt;
 
-/// The classes of the matrix: the seven effects, a null and an effect outside the catalog.
-const CLASSES: [&str; 9] = [
-    "amplitude_nonlinearity",
-    "fluid_inertia",
-    "channel_delay",
-    "thermal_drift",
-    "synchronous_runout",
-    "probe_saturation",
-    "support_friction",
-    "none",
-    "unexplained",
-];
 const SEEDS_PER_CLASS: u64 = 3;
 /// Exciter level (N rms per exciter) of every case but the high-amplitude one: the film is
 /// linear enough here that the null case must come out `none`.
@@ -166,7 +154,7 @@ fn every_hidden_effect_is_named_with_its_size_and_the_extended_model_predicts_be
     let results = run_all(cases);
 
     // Confusion matrix: rows hidden, columns named.
-    let named_classes: Vec<&str> = CLASSES.iter().copied().chain(["insufficient_data"]).collect();
+    let named_classes = named_classes();
     let mut matrix = vec![vec![0usize; named_classes.len()]; CLASSES.len()];
     let mut failures = Vec::new();
     println!("\nhidden effect cases ({SEEDS_PER_CLASS} seeds each, {RMS_N} N rms multisine unless stated, {SECONDS} s at 5 kHz)");

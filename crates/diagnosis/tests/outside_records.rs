@@ -104,18 +104,7 @@ fn outside_records_are_named_with_their_parameters_and_the_updated_model_predict
     results.sort_by(|a, b| a.0.cmp(&b.0));
     let seconds = start.elapsed().as_secs_f64();
 
-    let classes = [
-        "amplitude_nonlinearity",
-        "fluid_inertia",
-        "channel_delay",
-        "thermal_drift",
-        "synchronous_runout",
-        "probe_saturation",
-        "support_friction",
-        "none",
-        "unexplained",
-    ];
-    let named_classes: Vec<&str> = classes.iter().copied().chain(["insufficient_data"]).collect();
+    let (classes, named_classes) = (crate::common::CLASSES, crate::common::named_classes());
     let mut matrix_counts = vec![vec![0usize; named_classes.len()]; classes.len()];
     let (mut right, mut failures) = (0usize, Vec::new());
     println!("\noutside records ({} threads, {seconds:.1} s)", threads);

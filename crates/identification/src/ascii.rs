@@ -769,13 +769,45 @@ fn data_row(number: usize, line: &str, header: &Header, last_scan: &mut Option<u
     }
 }
 
+/// The columns and scan indices of a whole-record read, filled from what [`LineReader`]
+/// says of each line; the first problem of any kind refuses the file.
+#[derive(Default)]
+struct Rows {
+    scan_index: Vec<u64>,
+    columns: Vec<Vec<f64>>,
+}
+
+impl Rows {
+    fn take(&mut self, fed: Fed) -> Result<(), IdentificationError> {
+        match fed {
+            Fed::Nothing => {}
+            Fed::Header(header) => self.columns = vec![Vec::new(); header.channels.len()],
+            Fed::Row(row) => {
+                for (column, x) in self.columns.iter_mut().zip(row.values) {
+                    column.push(x);
+                }
+                self.scan_index.push(row.scan_index);
+            }
+            Fed::Gap { gap: e, .. } | Fed::Bad(e) => return Err(e),
+        }
+        Ok(())
+    }
+
+    /// The record, refused when no scan row followed the column line (at `column_line`).
+    fn into_record(self, header: Header, file_name: &str, column_line: usize) -> Result<Record, IdentificationError> {
+        if self.scan_index.is_empty() {
+            return Err(parse_error(file_name, column_line, 0, "no data: no scan rows follow the column line".into()));
+        }
+        Ok(Record { header, scan_index: self.scan_index, columns: self.columns })
+    }
+}
+
 /// Reads a record from `stream`, line by line: the text is never held whole (only the
 /// record's columns are), so a record the size of the memory can be read. The same rules and
 /// errors as [`read`]; a byte that is not UTF-8 is an error at its line and column.
 pub fn read_stream(mut stream: impl std::io::BufRead, file_name: &str) -> Result<Record, IdentificationError> {
     let mut reader = LineReader::new(file_name);
-    let mut scan_index: Vec<u64> = Vec::new();
-    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut rows = Rows::default();
     let mut bytes: Vec<u8> = Vec::new();
     let (mut number, mut lines) = (0usize, 0usize);
     loop {
@@ -795,26 +827,13 @@ pub fn read_stream(mut stream: impl std::io::BufRead, file_name: &str) -> Result
         if n > 0 && (ended || !line.is_empty()) {
             lines += 1;
         }
-        match reader.feed(number, line)? {
-            Fed::Nothing => {}
-            Fed::Header(header) => columns = vec![Vec::new(); header.channels.len()],
-            Fed::Row(row) => {
-                for (column, x) in columns.iter_mut().zip(row.values) {
-                    column.push(x);
-                }
-                scan_index.push(row.scan_index);
-            }
-            Fed::Gap { gap: e, .. } | Fed::Bad(e) => return Err(e),
-        }
+        rows.take(reader.feed(number, line)?)?;
         if !ended {
             break;
         }
     }
     let (header, column_line) = reader.finish(lines.max(1))?;
-    if scan_index.is_empty() {
-        return Err(parse_error(file_name, column_line, 0, "no data: no scan rows follow the column line".into()));
-    }
-    Ok(Record { header: header.clone(), scan_index, columns })
+    rows.into_record(header.clone(), file_name, column_line)
 }
 
 /// Reads a record from the text of a file; `file_name` only labels errors. Never panics;
@@ -823,27 +842,13 @@ pub fn read_stream(mut stream: impl std::io::BufRead, file_name: &str) -> Result
 /// any kind, in a data row too, refuses the file.
 pub fn read(text: &str, file_name: &str) -> Result<Record, IdentificationError> {
     let mut reader = LineReader::new(file_name);
-    let mut scan_index: Vec<u64> = Vec::new();
-    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut rows = Rows::default();
     for (i, line) in text.split('\n').enumerate() {
-        match reader.feed(i + 1, line)? {
-            Fed::Nothing => {}
-            Fed::Header(header) => columns = vec![Vec::new(); header.channels.len()],
-            Fed::Row(row) => {
-                for (column, x) in columns.iter_mut().zip(row.values) {
-                    column.push(x);
-                }
-                scan_index.push(row.scan_index);
-            }
-            Fed::Gap { gap: e, .. } | Fed::Bad(e) => return Err(e),
-        }
+        rows.take(reader.feed(i + 1, line)?)?;
     }
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let (header, column_line) = reader.finish(text.lines().count().max(1))?;
-    if scan_index.is_empty() {
-        return Err(parse_error(file_name, column_line, 0, "no data: no scan rows follow the column line".into()));
-    }
-    Ok(Record { header: header.clone(), scan_index, columns })
+    rows.into_record(header.clone(), file_name, column_line)
 }
 
 /// The version from the format line, or (column, message).

@@ -62,6 +62,25 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
 
+/// The rows of both confusion matrices: the seven catalogue effects, a null and an effect
+/// outside the catalogue.
+pub const CLASSES: [&str; 9] = [
+    "amplitude_nonlinearity",
+    "fluid_inertia",
+    "channel_delay",
+    "thermal_drift",
+    "synchronous_runout",
+    "probe_saturation",
+    "support_friction",
+    "none",
+    "unexplained",
+];
+
+/// The columns: every class, and the verdict that no class could be judged.
+pub fn named_classes() -> Vec<&'static str> {
+    CLASSES.iter().copied().chain(["insufficient_data"]).collect()
+}
+
 /// Prints a confusion matrix: `counts[r][c]` records of class `rows[r]` named `columns[c]`.
 pub fn print_confusion(title: &str, rows: &[&str], columns: &[&str], counts: &[Vec<usize>]) {
     println!("\nconfusion matrix ({title})");

@@ -519,18 +519,7 @@ fn near_lines(nb: usize, bins: &[f64]) -> Vec<bool> {
 fn line_snr(pw: &[f64], bins: &[f64]) -> Vec<f64> {
     let mask = near_lines(pw.len(), bins);
     let outside: f64 = (1..pw.len()).filter(|&k| !mask[k]).map(|k| pw[k]).sum();
-    bins.iter()
-        .map(|&b| {
-            let line: f64 = lobe(pw.len(), b).map(|k| pw[k]).sum();
-            if outside > 0.0 {
-                line / outside
-            } else if line > 0.0 {
-                f64::INFINITY
-            } else {
-                f64::NAN
-            }
-        })
-        .collect()
+    lobe_snr(pw, bins, outside)
 }
 
 /// Sums over bins `1..` of one spectrum: all of them, those within a line's main lobe (the
