@@ -67,7 +67,9 @@ fi
 # disk (a CI run once died of a full disk while linking). Set it to 1 to keep them.
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 set +e
-cargo test --workspace --profile test --no-run >target/build-output.txt 2>&1
+# The JSON on stdout lists the test executables the Rust tests below run; the diagnostics
+# are rendered on stderr as in a plain build.
+cargo test --workspace --profile test --no-run --message-format=json-render-diagnostics >target/build-artifacts.json 2>target/build-output.txt
 build_status=$?
 set -e
 # What the build said beyond its progress lines: warnings, errors (none, when all is well).
@@ -93,16 +95,48 @@ fi
 # run below, each DDS test in a domain of its own range (Rust 1..170 and 220..232, interop
 # 170..220), and their output is printed when both are done. Nothing below may take cargo's
 # lock while they run: the interop scripts use the binaries built above.
+# The test executables run in two lanes, as `cargo test` would run them one after another
+# (from their package's directory, with `--nocapture`): the node tests, which wait on DDS
+# and on node processes, beside all the others, which compute. `cargo test` cannot do that:
+# a second cargo waits for the first's lock until its tests have run.
 export OILFILM_BUILT=1
 echo "== Rust tests (in the background; their output follows the interop tests)"
+python3 - target/build-artifacts.json >target/test-executables.txt <<'PY'
+import json, os, sys
+for line in open(sys.argv[1]):
+    if not line.startswith("{"):
+        continue
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m["profile"]["test"] and m.get("executable"):
+        package_dir = os.path.dirname(m["manifest_path"])
+        lane = "dds" if os.path.basename(package_dir) == "nodes" else "compute"
+        print(lane, package_dir, m["target"]["name"], m["executable"], sep="\t")
+PY
+# One lane: every executable of `$1` in turn, output to target/test-output-$1.txt; a binary
+# that exits non-zero without a test report (a crash) is counted in target/test-crashes-$1.
+run_lane() {
+  local lane=$1 out=target/test-output-$1.txt crashes=0
+  : >"$out"
+  while IFS=$'\t' read -r l dir name exe; do
+    [ "$l" = "$lane" ] || continue
+    echo "     Running $name ($exe)" >>"$out"
+    local before
+    before=$(grep -c '^test result:' "$out" || true)
+    if ! (cd "$dir" && "$exe" --nocapture) >>"$out" 2>&1; then
+      if [ "$(grep -c '^test result:' "$out" || true)" -eq "$before" ]; then
+        crashes=$((crashes + 1))
+        echo "CRASHED: $name ($exe) ended without a test report" >>"$out"
+      fi
+    fi
+  done <target/test-executables.txt
+  echo "$crashes" >"target/test-crashes-$lane"
+}
 rust_started=$SECONDS
-rm -f target/test-status target/test-seconds
+rm -f target/test-crashes-* target/test-seconds
 (
-  set +e
-  # --no-fail-fast: a failing test binary must not keep the later ones from running (without
-  # it a run once reported 235 passed and 1 failed, and never ran some 110 other tests).
-  cargo test --workspace --profile test --no-fail-fast -- --nocapture >target/test-output.txt 2>&1
-  echo "$?" >target/test-status
+  run_lane dds &
+  run_lane compute
+  wait
   echo "$((SECONDS - rust_started))" >target/test-seconds
 ) &
 rust_pid=$!
@@ -147,17 +181,16 @@ phase "foreign-record interop"
 
 echo "== Rust tests (their output)"
 wait "$rust_pid" || true
+cat target/test-output-compute.txt target/test-output-dds.txt >target/test-output.txt
 cat target/test-output.txt
-rust_status=$(cat target/test-status 2>/dev/null || echo 1)
+crashes=$(($(cat target/test-crashes-compute 2>/dev/null || echo 1) + $(cat target/test-crashes-dds 2>/dev/null || echo 1)))
 read -r rp rf rs < <(grep -E "^test result:" target/test-output.txt | awk '
   { for (i = 1; i <= NF; i++) { if ($i ~ /passed;/) p += $(i-1); if ($i ~ /failed;/) f += $(i-1); if ($i ~ /ignored;/) s += $(i-1) } }
   END { printf "%d %d %d\n", p, f, s }')
 passed=$((passed + rp))
 failed=$((failed + rf))
-if [ "$rust_status" -ne 0 ] && [ "$rf" -eq 0 ]; then
-  # A crash counts as a failure even if no test reported one.
-  failed=$((failed + 1))
-fi
+# A crash counts as a failure even if no test reported one.
+failed=$((failed + crashes))
 echo "== time: the Rust tests took $(cat target/test-seconds 2>/dev/null || echo '?') s, beside the interop tests (total $SECONDS s)"
 echo
 echo "all: $passed passed, $failed failed, $rs skipped"
