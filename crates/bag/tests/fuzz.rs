@@ -83,6 +83,7 @@ fn sound_bag(dir: &Path, compression: Compression, split_ns: Option<u64>) {
             bearing_temperature_degc: 29.0,
             state: RigStatus::STATE_EXCITING,
             message: String::new(),
+            frames_dropped: i,
         };
         w.write_message(status, t, &s).unwrap();
     }

@@ -307,6 +307,7 @@ impl ReplayCore {
             bearing_temperature_degc: temperature_c,
             state: RigStatus::STATE_RUNNING,
             message,
+            frames_dropped: 0,
         };
         out.frames.push((frame, status));
     }
