@@ -263,7 +263,17 @@ def status_cases():
     f.header = header(-1, 500_000_000)
     f.state = RigStatus.STATE_FAULT
     f.message = "probe_b_y out of its linear range (\u00b1 2 mm)"
-    return [("exciting", m), ("fault_negative_stamp", f)]
+    # A TCP stream's DAQ after a flood: every byte of the uint64 count set, after a message
+    # that leaves 7 bytes of padding before it.
+    d = RigStatus()
+    d.header = header(1_700_000_021, 1)
+    d.speed_rad_s = 157.07963267948966
+    d.static_load_n = 5601.8
+    d.bearing_temperature_degc = 28.999
+    d.state = RigStatus.STATE_RUNNING
+    d.message = "tcp stream of tcp://daq-1:5000#1"
+    d.frames_dropped = 0x0102_0304_0506_0708
+    return [("exciting", m), ("fault_negative_stamp", f), ("tcp_frames_dropped", d)]
 
 
 def clock_cases():

@@ -7,10 +7,15 @@
 //! metadata.yaml missing, cut, flipped or edited (version, storage, file list), the header's
 //! profile rewritten, a type no reader here knows, message payloads that are not valid CDR.
 //!
-//! Each case copies one of six sound bags written once at the start (a bag's writer syncs
-//! its files to disk, which cost more than the rest of a case: the loop once wrote a bag a
-//! case and ran 400 cases in 17 s), mutates the copy and reads it; one case in ten is also
-//! recovered and read again, and one in forty is a fresh bag that is not ours or not CDR.
+//! Corpus: the seed bags in `crates/bag/tests/data/fuzz/` (`seed_*/`: a real graph run's
+//! first messages, uncompressed in one file, lz4 split in three, and zstd with every topic
+//! and `/parameter_events`; written by `examples/write_fuzz_seeds.rs`), and six bags of DAQ
+//! frames and status written at the start by today's writer (each compression, one file or
+//! split), so the loop also follows the writer as it changes. Each case copies one (a bag's
+//! writer syncs its files to disk, which cost more than the rest of a case: the loop once
+//! wrote a bag a case and ran 400 cases in 17 s), mutates the copy and reads it; one case in
+//! ten is also recovered and read again, and one in forty is a fresh bag that is not ours or
+//! not CDR.
 //!
 //! Bounded: `CASES` (10 000) cases; each case's seed is `SEED + case`, printed on failure, so
 //! `OILFILM_FUZZ_SEED=<seed> OILFILM_FUZZ_CASES=1` reproduces it. `OILFILM_FUZZ_CASES=1000000`
@@ -83,6 +88,7 @@ fn sound_bag(dir: &Path, compression: Compression, split_ns: Option<u64>) {
             bearing_temperature_degc: 29.0,
             state: RigStatus::STATE_EXCITING,
             message: String::new(),
+            frames_dropped: i,
         };
         w.write_message(status, t, &s).unwrap();
     }
@@ -259,10 +265,24 @@ fn write_fresh(path: &Path, bytes: &[u8]) {
     std::fs::write(path, bytes).unwrap();
 }
 
-/// The sound bags the cases start from, written once (a bag's writer syncs its files to
-/// disk, milliseconds a bag): each compression, in one file or split.
+/// The committed seed bags (`tests/data/fuzz/seed_*/`), sorted by name.
+fn seeds() -> Vec<(String, PathBuf)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut out: Vec<(String, PathBuf)> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("seed_")))
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), p))
+        .collect();
+    out.sort();
+    out
+}
+
+/// The sound bags the cases start from: the committed seeds, and bags written once here (a
+/// bag's writer syncs its files to disk, milliseconds a bag): each compression, in one file
+/// or split.
 fn templates(root: &Path) -> Vec<(String, PathBuf)> {
-    let mut out = Vec::new();
+    let mut out = seeds();
     for compression in [Compression::Zstd, Compression::Lz4, Compression::None] {
         for split in [None, Some(80_000_000)] {
             let name = format!("{compression:?}{}", if split.is_some() { " split" } else { "" });
@@ -398,6 +418,59 @@ fn mutated_bags_never_panic_and_errors_name_the_file() {
             assert!(cases < 20 || refused * 2 > cases, "only {refused} of {cases} mutated bags were refused");
         }
     }
+}
+
+/// The compression of each chunk of an MCAP file ("" for none).
+fn chunk_compressions(bytes: &[u8]) -> Vec<String> {
+    records(bytes)
+        .into_iter()
+        .filter(|&(s, _)| bytes[s] == 0x06)
+        .map(|(s, e)| {
+            // A chunk's body: start and end time, uncompressed size (u64 each), CRC (u32),
+            // then the compression as a u32-prefixed string.
+            let body = &bytes[s + 9..e];
+            let len = u32::from_le_bytes(body[28..32].try_into().unwrap()) as usize;
+            String::from_utf8(body[32..32 + len].to_vec()).unwrap()
+        })
+        .collect()
+}
+
+/// The committed seeds are sound bags (each reads whole, as many messages as its
+/// metadata.yaml counts, every one decoded), well under 100 KB each, and between them hold
+/// what the loop's description says: a split bag, chunks uncompressed, lz4 and zstd, and
+/// every type the graph records.
+#[test]
+fn the_seed_bags_are_sound_small_and_hold_what_the_corpus_claims() {
+    use oilfilm_bag::OilfilmMessage;
+    let seeds = seeds();
+    assert_eq!(seeds.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(), ["seed_plain", "seed_split", "seed_zstd_every_type"]);
+    let (mut compressions, mut kinds, mut most_files) = (std::collections::BTreeSet::new(), std::collections::BTreeSet::new(), 0);
+    for (name, dir) in &seeds {
+        let bag = Bag::open(dir).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let msgs = bag.messages().unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(!msgs.is_empty(), "{name}: no messages");
+        assert_eq!(msgs.len() as u64, bag.info().message_count, "{name}: every message metadata.yaml counts");
+        for m in &msgs {
+            kinds.insert(match m.decode_ours().unwrap_or_else(|e| panic!("{name}: {e}")) {
+                OilfilmMessage::ExciterCommand(_) => "ExciterCommand",
+                OilfilmMessage::DaqFrame(_) => "DaqFrame",
+                OilfilmMessage::ConditionedFrame(_) => "ConditionedFrame",
+                OilfilmMessage::CoefficientEstimate(_) => "CoefficientEstimate",
+                OilfilmMessage::RigStatus(_) => "RigStatus",
+                OilfilmMessage::ParameterEvent(_) => "ParameterEvent",
+            });
+        }
+        let files = bag.files();
+        most_files = most_files.max(files.len());
+        for f in &files {
+            let bytes = std::fs::read(f).unwrap();
+            assert!(bytes.len() < 100_000, "{}: {} bytes", f.display(), bytes.len());
+            compressions.extend(chunk_compressions(&bytes));
+        }
+    }
+    assert!(most_files >= 3, "a split seed: at most {most_files} files in one bag");
+    assert_eq!(compressions.into_iter().collect::<Vec<_>>(), ["", "lz4", "zstd"], "chunks of each compression");
+    assert_eq!(kinds.len(), 6, "every type the graph records: {kinds:?}");
 }
 
 #[test]

@@ -413,6 +413,8 @@ impl SimDaqCore {
             } else {
                 "simulated rig".to_string()
             },
+            // The simulated rig makes its scans on the node's own turns: none can be dropped.
+            frames_dropped: 0,
         }
     }
 

@@ -141,6 +141,8 @@ impl ForeignSource {
             bearing_temperature_degc: mean_si(self.temperature, ChannelId::Temperature),
             state: RigStatus::STATE_RUNNING,
             message: format!("{} record {}; {speed_note}", self.record.format.name(), self.record.path.display()),
+            // A file's reader waits for room in the node's queue: nothing is dropped.
+            frames_dropped: 0,
         };
         self.sequence += 1;
         Ok(Some((frame, status)))

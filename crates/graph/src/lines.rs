@@ -155,8 +155,8 @@ fn flush_warnings(name: &str, warnings: &mut WarnLimiter) {
 
 /// Frames the reading thread may hold for the node's turns. A TCP source floods it only when
 /// the acquisition sends faster than the node publishes: the frames beyond it are dropped and
-/// counted (the count is on every rig status after, and warned about once a second) rather
-/// than held in memory; a file replay waits for room instead.
+/// counted (the count is in `frames_dropped` of every rig status after, and warned about once
+/// a second) rather than held in memory; a file replay waits for room instead.
 pub const QUEUE_FRAMES: usize = 64;
 
 /// A frame queue's sending end for a source that must not wait (TCP): a full queue drops the
@@ -190,6 +190,39 @@ impl DroppingSender {
             }
             Err(mpsc::TrySendError::Disconnected(_)) => Err(NodeError::Closed("the DAQ node stopped taking frames".into())),
         }
+    }
+}
+
+/// A frame queue's receiving end, as the node's turns take from it: every status taken
+/// carries in `frames_dropped` the frames the sending end ([`DroppingSender`]) has dropped
+/// so far. The count is read when the node takes the frame, not when it was queued: a flood
+/// drops frames while the queue is full, so the statuses of the frames still queued then
+/// report those drops at once rather than only after the flood, when a new frame comes.
+pub struct FrameQueue {
+    frames: mpsc::Receiver<Produced>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl FrameQueue {
+    pub fn new(frames: mpsc::Receiver<Produced>, dropped: Arc<AtomicU64>) -> Self {
+        Self { frames, dropped }
+    }
+
+    /// The next output, waiting up to `wait` for it (zero: not at all).
+    pub fn take(&self, wait: Duration) -> Result<Produced, mpsc::TryRecvError> {
+        let mut out = if wait.is_zero() {
+            self.frames.try_recv()?
+        } else {
+            self.frames.recv_timeout(wait).map_err(|e| match e {
+                mpsc::RecvTimeoutError::Timeout => mpsc::TryRecvError::Empty,
+                mpsc::RecvTimeoutError::Disconnected => mpsc::TryRecvError::Disconnected,
+            })?
+        };
+        let dropped = self.dropped.load(Ordering::SeqCst);
+        for (_, status) in &mut out.frames {
+            status.frames_dropped = dropped;
+        }
+        Ok(out)
     }
 }
 
@@ -367,9 +400,9 @@ pub fn run_tcp_source(
 
 /// The reading thread of a [`LineDaq`].
 struct Reader {
-    frames: mpsc::Receiver<Produced>,
-    /// Frames a TCP source dropped because the queue was full.
-    dropped: Arc<AtomicU64>,
+    /// What the thread read; the statuses say how many frames a TCP source dropped because
+    /// the queue was full.
+    frames: FrameQueue,
     stop: Arc<AtomicBool>,
     thread: std::thread::JoinHandle<Result<ReplayCore, NodeError>>,
 }
@@ -487,7 +520,7 @@ impl LineDaq {
                 Ok(core)
             })
             .map_err(|e| NodeError::Io { what: "the DAQ's reading thread".into(), source: e })?;
-        self.reader = Some(Reader { frames, dropped, stop, thread });
+        self.reader = Some(Reader { frames: FrameQueue::new(frames, dropped), stop, thread });
         Ok(())
     }
 
@@ -500,24 +533,9 @@ impl LineDaq {
     fn deliver(&mut self, ports: &mut DaqPorts<'_>, turn: &mut Turn) -> Result<bool, NodeError> {
         let Some(reader) = &self.reader else { return Ok(false) };
         for taken in 0..QUEUE_FRAMES {
-            let next = if taken == 0 {
-                match reader.frames.recv_timeout(READER_NAP) {
-                    Ok(out) => Ok(out),
-                    Err(mpsc::RecvTimeoutError::Timeout) => Err(mpsc::TryRecvError::Empty),
-                    Err(mpsc::RecvTimeoutError::Disconnected) => Err(mpsc::TryRecvError::Disconnected),
-                }
-            } else {
-                reader.frames.try_recv()
-            };
-            match next {
+            match reader.frames.take(if taken == 0 { READER_NAP } else { Duration::ZERO }) {
                 Ok(out) => {
-                    let dropped = reader.dropped.load(Ordering::SeqCst);
-                    for (frame, mut status) in out.frames {
-                        if dropped > 0 {
-                            status.message.push_str(&format!(
-                                "; {dropped} frame(s) dropped: the input came faster than the node published (queue of {QUEUE_FRAMES} frames)"
-                            ));
-                        }
+                    for (frame, status) in out.frames {
                         ports.frames.publish(frame)?;
                         ports.status.publish(status)?;
                         turn.handled += 2;

@@ -10,6 +10,14 @@
 //!
 //! Values land in the node's typed parameter struct (serde, unknown names rejected), so a
 //! misspelt parameter is an error naming the file and the name, never silently ignored.
+//!
+//! A params file may give only some of a node's parameters (the rest keep their defaults),
+//! so a file cut short after its last whole line reads as a valid one. Two things keep a cut
+//! file from passing unseen: a file whose text does not end with a line end is refused (a
+//! cut almost never falls just after one, and a value cut in the middle, `window: 25` of
+//! `window: 25000`, would read as another valid value), and a node says once at load which
+//! of its parameters are at their defaults although a params file had its section
+//! ([`Sources::defaults_note`]), naming the files.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -209,11 +217,15 @@ pub fn checked<P: NodeParams>(map: &Map<String, Value>) -> Result<P, NodeError> 
 }
 
 /// Where each parameter's value came from, so that an error about a value names the file
-/// and key (or the `-p` override) that gave it.
+/// and key (or the `-p` override) that gave it; and which took their defaults.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Sources {
     /// Parameter name -> (file, node section) or the override as written.
     given: HashMap<String, Given>,
+    /// The params files that had a section for the node, in the order given.
+    sectioned: Vec<String>,
+    /// The parameters neither a file nor an override gave, with their default values.
+    defaulted: Vec<(String, Value)>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -232,6 +244,49 @@ impl Sources {
             Some(Given::Override(text)) => NodeError::parameter(format!("-p {text}"), reason.clone()),
             None => error,
         }
+    }
+
+    /// The parameters at their defaults although a params file had the node's section, with
+    /// their values (empty when no file had the section: then no file was meant for it).
+    pub fn defaulted(&self) -> &[(String, Value)] {
+        if self.sectioned.is_empty() {
+            &[]
+        } else {
+            &self.defaulted
+        }
+    }
+
+    /// What node `node` says at load when params files had its section but left some of
+    /// its parameters out: the files and those parameters with their default values. A
+    /// file may leave parameters out on purpose; one cut short after a whole line leaves out
+    /// what followed, and this line is where that shows. `None` when nothing was left out.
+    pub fn defaults_note(&self, node: &str) -> Option<String> {
+        let left = self.defaulted();
+        if left.is_empty() {
+            return None;
+        }
+        let values: Vec<String> = left.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        Some(format!(
+            "{node}: {} of its parameters not in its section of {} (nor given with -p), so at their defaults: {}",
+            left.len(),
+            self.sectioned.join(", "),
+            values.join(", ")
+        ))
+    }
+}
+
+/// Logs `note` unless this process has already logged it: a node's parameters are loaded
+/// more than once in one process (a launch file's nodes are checked when it is read, then
+/// loaded again when they are built), and the note is one line at load, not one per load.
+fn log_once(note: &str) {
+    use std::hash::{Hash, Hasher};
+    static LOGGED: std::sync::Mutex<std::collections::BTreeSet<u64>> = std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    note.hash(&mut h);
+    // A poisoned lock only means another thread panicked while logging: the set is intact.
+    let first = LOGGED.lock().unwrap_or_else(std::sync::PoisonError::into_inner).insert(h.finish());
+    if first {
+        tracing::info!("{note}");
     }
 }
 
@@ -317,7 +372,11 @@ pub fn load_texts<P: NodeParams>(args: &NodeArgs, texts: &[(String, String)]) ->
     let mut sources = Sources::default();
     for (name, text) in texts {
         let name = name.clone();
-        for (section, k, v) in sections(text, &name, args)? {
+        let (applies, entries) = sections(text, &name, args)?;
+        if applies {
+            sources.sectioned.push(name.clone());
+        }
+        for (section, k, v) in entries {
             if k == USE_SIM_TIME {
                 // Every ROS 2 node has it; the runner reads it from the overrides and files.
                 continue;
@@ -344,6 +403,10 @@ pub fn load_texts<P: NodeParams>(args: &NodeArgs, texts: &[(String, String)]) ->
         sources.given.insert(k.clone(), Given::Override(format!("{k}:={v}")));
     }
     let typed = checked::<P>(&map).map_err(|e| sources.locate(e))?;
+    sources.defaulted = map.iter().filter(|(k, _)| !sources.given.contains_key(*k)).map(|(k, v)| (k.clone(), v.clone())).collect();
+    if let Some(note) = sources.defaults_note(&args.fully_qualified_name()) {
+        log_once(&note);
+    }
     Ok((typed, map, sources))
 }
 
@@ -358,7 +421,7 @@ pub fn use_sim_time(args: &NodeArgs) -> Result<bool, NodeError> {
     for file in &args.params_files {
         let name = file.display().to_string();
         let text = std::fs::read_to_string(file).map_err(|e| NodeError::File { file: name.clone(), reason: e.to_string() })?;
-        for (_, k, v) in sections(&text, &name, args)? {
+        for (_, k, v) in sections(&text, &name, args)?.1 {
             if k == USE_SIM_TIME {
                 value = as_bool(&v, &name)?;
             }
@@ -395,8 +458,9 @@ pub const MAX_YAML_BYTES: u64 = 1 << 20;
 pub const MAX_YAML_DEPTH: usize = 32;
 
 /// The text of a params or launch file, checked before any parsing: at most
-/// [`MAX_YAML_BYTES`], UTF-8 (else the line and column of the first bad byte), nested at
-/// most [`MAX_YAML_DEPTH`] deep, no alias. Errors name the file.
+/// [`MAX_YAML_BYTES`], UTF-8 (else the line and column of the first bad byte), ending with a
+/// line end (else it is taken as cut short: the line, column and byte where it ends), nested
+/// at most [`MAX_YAML_DEPTH`] deep, no alias. Errors name the file.
 pub fn read_yaml(path: &std::path::Path) -> Result<String, NodeError> {
     use std::io::Read;
     let file = path.display().to_string();
@@ -421,6 +485,9 @@ pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
         let column = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
         err(format!("line {line} column {column}: byte {at} is not UTF-8 text"))
     })?;
+    if !text.is_empty() && !text.ends_with('\n') {
+        return Err(err(unterminated(&text)));
+    }
     check_yaml_depth(&text).map_err(|r| match r {
         Refused::Deep(line, column, depth) => {
             err(format!("line {line} column {column}: nested {depth} deep, more than the {MAX_YAML_DEPTH} a params or launch file may be"))
@@ -430,6 +497,25 @@ pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
         }
     })?;
     Ok(text)
+}
+
+/// The refusal of a text whose last line has no line end: where it ends and what the line
+/// holds (its first 60 characters). Every editor and writer ends a file's last line; a file
+/// that does not was most likely cut short (a copy or write interrupted), and its last value
+/// may be cut too, a number shortened into another valid number. A launch file is read
+/// through the same check: a cut one loses the nodes that followed.
+fn unterminated(text: &str) -> String {
+    let start = text.rfind('\n').map_or(0, |p| p + 1);
+    let last = &text[start..];
+    let line = text[..start].matches('\n').count() + 1;
+    let column = last.chars().count() + 1;
+    let shown: String = last.chars().take(60).collect();
+    let more = if last.chars().count() > 60 { "..." } else { "" };
+    format!(
+        "line {line} column {column} (byte {}): the file ends without a line end after `{shown}{more}`: cut short? \
+         (a params or launch file ends with a line end; if that line is whole, add one)",
+        text.len()
+    )
 }
 
 /// Why [`check_yaml_depth`] refused a text.
@@ -509,12 +595,15 @@ fn edit_distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// The `ros__parameters` entries that apply to the node, in file order: (section, name,
-/// value). A file with no
-/// section for the node but one whose name is a near miss of its name (`/oilfilm/estimatr`
-/// for `/oilfilm/estimator`) is an error: it would leave the node on its defaults without a
-/// word. (Other nodes' sections are normal: one file often serves a whole graph.)
-fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, String, Value)>, NodeError> {
+/// A params file's entries for one node: (section, name, value).
+type Entries = Vec<(String, String, Value)>;
+
+/// Whether the file has a section for the node, and the `ros__parameters` entries that apply
+/// to it, in file order: (section, name, value). A file with no section for the node but one
+/// whose name is a near miss of its name (`/oilfilm/estimatr` for `/oilfilm/estimator`) is
+/// an error: it would leave the node on its defaults without a word. (Other nodes' sections
+/// are normal: one file often serves a whole graph.)
+fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<(bool, Entries), NodeError> {
     let err = |reason: String| NodeError::File { file: file.to_string(), reason };
     let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(text).map_err(|e| err(e.to_string()))?;
     let serde_yaml_ng::Value::Mapping(top) = doc else {
@@ -545,7 +634,7 @@ fn sections(text: &str, file: &str, args: &NodeArgs) -> Result<Vec<(String, Stri
     if let (false, Some(key)) = (applies, near_misses.first()) {
         return Err(err(format!("no section for node `{fq}`, but `{key}`: a misspelling? (a section applies as `/**`, `{}` or `{fq}`)", args.name)));
     }
-    Ok(out)
+    Ok((applies, out))
 }
 
 /// A parameter value as `rcl_interfaces/msg/ParameterValue` (a NaN double arrives here as

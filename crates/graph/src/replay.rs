@@ -307,6 +307,10 @@ impl ReplayCore {
             bearing_temperature_degc: temperature_c,
             state: RigStatus::STATE_RUNNING,
             message,
+            // A file waits for room in the node's queue; a TCP stream's drops are counted
+            // where its frames are queued, and set when the node takes the frame
+            // (`lines::FrameQueue`).
+            frames_dropped: 0,
         };
         out.frames.push((frame, status));
     }

@@ -426,25 +426,44 @@ fn bad_row_warnings_are_limited_to_one_a_second_with_a_count() {
 
 /// A TCP source faster than the node: the queue holds at most its stated number of outputs
 /// and the rest are dropped and counted, not held in memory; output without frames is not
-/// queued at all.
+/// queued at all. Every status the node takes carries the count so far in `frames_dropped`:
+/// 0 before the flood, the whole count on the statuses still queued when it ended.
 #[test]
 fn a_flooded_queue_drops_and_counts_frames_instead_of_growing() {
-    use oilfilm_graph::lines::{DroppingSender, QUEUE_FRAMES};
+    use oilfilm_graph::lines::{DroppingSender, FrameQueue, QUEUE_FRAMES};
     use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::mpsc::TryRecvError;
     use std::sync::Arc;
     let (tx, rx) = std::sync::mpsc::sync_channel(QUEUE_FRAMES);
     let dropped = Arc::new(AtomicU64::new(0));
     let mut sender = DroppingSender::new(tx, Arc::clone(&dropped));
-    let one = || Produced { frames: vec![(DaqFrame::default(), RigStatus::default())], bad_row: None };
+    let queue = FrameQueue::new(rx, Arc::clone(&dropped));
+    // A status that claims drops of its own: the queue's count replaces it.
+    let one = || Produced { frames: vec![(DaqFrame::default(), RigStatus { frames_dropped: 12345, ..RigStatus::default() })], bad_row: None };
+    let take_all = |queue: &FrameQueue| -> Vec<u64> {
+        let mut counts = Vec::new();
+        loop {
+            match queue.take(Duration::ZERO) {
+                Ok(out) => counts.extend(out.frames.iter().map(|(_, s)| s.frames_dropped)),
+                Err(TryRecvError::Empty) => return counts,
+                Err(TryRecvError::Disconnected) => panic!("the sending end is alive"),
+            }
+        }
+    };
+    sender.send(one()).unwrap();
+    assert_eq!(take_all(&queue), [0], "nothing dropped yet");
     for _ in 0..100 * QUEUE_FRAMES {
         sender.send(one()).unwrap();
         sender.send(Produced { frames: Vec::new(), bad_row: None }).unwrap();
     }
-    assert_eq!(rx.try_iter().count(), QUEUE_FRAMES, "the queue holds its limit");
-    assert_eq!(dropped.load(Ordering::SeqCst), 99 * QUEUE_FRAMES as u64, "every other frame is counted as dropped");
+    let count = dropped.load(Ordering::SeqCst);
+    assert_eq!(count, 99 * QUEUE_FRAMES as u64, "every other frame is counted as dropped");
+    let taken = take_all(&queue);
+    assert_eq!(taken.len(), QUEUE_FRAMES, "the queue holds its limit");
+    assert!(taken.iter().all(|&n| n == count), "every status taken says {count} dropped: {taken:?}");
     sender.send(one()).unwrap();
-    assert_eq!(rx.try_iter().count(), 1, "room again once the node takes frames");
-    drop(rx);
+    assert_eq!(take_all(&queue), [count], "room again once the node takes frames; the count stays (cumulative)");
+    drop(queue);
     assert!(sender.send(one()).is_err(), "a stopped node ends the reading");
 }
 

@@ -11,6 +11,7 @@ mod fuzz;
 mod graph_equals_batch;
 mod launch_files;
 mod lines_fuzz;
+mod params_files;
 mod sim_rig_graph;
 mod yaml_fuzz;
 

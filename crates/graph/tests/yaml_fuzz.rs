@@ -8,7 +8,9 @@
 //! ranges deleted or repeated, lines duplicated) and reads it as one node's params file (in
 //! memory, the checks a file gets) and, every tenth case, as a launch file (from a file: the
 //! launch reader resolves paths). Bounded: `OILFILM_FUZZ_CASES` (default 10 000) cases from
-//! seed `OILFILM_FUZZ_SEED` (printed on failure with the case).
+//! seed `OILFILM_FUZZ_SEED`; case `k` runs from seed + `k` alone (its seed, not its index,
+//! picks the node and whether the launch reader runs), printed on failure, so
+//! `OILFILM_FUZZ_SEED=<seed> OILFILM_FUZZ_CASES=1` runs that case alone.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
@@ -88,11 +90,11 @@ fn mutate(rng: &mut ChaCha8Rng, bytes: &mut Vec<u8>) {
 }
 
 /// A file error must name the file; any other error is a parameter's (it names the name).
-fn check_error(e: &NodeError, file: &str, case: u64) {
+fn check_error(e: &NodeError, file: &str, case: &str) {
     let text = e.to_string();
-    assert!(text.len() < 4096, "case {case}: an error of bounded length: {} bytes", text.len());
+    assert!(text.len() < 4096, "{case}: an error of bounded length: {} bytes", text.len());
     if let NodeError::File { file: f, .. } = e {
-        assert!(f.ends_with(file), "case {case}: the error names {f}, not {file}");
+        assert!(f.ends_with(file), "{case}: the error names {f}, not {file}");
     }
 }
 
@@ -112,7 +114,8 @@ fn mutated_params_and_launch_files_never_panic_or_hang_and_name_the_file() {
     let (mut loaded, mut refused, mut slowest) = (0u64, 0u64, std::time::Duration::ZERO);
     let start = Instant::now();
     for case in 0..cases {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(case));
+        let case_seed = seed.wrapping_add(case);
+        let mut rng = ChaCha8Rng::seed_from_u64(case_seed);
         let (seed_name, base) = &corpus[rng.random_range(0..corpus.len())];
         let mut bytes = base.clone();
         for _ in 0..rng.random_range(1..5) {
@@ -123,28 +126,27 @@ fn mutated_params_and_launch_files_never_panic_or_hang_and_name_the_file() {
             // The params readers in memory (the same checks as from a file), one node's
             // parameters a case in turn; the launch reader, which reads files, every tenth.
             let texts = params::check_yaml(bytes.clone(), &name).map(|text| vec![(name.clone(), text)]);
-            let node = texts.and_then(|texts| match case % 4 {
+            let node = texts.and_then(|texts| match case_seed % 4 {
                 0 => params::load_texts::<EstimatorParams>(&args("estimator"), &texts).and_then(|(p, _, _)| p.config(5000.0).map(|_| ())),
                 1 => params::load_texts::<ConditionerParams>(&args("conditioner"), &texts).and_then(|(p, _, _)| p.validate()),
                 2 => params::load_texts::<DaqParams>(&args("daq"), &texts).map(|_| ()),
                 _ => params::load_texts::<ExciterParams>(&args("exciter"), &texts).map(|_| ()),
             });
             let mut results = vec![node];
-            if case % 10 == 0 {
+            if case_seed % 10 == 0 {
                 std::fs::write(&case_file, &bytes).unwrap();
                 results.push(oilfilm_graph::launch::read(&case_file).map(|_| ()));
             }
             results
         }));
-        let results = outcome
-            .unwrap_or_else(|_| panic!("case {case} (seed {}, from {seed_name}): a panic on\n{}", seed.wrapping_add(case), String::from_utf8_lossy(&bytes)));
+        let results = outcome.unwrap_or_else(|_| panic!("case {case} (seed {case_seed}, from {seed_name}): a panic on\n{}", String::from_utf8_lossy(&bytes)));
         slowest = slowest.max(t.elapsed());
         for r in &results {
             match r {
                 Ok(()) => loaded += 1,
                 Err(e) => {
                     refused += 1;
-                    check_error(e, &name, case);
+                    check_error(e, &name, &format!("case {case} (seed {case_seed}, from {seed_name})"));
                 }
             }
         }
@@ -155,6 +157,7 @@ fn mutated_params_and_launch_files_never_panic_or_hang_and_name_the_file() {
         total.as_secs_f64(),
         slowest.as_secs_f64() * 1e3
     );
-    assert!(refused > 0 && loaded > 0, "the mutations reach both outcomes: {loaded} read, {refused} refused");
+    // A case run alone is judged on itself (above); the mix of outcomes only over many.
+    assert!(cases < 20 || (refused > 0 && loaded > 0), "the mutations reach both outcomes: {loaded} read, {refused} refused");
     let _ = std::fs::remove_dir_all(&dir);
 }

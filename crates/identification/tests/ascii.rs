@@ -1,5 +1,10 @@
 //! The ASCII record format: example files, every refusal with its line and column, bit-exact
 //! round trips, and a seeded mutation search that the reader never panics on.
+//!
+//! The mutation search is bounded: `OILFILM_FUZZ_CASES` (default 10 000) cases from seed
+//! `OILFILM_FUZZ_SEED`; case `k` runs from seed + `k` alone (its base record and every edit
+//! come from that seed's generator, printed on failure with the command that runs it
+//! alone). `OILFILM_FUZZ_CASES=200000` searches longer (nothing here is judged on time).
 
 use std::path::PathBuf;
 
@@ -397,19 +402,35 @@ fn mutate(rng: &mut ChaCha8Rng, bytes: &mut Vec<u8>) {
     }
 }
 
+/// The mutation search's first seed (`OILFILM_FUZZ_SEED` overrides it).
+const FUZZ_SEED: u64 = 0xa5c11;
+
+/// What a failing case of the mutation search says: its index and seed, and the command that
+/// runs it alone.
+fn fuzz_case_label(case: u64, seed: u64) -> String {
+    format!(
+        "case {case} (seed {seed}; alone: OILFILM_FUZZ_SEED={seed} OILFILM_FUZZ_CASES=1 cargo test -p oilfilm-identification --test identification \
+         ascii::mutated_files_never_make_the_reader_panic)"
+    )
+}
+
 #[test]
 fn mutated_files_never_make_the_reader_panic() {
     let (example, _) = data("example-si.txt");
     let (volts, _) = data("example-volts-offsets.txt");
     let short: String = example.lines().take(15).map(|l| format!("{l}\n")).collect();
     assert_eq!(ascii::read(&short, "short").expect("short example").len(), 3);
-    let mut rng = ChaCha8Rng::seed_from_u64(0xa5c11);
-    let (mut ok, mut refused) = (0, 0);
-    // OILFILM_FUZZ_CASES=200000 searches longer; the default keeps the suite fast.
-    let cases: usize = std::env::var("OILFILM_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000);
+    let (first, cases) = crate::fuzz::settings(FUZZ_SEED, 10_000);
+    let start = std::time::Instant::now();
+    let (mut ok, mut refused) = (0u64, 0u64);
     for case in 0..cases {
+        // Everything a case does comes from its own seed, not from the cases before it, so
+        // that it runs alone as it ran in the loop.
+        let seed = first.wrapping_add(case);
+        let mut rng = crate::fuzz::rng(seed);
+        let label = fuzz_case_label(case, seed);
         // A short file half the time, so that the header takes more of the damage.
-        let base = match case % 4 {
+        let base = match rng.random_range(0..4) {
             0 | 2 => &short,
             1 => &example,
             _ => &volts,
@@ -420,32 +441,34 @@ fn mutated_files_never_make_the_reader_panic() {
         }
         let text = String::from_utf8_lossy(&bytes);
         let outcome = std::panic::catch_unwind(|| ascii::read(&text, "mutant.txt"));
-        let result = outcome.unwrap_or_else(|_| panic!("case {case}: the reader panicked on\n{text}"));
+        let result = outcome.unwrap_or_else(|_| panic!("{label}: the reader panicked on\n{text}"));
         // The streaming reader gives the same record or the same error.
         let streamed = std::panic::catch_unwind(|| ascii::read_stream(text.as_bytes(), "mutant.txt"))
-            .unwrap_or_else(|_| panic!("case {case}: the streaming reader panicked on\n{text}"));
+            .unwrap_or_else(|_| panic!("{label}: the streaming reader panicked on\n{text}"));
         match (&result, &streamed) {
             (Ok(a), Ok(b)) => assert_bit_identical(a, b),
-            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "case {case}"),
-            _ => panic!("case {case}: read gave {result:?}, read_stream {streamed:?}"),
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "{label}"),
+            _ => panic!("{label}: read gave {result:?}, read_stream {streamed:?}"),
         }
         match result {
             Ok(record) => {
                 ok += 1;
-                assert!(record.columns.len() == 10 && record.columns.iter().all(|c| c.len() == record.len()));
+                assert!(record.columns.len() == 10 && record.columns.iter().all(|c| c.len() == record.len()), "{label}: ragged record");
                 // Whatever reads also writes and reads back unchanged.
-                let again = ascii::read(&ascii::write(&record).expect("write"), "again").expect("reread");
+                let again = ascii::read(&ascii::write(&record).unwrap_or_else(|e| panic!("{label}: write: {e}")), "again")
+                    .unwrap_or_else(|e| panic!("{label}: reread: {e}"));
                 assert_bit_identical(&record, &again);
             }
             Err(IdentificationError::Parse { line, .. }) => {
                 refused += 1;
-                assert!(line >= 1 && line <= text.split('\n').count().max(1), "case {case}: line {line}");
+                assert!(line >= 1 && line <= text.split('\n').count().max(1), "{label}: line {line}");
             }
-            Err(other) => panic!("case {case}: not a parse error: {other}"),
+            Err(other) => panic!("{label}: not a parse error: {other}"),
         }
     }
-    println!("mutated files: {ok} still valid, {refused} refused");
-    assert!(refused > cases / 2 && ok > cases / 80, "{ok} valid, {refused} refused");
+    println!("ascii record fuzz: {cases} cases from seed {first} in {:.2} s: {ok} still valid, {refused} refused", start.elapsed().as_secs_f64());
+    // A case run alone is judged on itself (above); the loop's mix only over many cases.
+    assert!(cases < 1000 || (refused > cases / 2 && ok > cases / 80), "{ok} valid, {refused} refused");
 }
 
 #[test]

@@ -10,6 +10,10 @@ mod conditioning;
 mod coverage;
 mod estimator;
 mod excitation;
+// The fuzz loops' shared settings: `OILFILM_FUZZ_SEED`/`OILFILM_FUZZ_CASES` and a case's
+// generator from its seed.
+#[path = "../../../tests/support/fuzz.rs"]
+mod fuzz;
 mod identify_simulated;
 #[path = "../../../tests/support/json_difference.rs"]
 mod json_difference;

@@ -24,9 +24,12 @@ pub use cdr::{decode, decode_exact, encode, encode_with_padding, CdrError, CdrFi
 /// Fields in an optional `appended { .. }` block follow the others and were added to the
 /// .msg after messages without them were recorded: a message whose data ends where they
 /// would begin (at most 3 bytes of padding left) decodes with all of them at their default
-/// (empty), so old bags stay readable; otherwise all must be present. Only for top-level
-/// messages (none is nested in another) whose appended fields are sequences, so "absent"
-/// and "empty" cannot be confused with data.
+/// (empty, zero), so old bags stay readable; otherwise all must be present. Only for
+/// top-level messages (none is nested in another) whose appended fields are sequences, so
+/// "absent" and "empty" cannot be confused with data, or scalars whose zero is what the .msg
+/// says a message without them means (RigStatus's `frames_dropped`: nothing dropped, or not
+/// counted then) and that are at least 4 bytes wide: present, they leave more than the 3
+/// bytes of padding an old message may end with, so the two cannot be confused either.
 #[macro_export]
 macro_rules! ros_message {
     (
@@ -493,8 +496,8 @@ ros_message! {
 }
 
 ros_message! {
-    /// `oilfilm_msgs/msg/RigStatus`: speed, static load, bearing temperature, state.
-    /// See `msgs/msg/RigStatus.msg`.
+    /// `oilfilm_msgs/msg/RigStatus`: speed, static load, bearing temperature, state, and
+    /// the DAQ input's dropped frames. See `msgs/msg/RigStatus.msg`.
     pub struct RigStatus = "oilfilm_msgs/msg/RigStatus",
         definition = include_str!("../../../msgs/msg/RigStatus.msg"); {
         pub header: Header,
@@ -503,6 +506,9 @@ ros_message! {
         pub bearing_temperature_degc: f64,
         pub state: u8,
         pub message: String,
+    }
+    appended {
+        pub frames_dropped: u64,
     }
     constants {
         STATE_IDLE: u8 = 0 as "uint8",

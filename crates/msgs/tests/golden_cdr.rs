@@ -92,7 +92,28 @@ fn coefficient_estimate_matches_rclpy() {
 
 #[test]
 fn rig_status_matches_rclpy() {
-    assert!(check::<RigStatus>("RigStatus.json") >= 2);
+    assert!(check::<RigStatus>("RigStatus.json") >= 3);
+}
+
+/// rclpy's bytes of the fixture's `exciting` status as it serialised them before
+/// `frames_dropped` was appended (what a bag recorded then holds): they decode, strictly,
+/// to the same status with nothing dropped.
+#[test]
+fn rclpys_rig_status_from_before_frames_dropped_decodes_with_it_zero() {
+    let old = unhex(
+        "0001000014f15365ffc99a3b100000006f696c66696c6d5f62656172696e6700000000003b43d5598ca263403333333333e3b54054e3a59bc4003d40020000001200000074776f2d746f6e652032302f333020487a00",
+    );
+    let got: RigStatus = decode_exact(&old).expect("an old status decodes");
+    let want = RigStatus {
+        header: Header { stamp: Time { sec: 1_700_000_020, nanosec: 999_999_999 }, frame_id: "oilfilm_bearing".into() },
+        speed_rad_s: 157.07963267948966,
+        static_load_n: 5603.2,
+        bearing_temperature_degc: 29.003,
+        state: RigStatus::STATE_EXCITING,
+        message: "two-tone 20/30 Hz".into(),
+        frames_dropped: 0,
+    };
+    assert_eq!(got, want);
 }
 
 /// The player's /clock message: rclpy's bytes for a bag log time and for zero.

@@ -192,6 +192,60 @@ fn pack_counts_only_when_lossless() {
     let mut si = sample_daq();
     assert!(!si.pack_counts(&[lsb, lsb]), "SI values are not counts");
 }
+oilfilm_msgs::ros_message! {
+    /// `RigStatus` as first released, before `frames_dropped` was appended: what a bag
+    /// recorded then holds.
+    pub struct RigStatusV1 = "oilfilm_msgs/msg/RigStatus", definition = ""; {
+        pub header: Header,
+        pub speed_rad_s: f64,
+        pub static_load_n: f64,
+        pub bearing_temperature_degc: f64,
+        pub state: u8,
+        pub message: String,
+    }
+    constants {}
+}
+
+/// A status recorded before `frames_dropped` existed decodes with it 0; one with it keeps
+/// it; and a cut anywhere in the appended field (or its padding) is an error, not a status
+/// with a made-up count. The message lengths put the end of `message` at each offset modulo
+/// 8, so the padding before the `uint64` takes every length from 0 to 7.
+#[test]
+fn a_status_recorded_before_frames_dropped_decodes_with_it_zero_and_a_cut_one_is_refused() {
+    for len in 0..8 {
+        let s = RigStatus {
+            header: Header { stamp: Time { sec: 3, nanosec: 4 }, frame_id: "oilfilm_bearing".into() },
+            speed_rad_s: 157.0,
+            state: RigStatus::STATE_RUNNING,
+            message: "m".repeat(len),
+            frames_dropped: 0x0102_0304_0506_0708,
+            ..Default::default()
+        };
+        let old = RigStatusV1 {
+            header: s.header.clone(),
+            speed_rad_s: s.speed_rad_s,
+            static_load_n: s.static_load_n,
+            bearing_temperature_degc: s.bearing_temperature_degc,
+            state: s.state,
+            message: s.message.clone(),
+        };
+        let old_bytes = encode(&old);
+        let got: RigStatus = decode_exact(&old_bytes).expect("an old status decodes");
+        assert_eq!(got, RigStatus { frames_dropped: 0, ..s.clone() }, "message of {len} bytes");
+        let bytes = encode(&s);
+        assert_eq!(bytes[..old_bytes.len()], old_bytes[..], "the field follows the first release's bytes unchanged");
+        assert_eq!(decode_exact::<RigStatus>(&bytes).expect("round trip"), s);
+        for n in old_bytes.len()..bytes.len() {
+            match decode::<RigStatus>(&bytes[..n]) {
+                Ok(got) => {
+                    assert!(n < old_bytes.len() + 4, "message of {len} bytes: a cut at {n} of {} decoded: {got:?}", bytes.len());
+                    assert_eq!(got.frames_dropped, 0, "a cut in the padding is an old status");
+                }
+                Err(e) => assert!(n >= old_bytes.len() + 4 && e.to_string().contains("frames_dropped"), "message of {len} bytes, cut at {n}: {e}"),
+            }
+        }
+    }
+}
 
 #[test]
 fn every_single_byte_corruption_decodes_or_errors() {
@@ -221,7 +275,8 @@ fn errors_name_the_field() {
 
     let s = RigStatus { message: "x".into(), ..Default::default() };
     let mut bytes = encode(&s);
-    let nul = bytes.len() - 1;
+    // The message's NUL: after it come the padding and `frames_dropped`.
+    let nul = bytes.windows(2).position(|w| w == b"x\0").expect("the message is encoded") + 1;
     bytes[nul] = b'y';
     let e = decode::<RigStatus>(&bytes).expect_err("no NUL");
     assert_eq!(e.field, "message", "{e}");

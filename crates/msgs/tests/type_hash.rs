@@ -17,7 +17,7 @@ const ROSIDL: &[(&str, &str)] = &[
     ("oilfilm_msgs/msg/DaqFrame", "RIHS01_c585104ebcfacd42cf1edf9c7e0f8e30514a750d29ebc98c3ec9061ad3e29dcd"),
     ("oilfilm_msgs/msg/ConditionedFrame", "RIHS01_633b5d90c5b55cb9db92692e77cc0d9acf4fbf0abb6f9ace2856033bf3f0f6bf"),
     ("oilfilm_msgs/msg/CoefficientEstimate", "RIHS01_87439f95ec86f7e098f608d8472d186def30124d2281d58163d57711d7450643"),
-    ("oilfilm_msgs/msg/RigStatus", "RIHS01_28c780a23e00861cbda92acad04db9fe1a69aff3a04446204d23b7b288fc9c8b"),
+    ("oilfilm_msgs/msg/RigStatus", "RIHS01_7bb35ce97b1bc57635b09d1a4a04c17c959cb7f22165786d9d5504fb0179fde1"),
     // The recorder's /parameter_events (rcl_interfaces' share/rcl_interfaces/msg/ParameterEvent.json).
     ("rcl_interfaces/msg/ParameterEvent", "RIHS01_043e627780fcad87a22d225bc2a037361dba713fca6a6b9f4b869a5aa0393204"),
     ("rcl_interfaces/msg/Parameter", "RIHS01_ddfe6442cffc462317adb5c92536a7b6dd55858c5c3e1e328165a6b73c2831af"),
