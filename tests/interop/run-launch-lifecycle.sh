@@ -8,7 +8,7 @@ cd "$(dirname "$0")/../.."
 bin_dir=${1:-target/debug}
 [ -x "$bin_dir/oilfilm" ] && [ -x "$bin_dir/oilfilm-daq" ] || { echo "no oilfilm binaries in $bin_dir (build them first)" >&2; exit 1; }
 eval "$(bash tests/interop/setup-ros-venv.sh)"
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 50))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 40))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"

@@ -11,7 +11,7 @@ work=$(mktemp -d "${TMPDIR:-/tmp}/oilfilm-rclpy-player.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 target/debug/examples/write_sim_rig "$work/sim_rig" 2 >/dev/null
 eval "$(bash tests/interop/setup-ros-venv.sh)"
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 50))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 40))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only)"

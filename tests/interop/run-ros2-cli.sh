@@ -23,7 +23,7 @@ if [ -z "$system_ros2" ]; then
   export PATH=$(dirname "$OILFILM_ROS_PYTHON_BIN"):$PATH
   export ROS_DISTRO=kilted
 fi
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 50))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((170 + RANDOM % 40))}
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOCALHOST_ONLY=1
 echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID (loopback only), ros2: $(command -v ros2)"

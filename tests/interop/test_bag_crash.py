@@ -53,7 +53,7 @@ def complete_chunks(path):
 
 @pytest.fixture(scope="module")
 def killed_bag():
-    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", str(170 + os.getpid() % 50)), RUST_LOG="warn")
+    env = dict(os.environ, ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", str(210 + os.getpid() % 10)), RUST_LOG="warn")
     bag = WORK / "killed"
     mcap_file = bag / "killed_0.mcap"
     log = (WORK / "nodes.log").open("w")
