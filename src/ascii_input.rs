@@ -77,10 +77,7 @@ pub fn rig_of(path: &Path, header: &ascii::Header, explicit: Option<&Path>) -> R
         let candidate = if p.is_absolute() { p.to_path_buf() } else { path.parent().unwrap_or(Path::new(".")).join(p) };
         candidate.is_file().then_some(candidate)
     };
-    let read_rig = |p: &Path| -> Result<RigConfig> {
-        let text = std::fs::read_to_string(p).with_context(|| format!("cannot read rig file {}", p.display()))?;
-        Ok(RigConfig::from_toml_str(&text, &p.display().to_string())?)
-    };
+    let read_rig = |p: &Path| -> Result<RigConfig> { Ok(oilfilm_graph::node::read_rig_file(p)?) };
     let (rig, rig_source) = match explicit {
         Some(p) => {
             if let Some(h) = beside(&named).filter(|h| h.canonicalize().ok() != p.canonicalize().ok()) {

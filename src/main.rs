@@ -19,7 +19,7 @@ mod report;
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Parser, Subcommand};
 use oilfilm_physics::config::RigConfig;
 
@@ -136,10 +136,7 @@ impl RigSource {
     pub fn load(&self) -> Result<RigConfig> {
         match &self.rig {
             None => Ok(RigConfig::zhou2004()?),
-            Some(path) => {
-                let text = std::fs::read_to_string(path).with_context(|| format!("cannot read rig file {}", path.display()))?;
-                Ok(RigConfig::from_toml_str(&text, &path.display().to_string())?)
-            }
+            Some(path) => Ok(oilfilm_graph::node::read_rig_file(path)?),
         }
     }
 }

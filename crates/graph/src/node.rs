@@ -136,8 +136,14 @@ pub fn load_rig(path: &str) -> Result<RigConfig, NodeError> {
     if path.is_empty() {
         return Ok(RigConfig::zhou2004()?);
     }
-    let text = std::fs::read_to_string(path).map_err(|e| NodeError::File { file: path.into(), reason: e.to_string() })?;
-    Ok(RigConfig::from_toml_str(&text, path)?)
+    read_rig_file(std::path::Path::new(path))
+}
+
+/// A rig file, read with the checks of every configuration file (bounded size, UTF-8, ending
+/// with a line end: [`crate::params::read_config_text`]), parsed and validated.
+pub fn read_rig_file(path: &std::path::Path) -> Result<RigConfig, NodeError> {
+    let text = crate::params::read_config_text(path, "a rig file")?;
+    Ok(RigConfig::from_toml_str(&text, &path.display().to_string())?)
 }
 
 /// Skipped input: logged as a warning with the node's name, and the node goes on.

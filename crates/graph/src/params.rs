@@ -449,9 +449,9 @@ fn to_json(v: &serde_yaml_ng::Value) -> Result<Value, String> {
     serde_json::to_value(v).map_err(|e| e.to_string())
 }
 
-/// The largest params or launch file read, bytes: a graph's files are a few kB, and the YAML
-/// parser's time grows faster than the size on pathological input, so a huge file is refused
-/// before it is read.
+/// The largest params, launch or rig file read, bytes: a graph's files are a few kB, and the
+/// YAML parser's time grows faster than the size on pathological input, so a huge file is
+/// refused before it is read.
 pub const MAX_YAML_BYTES: u64 = 1 << 20;
 /// The deepest nesting accepted in a params or launch file (flow brackets, block sequences
 /// and indentation levels alike): theirs is 3 or 4.
@@ -474,20 +474,7 @@ pub fn read_yaml(path: &std::path::Path) -> Result<String, NodeError> {
 /// [`read_yaml`]'s checks on a file's bytes: its text, or an error naming `file`.
 pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
     let err = |reason: String| NodeError::File { file: file.to_string(), reason };
-    if bytes.len() as u64 > MAX_YAML_BYTES {
-        return Err(err(format!("larger than {MAX_YAML_BYTES} bytes, the most a params or launch file may be")));
-    }
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let at = e.utf8_error().valid_up_to();
-        let before = &e.as_bytes()[..at];
-        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
-        let start = before.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
-        let column = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
-        err(format!("line {line} column {column}: byte {at} is not UTF-8 text"))
-    })?;
-    if !text.is_empty() && !text.ends_with('\n') {
-        return Err(err(unterminated(&text)));
-    }
+    let text = check_config_text(bytes, file, "a params or launch file")?;
     check_yaml_depth(&text).map_err(|r| match r {
         Refused::Deep(line, column, depth) => {
             err(format!("line {line} column {column}: nested {depth} deep, more than the {MAX_YAML_DEPTH} a params or launch file may be"))
@@ -499,12 +486,48 @@ pub fn check_yaml(bytes: Vec<u8>, file: &str) -> Result<String, NodeError> {
     Ok(text)
 }
 
+/// A configuration file's text (a rig file, say), read with the checks every configuration
+/// file gets before it is parsed: at most [`MAX_YAML_BYTES`], UTF-8, ending with a line end.
+/// `kind` says what the file is in errors (`"a rig file"`).
+pub fn read_config_text(path: &std::path::Path, kind: &str) -> Result<String, NodeError> {
+    use std::io::Read;
+    let file = path.display().to_string();
+    let err = |reason: String| NodeError::File { file: file.clone(), reason };
+    let f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
+    let mut bytes = Vec::new();
+    f.take(MAX_YAML_BYTES + 1).read_to_end(&mut bytes).map_err(|e| err(e.to_string()))?;
+    check_config_text(bytes, &file, kind)
+}
+
+/// [`read_config_text`]'s checks on a file's bytes: at most [`MAX_YAML_BYTES`], UTF-8 (else
+/// the line and column of the first bad byte), ending with a line end (else it is taken as
+/// cut short: the line, column and byte where it ends). Errors name `file`.
+fn check_config_text(bytes: Vec<u8>, file: &str, kind: &str) -> Result<String, NodeError> {
+    let err = |reason: String| NodeError::File { file: file.to_string(), reason };
+    if bytes.len() as u64 > MAX_YAML_BYTES {
+        return Err(err(format!("larger than {MAX_YAML_BYTES} bytes, the most {kind} may be")));
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let before = &e.as_bytes()[..at];
+        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+        let start = before.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1);
+        let column = String::from_utf8_lossy(&before[start..]).chars().count() + 1;
+        err(format!("line {line} column {column}: byte {at} is not UTF-8 text"))
+    })?;
+    if !text.is_empty() && !text.ends_with('\n') {
+        return Err(err(unterminated(&text, kind)));
+    }
+    Ok(text)
+}
+
 /// The refusal of a text whose last line has no line end: where it ends and what the line
 /// holds (its first 60 characters). Every editor and writer ends a file's last line; a file
 /// that does not was most likely cut short (a copy or write interrupted), and its last value
-/// may be cut too, a number shortened into another valid number. A launch file is read
-/// through the same check: a cut one loses the nodes that followed.
-fn unterminated(text: &str) -> String {
+/// may be cut too, a number shortened into another valid number. Launch and rig files are
+/// read through the same check: a cut launch file loses the nodes that followed, a rig file
+/// cut in its last value (`clearance_m = 1.14e-4` as `1.1`) would still parse.
+fn unterminated(text: &str, kind: &str) -> String {
     let start = text.rfind('\n').map_or(0, |p| p + 1);
     let last = &text[start..];
     let line = text[..start].matches('\n').count() + 1;
@@ -513,7 +536,7 @@ fn unterminated(text: &str) -> String {
     let more = if last.chars().count() > 60 { "..." } else { "" };
     format!(
         "line {line} column {column} (byte {}): the file ends without a line end after `{shown}{more}`: cut short? \
-         (a params or launch file ends with a line end; if that line is whole, add one)",
+         ({kind} ends with a line end; if that line is whole, add one)",
         text.len()
     )
 }

@@ -135,3 +135,35 @@ fn the_defaults_note_is_logged_once_per_process() {
     assert!(notes[0].contains("at their defaults") && notes[0].contains("hop="), "{}", notes[0]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_rig_file_without_a_line_end_at_its_end_is_refused_by_every_reader() {
+    // The shipped rig cut inside its last value: `linear_range = [0.0, 100.0]` would parse
+    // as a different rig if a number were cut, so the missing line end is what tells.
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch_configs/rigs/zhou2004.toml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    assert!(text.ends_with('\n'), "the shipped rig ends with a line end");
+    let dir = std::env::temp_dir().join(format!("oilfilm-rig-cut-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cut = dir.join("cut.toml");
+    let cut_text = text.trim_end_matches('\n');
+    std::fs::write(&cut, cut_text).unwrap();
+    let line = cut_text.matches('\n').count() + 1;
+    let e = oilfilm_graph::node::read_rig_file(&cut).unwrap_err().to_string();
+    assert!(
+        e.contains(&cut.display().to_string())
+            && e.contains(&format!("line {line} column "))
+            && e.contains("cut short?")
+            && e.contains("a rig file ends with a line end"),
+        "{e}"
+    );
+    // The launch path (a node's `rig_file` parameter) reads through the same check.
+    let e = oilfilm_graph::node::load_rig(&cut.display().to_string()).unwrap_err().to_string();
+    assert!(e.contains("cut short?"), "{e}");
+    // With its line end the same text is the shipped rig.
+    let whole = dir.join("whole.toml");
+    std::fs::write(&whole, &text).unwrap();
+    let rig = oilfilm_graph::node::read_rig_file(&whole).unwrap();
+    assert_eq!(rig, oilfilm_physics::config::RigConfig::zhou2004().unwrap());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
