@@ -168,7 +168,7 @@ interop() {
 # The checks of files (bags, other tools' records) need no DDS but the bag-crash check's
 # two publishers, in domains 210..220 of their own; they run in the background, beside the
 # ROS 2 checks (domains 170..210), and their output is printed after them.
-rm -f target/interop-*.counts
+rm -f target/interop-*.counts target/interop-files.done
 (
   interop_counts=target/interop-files.counts
   files_started=$SECONDS
@@ -178,6 +178,7 @@ rm -f target/interop-*.counts
   echo "== Records from other tools (npTDMS, scipy, pandas from PyPI, in .venv-foreign)"
   interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
   echo "== time: the bag and record interop took $((SECONDS - files_started)) s, beside the ROS 2 interop"
+  touch target/interop-files.done
 ) >target/interop-files.log 2>&1 &
 files_pid=$!
 
@@ -196,11 +197,11 @@ cat target/interop-files.log
 phase "waiting for the bag and record interop"
 passed=$((passed + $(cat target/interop-*.counts 2>/dev/null | grep -c '^ok$' || true)))
 failed=$((failed + $(cat target/interop-*.counts 2>/dev/null | grep -c '^failed$' || true)))
-# Three file checks and six ROS 2 checks: one that did not report (a group killed) fails.
-reported=$(cat target/interop-*.counts 2>/dev/null | wc -l)
-if [ "$reported" -ne 9 ]; then
+# A background group that did not reach its end (killed, or the shell failed in it) fails,
+# whatever its checks reported before.
+if [ ! -e target/interop-files.done ]; then
   failed=$((failed + 1))
-  echo "FAILED: $reported interop check(s) reported of 9"
+  echo "FAILED: the bag and record interop did not run to its end (its log above)"
 fi
 
 echo "== Rust tests (their output)"
