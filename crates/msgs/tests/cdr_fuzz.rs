@@ -176,7 +176,7 @@ fn mutated_messages_of_every_type_decode_or_are_refused_with_the_field_and_offse
         corpus.len(),
         start.elapsed().as_secs_f64()
     );
-    assert!(decoded > 0 && refused > cases / 2, "the mutations reach both outcomes: {decoded} decoded, {refused} refused");
+    assert!(!fuzz::mix_is_judged(cases) || (decoded > 0 && refused > cases / 2), "the mutations reach both outcomes: {decoded} decoded, {refused} refused");
     if cases >= 10_000 {
         let never: Vec<&str> = TYPES.iter().zip(&refused_as).filter(|(_, n)| **n == 0).map(|((t, _), _)| *t).collect();
         assert!(never.is_empty(), "no mutated message was refused as {never:?}");

@@ -102,5 +102,7 @@ fn mutated_rig_files_never_panic_and_errors_stay_short() {
         }
     }
     println!("rig file fuzz: {cases} cases in {:.2} s: {loaded} loaded, {refused} refused (longest error {longest} bytes)", start.elapsed().as_secs_f64());
-    assert!(loaded > 0 && refused > cases / 4, "{loaded} loaded, {refused} refused");
+    // A case replayed alone (`OILFILM_FUZZ_CASES=1`) is judged on itself (above); the mix of
+    // outcomes only over a loop of many, as `tests/support/fuzz.rs` judges the others.
+    assert!(cases < 1000 || (loaded > 0 && refused > cases / 4), "{loaded} loaded, {refused} refused");
 }
