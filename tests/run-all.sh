@@ -112,6 +112,12 @@ for line in open(sys.argv[1]):
         lane = "dds" if os.path.basename(package_dir) == "nodes" else "compute"
         print(lane, package_dir, m["target"]["name"], m["executable"], sep="\t")
 PY
+# No executable listed would pass as no test failing: fail instead.
+executables=$(wc -l <target/test-executables.txt)
+if [ "$executables" -eq 0 ]; then
+  failed=$((failed + 1))
+  echo "FAILED: the build listed no test executable (target/build-artifacts.json)"
+fi
 # One lane: every executable of `$1` in turn, output to target/test-output-$1.txt; a binary
 # that exits non-zero without a test report (a crash) is counted in target/test-crashes-$1.
 run_lane() {

@@ -88,7 +88,7 @@ impl NodeParams for DaqParams {
             Spec::fixed("rate_factor", "pace: 1 real time (stamps are wall time), 4 four times faster and 0 as fast as the consumers allow (stamps are sim time, published on /clock); not used by tcp", Rule::number(0.0, 1e6)),
             Spec::fixed("duration_s", "stop after this many seconds of rig time; 0: run until stopped or the file ends (not used by tcp)", Rule::number(0.0, 1e9)),
             Spec::fixed("start_stamp_ns", "rig time of scan 0, ns since the epoch; 0: the clock when the rig starts (sim), the record's start_time_s (ascii, tcp)", Rule::Integer { min: 0, max: i64::MAX }),
-            Spec::fixed("command_timeout_s", "sim: how long to wait for exciter setpoints before running a block with the force held, s of wall time", Rule::above(0.0, 86_400.0)),
+            Spec::fixed("command_timeout_s", "sim: how long to wait for exciter setpoints before running a block with the force held, s of wall time (the first block waits at least 10 s, for discovery)", Rule::above(0.0, 86_400.0)),
             Spec::fixed("speed_rpm", "shaft speed stated in rig/status, rpm; 0: the rig file's (sim) or the record's speed_rpm header (ascii, tcp)", Rule::number(0.0, 1e6)),
         ]
     }
@@ -627,14 +627,19 @@ impl SimDaq {
         }
         if !self.core.ready() {
             let since = *self.waiting_since.get_or_insert(now);
-            if now.seconds_since(since) < p.command_timeout_s {
-                return Ok(Turn { wake: Some(later(since, p.command_timeout_s)), ..turn });
+            // The first block's setpoints also wait on discovery (the exciter hears the rig
+            // status published above, then its setpoints reach this node: seconds on a loaded
+            // machine), so the first block waits as long as for a subscriber; later blocks
+            // wait `command_timeout_s` for a running exciter.
+            let timeout_s = if self.core.now() == epoch { p.command_timeout_s.max(READER_WAIT_S) } else { p.command_timeout_s };
+            if now.seconds_since(since) < timeout_s {
+                return Ok(Turn { wake: Some(later(since, timeout_s)), ..turn });
             }
             tracing::warn!(
                 node = "daq",
                 "no exciter setpoints for the block ending at {:.3} s after {} s: running it with the force held",
                 block_end_s,
-                p.command_timeout_s
+                timeout_s
             );
         }
         self.waiting_since = None;
