@@ -173,9 +173,11 @@ interop() {
 
 # The checks of files (bags, other tools' records) need no DDS but the bag-crash check's
 # two publishers, in domains 210..220 of their own; they run in the background, beside the
-# ROS 2 checks (domains 170..210), and their output is printed after them.
+# later ROS 2 checks (domains 170..210), and their output is printed after them. They start
+# after the live-graph and launch checks, whose timing (discovery, a ramp's last setpoints
+# before a node exits) is the most sensitive to a loaded machine.
 rm -f target/interop-*.counts target/interop-files.done
-(
+files_group() {
   interop_counts=target/interop-files.counts
   files_started=$SECONDS
   echo "== rosbag2 MCAP bag interop (rosbags, mcap, mcap-ros2-support, pymcap-cli from PyPI, in .venv-bag)"
@@ -185,8 +187,7 @@ rm -f target/interop-*.counts target/interop-files.done
   interop "TDMS (npTDMS: several groups and segments; interleaved, read back by npTDMS), a .mat struct (scipy.io.savemat) and a CSV with a units row (pandas) import and identify to the ASCII record's coefficients bit for bit; a comma-decimal CSV is refused, nothing written" bash tests/interop/run-foreign-files.sh
   echo "== time: the bag and record interop took $((SECONDS - files_started)) s, beside the ROS 2 interop"
   touch target/interop-files.done
-) >target/interop-files.log 2>&1 &
-files_pid=$!
+}
 
 interop_counts=target/interop-ros.counts
 interop "oilfilm_msgs builds with rosidl; rclpy serialises every message as the golden CDR fixtures say" bash tests/interop/run-check-msgs.sh --check
@@ -194,6 +195,8 @@ interop "rclpy publishes and receives every oilfilm_msgs message over DDS (loopb
 # The binaries `cargo test` just built (target/debug, optimised by [profile.test]).
 interop "rclpy sees, echoes, parameterises and drives our live node graph; it stops cleanly on SIGINT" bash tests/interop/run-rclpy-live.sh target/debug
 interop "oilfilm launch as a process tree: a run without an estimate exits non-zero naming the silent node; SIGKILL of the launcher stops its nodes, the exciter ramping to zero" bash tests/interop/run-launch-lifecycle.sh target/debug
+( files_group ) >target/interop-files.log 2>&1 &
+files_pid=$!
 interop "the real ros2 command line (ros2cli on the rclpy wheels) against the live graph and oilfilm play: node/topic/service list, topic info -v, echo --once, hz, param list/describe/get/set, refusals on /rosout, the player named" bash tests/interop/run-ros2-cli.sh target/debug
 interop "oilfilm play seen from rclpy: /clock is rosgraph_msgs/Clock on the bag's log time and a use_sim_time node follows it; every message arrives with its recorded stamp" bash tests/interop/run-rclpy-player.sh target/debug
 phase "ROS 2 interop"
