@@ -426,8 +426,7 @@ impl ConditionerCore {
             Chain::ZeroPhase => {
                 // A stream that cannot be set up (a channel missing, say) leaves every block
                 // to the windowed conditioning, which names what is wrong in each block.
-                zero_phase =
-                    ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().flatten().map(Box::new);
+                zero_phase = ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().map(Box::new);
                 (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None)
             }
             Chain::Causal => {

@@ -1,5 +1,6 @@
 //! Throughput of the conditioning chain on a record the size of the paper's (50 000 scans of
-//! 10 channels at 5 kHz): each stage on its own, then the whole `condition` call.
+//! 10 channels at 5 kHz): the range check and the low-pass on their own, then the whole chain
+//! on the record in volts and in SI, and the causal chain.
 //!
 //! `cargo run --release -p oilfilm-identification --example bench_conditioning [scans] [repeats] [into|causal|blocks]`
 //! (`into`: only the whole `condition_into`, `causal`: only the causal chain, e.g. under
@@ -14,10 +15,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
-use oilfilm_identification::conditioning::{
-    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass, range_check, Chain, ConditioningConfig, Mechanics, RawRecord,
-    RawUnits,
-};
+use oilfilm_identification::conditioning::{condition, condition_into, lowpass, range_check, Chain, ConditioningConfig, Mechanics, RawRecord, RawUnits};
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
 
@@ -126,73 +124,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     report("RawRecord::from_scans (transpose)", all, t);
 
-    let mut si: Vec<Vec<f64>> = vec![vec![0.0; n]; channels];
     let t = best_of(repeats, || {
-        for ((ch, col), out) in raw.channels.iter().zip(&raw.columns).zip(si.iter_mut()) {
-            calibrate::to_si_into(*ch, col, &cal, out).unwrap(); // validated record
+        for (&ch, col) in raw.channels.iter().zip(&raw.columns) {
+            black_box(range_check::check(ch, col, raw.units, &cal).unwrap()); // validated record
         }
     });
-    report("calibrate::to_si (step 3)", all, t);
-
-    let t = best_of(repeats, || {
-        black_box(range_check::check_record(&raw, &cal).unwrap()); // validated record
-    });
-    report("range_check::check (step 2)", all, t);
-
-    let delays: Vec<deskew::FractionalDelay> =
-        raw.channels.iter().map(|&ch| deskew::FractionalDelay::for_offset(cal.sample_offset_s(ch).unwrap(), fs, conf.deskew_taps).unwrap()).collect();
-    let mut out = vec![0.0; n];
-    let t = best_of(repeats, || {
-        for (d, col) in delays.iter().zip(&si) {
-            d.apply_into(col, &mut out).unwrap(); // same lengths
-            black_box(&out);
-        }
-    });
-    report("deskew::FractionalDelay (step 4, 4 taps)", all, t);
+    report("range_check::check (step 2, on its own)", all, t);
 
     let lp = lowpass::Butterworth::design(conf.lowpass_order, conf.lowpass_cutoff_hz, fs)?;
+    let mut cols = raw.columns.clone();
     let mut scratch = Vec::new();
-    let t = best_of(repeats, || {
-        for col in &si {
-            lp.filtfilt_into(col, &mut out, &mut scratch).unwrap(); // same lengths
-            black_box(&out);
-        }
-    });
-    report("lowpass::filtfilt (step 1, order 4, one by one)", all, t);
-    let mut cols = si.clone();
     let t = best_of(repeats, || {
         // Filters the previous run's output again: same cost, values stay finite.
         lp.filtfilt_many_in_place(&mut cols, &mut scratch).unwrap(); // equal lengths
         black_box(&cols);
     });
     report("lowpass::filtfilt_many_in_place (8 lanes)", all, t);
-
-    let (mut a, mut b) = (si[0].clone(), si[2].clone());
-    let t = best_of(repeats, || {
-        // In place, again and again: the same work per pass, the values stay finite.
-        kinematics::mean_and_difference_in_place(&mut a, &mut b).unwrap(); // equal lengths
-        kinematics::mean_and_difference_in_place(&mut b, &mut a).unwrap();
-        black_box((&a, &b));
-    });
-    report("kinematics (step 5, 4 probe columns)", 4 * n, t);
-
-    let sg = differentiate::SavitzkyGolayDerivative::new(conf.differentiator_half_length, fs)?;
-    let mut acc = vec![0.0; n];
-    let t = best_of(repeats, || {
-        for col in &si[..4] {
-            sg.apply_into(col, &mut out).unwrap(); // same lengths
-            sg.apply_into(&out, &mut acc).unwrap();
-            black_box(&acc);
-        }
-    });
-    report("differentiate x2 (step 6, 4 columns, M = 5)", 4 * n, t);
-
-    let (mut fx, mut fy) = (vec![0.0; n], vec![0.0; n]);
-    let t = best_of(repeats, || {
-        film_force::eq2_into(&si[6], &si[7], &si[8], &si[4], &si[5], &mech, &mut fx, &mut fy).unwrap();
-        black_box((&fx, &fy));
-    });
-    report("film_force::eq2 (step 7, 5 columns)", 5 * n, t);
 
     let t = best_of(repeats, || {
         black_box(condition(&raw, &cal, &mech, &conf).unwrap()); // validated above
@@ -204,6 +151,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         black_box(&out);
     });
     report("condition_into (reusing the output buffers)", all, t);
+    let mut si = raw.clone();
+    si.units = RawUnits::Si;
+    for (&ch, col) in si.channels.iter().zip(si.columns.iter_mut()) {
+        let c = cal.channel(ch)?;
+        col.iter_mut().for_each(|v| *v = (*v - c.offset_v) / c.sensitivity_v_per_unit);
+    }
+    let t = best_of(repeats, || {
+        condition_into(&si, &cal, &mech, &conf, &mut out).unwrap(); // the same record in SI
+        black_box(&out);
+    });
+    report("condition_into, the record in SI", all, t);
 
     report("causal chain (order 8 at 55.5 Hz, 1000-scan blocks)", all, causal(&raw, &cal, &mech, repeats));
     Ok(())

@@ -4,10 +4,10 @@
 
 use std::f64::consts::PI;
 
+use crate::reference;
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::{
-    calibrate, condition, condition_into, deskew, differentiate, film_force, kinematics, lowpass, range_check, Conditioned, ConditioningConfig, Mechanics,
-    RawRecord, RawUnits,
+    condition, condition_into, deskew, differentiate, lowpass, range_check, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -202,7 +202,7 @@ fn deskew_realigns_multiplexed_sine_at_80_hz() {
     for (k, &ch) in ChannelId::ALL.iter().enumerate() {
         let offset = k as f64 * 10e-6;
         let col: Vec<f64> = t.iter().map(|&ti| 0.2 + amp * (w * (ti + offset) + phase).sin()).collect();
-        let aligned = deskew::align(ch, &col, offset, FS, 4).unwrap();
+        let aligned = reference::delay(&deskew::FractionalDelay::for_offset(offset, FS, 4).unwrap(), &col);
         let (_, fa) = fit_sines(&t, &aligned, &[f], interior.clone());
         let (_, fr) = fit_sines(&t, &col, &[f], interior.clone());
         let amp_err = fa[0].0 / amp - 1.0;
@@ -248,12 +248,12 @@ fn deskew_is_exact_for_polynomials_including_edges() {
     let delay = 0.45;
     let col: Vec<f64> = (0..n).map(|i| p(i as f64)).collect();
     let d = deskew::FractionalDelay::new(delay, 4).unwrap();
-    let out = d.apply(&col).unwrap();
+    let out = reference::delay(&d, &col);
     let worst = (0..n).map(|i| (out[i] - p(i as f64 - delay)).abs()).fold(0.0, f64::max);
     println!("cubic through a 4-tap delay of {delay} samples: worst error {worst:.2e} (edges included)");
     assert!(worst < 1e-12);
     // Integer delays (including zero) are pure shifts.
-    let z = deskew::FractionalDelay::new(0.0, 4).unwrap().apply(&col).unwrap();
+    let z = reference::delay(&deskew::FractionalDelay::new(0.0, 4).unwrap(), &col);
     assert_eq!(z, col);
 }
 
@@ -355,10 +355,6 @@ fn lowpass_edges_keep_constants_and_ramps() {
     println!("constant: worst error {ec:.2e}; ramp 2 .. 12: worst error {er:.2e} (edges included)");
     assert!(ec < 1e-12);
     assert!(er < 1e-6);
-    // The in-place form gives the same.
-    let mut b = ramp.clone();
-    lp.filtfilt_in_place(&mut b, &mut Vec::new()).unwrap();
-    assert_eq!(b, yr);
 }
 
 #[test]
@@ -395,40 +391,9 @@ fn lowpass_eight_lane_transposed_path_equals_one_by_one_on_random_data() {
         let mut many = cols.clone();
         lp.filtfilt_many_in_place(&mut many, &mut Vec::new()).unwrap();
         for (k, (m, c)) in many.iter().zip(&cols).enumerate() {
-            // The one-lane path moves no data between layouts: the straightforward reference.
-            let mut one = c.clone();
-            lp.filtfilt_in_place(&mut one, &mut Vec::new()).unwrap();
+            let one = reference::filtfilt(&lp, c);
             assert!(m.iter().zip(&one).all(|(a, b)| a.to_bits() == b.to_bits()), "order {order}, n {n}, column {k}");
             assert_ne!(m, c);
-        }
-    }
-}
-
-#[test]
-fn differentiator_vector_kernels_equal_the_defining_sum_on_random_data() {
-    // The interior `out[n] = sum_k c_k (x[n+k] - x[n-k])`, summed in order k = 1..M, written
-    // out here plainly, against the vectorised kernels (4- or 8-wide, compile-time M = 4..6,
-    // the generic passes for other M), bit for bit; and the blocked second derivative against
-    // two single passes.
-    use rand::{RngExt, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    for m in [2, 4, 5, 6, 9] {
-        for len in [2 * m + 1, 2 * m + 8, 1031, 2600] {
-            let sg = differentiate::SavitzkyGolayDerivative::new(m, FS).unwrap();
-            let c = sg.coefficients();
-            let x: Vec<f64> = (0..len).map(|_| rng.random_range(-1e-4..1e-4)).collect();
-            let fast = sg.apply(&x).unwrap();
-            for i in m..len - m {
-                let mut acc = c[0] * (x[i + 1] - x[i - 1]);
-                for k in 2..m + 1 {
-                    acc += c[k - 1] * (x[i + k] - x[i - k]);
-                }
-                assert_eq!(fast[i].to_bits(), acc.to_bits(), "M {m}, len {len}, sample {i}");
-            }
-            let (mut first, mut second) = (vec![0.0; len], vec![0.0; len]);
-            sg.apply_twice_into(&x, &mut first, &mut second).unwrap();
-            assert_eq!(first, fast);
-            assert_eq!(second, sg.apply(&fast).unwrap(), "M {m}, len {len}");
         }
     }
 }
@@ -446,8 +411,8 @@ fn differentiator_velocity_and_acceleration_within_1e3_at_80_hz() {
     let amps = [30e-6, 10e-6, 5e-6, 4e-6];
     let phases = [0.0, 1.0, -0.5, 2.5];
     let x: Vec<f64> = t.iter().map(|&ti| -50e-6 + (0..4).map(|k| amps[k] * (2.0 * PI * freqs[k] * ti + phases[k]).sin()).sum::<f64>()).collect();
-    let v = sg.apply(&x).unwrap();
-    let a = sg.apply(&v).unwrap();
+    let v = reference::derivative(&sg, &x);
+    let a = reference::derivative(&sg, &v);
     let range = 2 * m..n - 2 * m;
     let (cv, fv) = fit_sines(&t, &v, &freqs, range.clone());
     let (ca, fa) = fit_sines(&t, &a, &freqs, range);
@@ -488,7 +453,7 @@ fn differentiator_is_exact_for_quartics_including_edges() {
     let x: Vec<f64> = ts.iter().map(|&s| p(s)).collect();
     let fs = n as f64;
     let sgn = differentiate::SavitzkyGolayDerivative::new(5, fs).unwrap();
-    let d = sgn.apply(&x).unwrap();
+    let d = reference::derivative(&sgn, &x);
     let worst = ts.iter().zip(&d).map(|(&s, &v)| (v - dp(s)).abs()).fold(0.0, f64::max);
     println!("quartic: worst derivative error {worst:.2e} (edges included)");
     assert!(worst < 1e-9);
@@ -563,7 +528,7 @@ fn range_check_agrees_with_calibration_within_linear_range() {
         // margin, which the volts -> SI -> volts round trip may move by one ulp).
         let mut off_margin = volts.clone();
         off_margin.remove(3);
-        let si = calibrate::to_si(ch, &off_margin, &cal).unwrap();
+        let si = reference::to_si(ch, &off_margin, &cal);
         let w = range_check::check(ch, &si, RawUnits::Si, &cal).unwrap().expect("violations");
         assert_eq!((w.index, w.count), (v.index, v.count - 1));
         // In range: nothing.
@@ -617,40 +582,6 @@ fn range_check_reports_probe_leaving_its_linear_range_and_record_is_refused() {
 
 // ---------------------------------------------------------------------------------------
 // eq. 2
-
-#[test]
-fn eq2_stage_equals_analytic_film_force() {
-    let sc = Scenario::new();
-    let n = 2000;
-    let t = times(n);
-    let col = |terms: Terms, c: f64, d: u32| -> Vec<f64> { t.iter().map(|&ti| c + eval(terms, ti, d)).collect() };
-    let (f1, f2, f3) = (col(F1, 0.0, 0), col(F2, 0.0, 0), col(F3, 9000.0, 0));
-    let (hax, hay) = (col(FRAME_X, 0.0, 2), col(FRAME_Y, 0.0, 2));
-    let (fx, fy) = film_force::eq2(&f1, &f2, &f3, &hax, &hay, &sc.mech).unwrap();
-    let worst = (0..n)
-        .map(|i| {
-            let [ax, ay] = sc.film_force(t[i]);
-            (fx[i] - ax).abs().max((fy[i] - ay).abs())
-        })
-        .fold(0.0, f64::max);
-    println!("eq. 2 stage against analytic: worst |dF| = {worst:.2e} N");
-    assert!(worst < 1e-9);
-    // Orientation: f1 alone pushes along (cos 45, sin 45); f2 alone along (cos 135, sin 135).
-    let one = |a: f64, b: f64| film_force::eq2(&[a], &[b], &[0.0], &[0.0], &[0.0], &sc.mech).unwrap();
-    let mg = sc.mech.housing_mass_kg * sc.mech.gravity_m_s2;
-    let (x1, y1) = one(100.0, 0.0);
-    let (x2, y2) = one(0.0, 100.0);
-    println!("f1 = 100 N -> ({:.3}, {:.3}) N; f2 = 100 N -> ({:.3}, {:.3}) N (gravity removed)", x1[0], y1[0] + mg, x2[0], y2[0] + mg);
-    let h = 100.0 * 0.5f64.sqrt();
-    assert!((x1[0] - h).abs() < 1e-12 && (y1[0] + mg - h).abs() < 1e-9);
-    assert!((x2[0] + h).abs() < 1e-12 && (y2[0] + mg - h).abs() < 1e-9);
-    // Housing acceleration enters as -m X''.
-    let (xa, _) = film_force::eq2(&[0.0], &[0.0], &[0.0], &[2.0], &[0.0], &sc.mech).unwrap();
-    assert_eq!(xa[0], -120.0);
-    let s = film_force::static_part(&fx, &fy, 0..n).unwrap();
-    let mean_y = fy.iter().sum::<f64>() / n as f64;
-    assert!((s[1] - mean_y).abs() < 1e-9);
-}
 
 #[test]
 fn condition_recovers_eq2_from_analytic_si_record() {
@@ -795,7 +726,7 @@ fn volts_and_si_records_condition_alike() {
     let mut si = raw.clone();
     si.units = RawUnits::Si;
     for (ch, col) in si.channels.clone().iter().zip(si.columns.iter_mut()) {
-        *col = calibrate::to_si(*ch, col, cal).unwrap();
+        *col = reference::to_si(*ch, col, cal);
     }
     let a = condition(&raw, cal, &sc.mech, &ConditioningConfig::default()).unwrap();
     let b = condition(&si, cal, &sc.mech, &ConditioningConfig::default()).unwrap();
@@ -859,18 +790,6 @@ fn condition_into_reuses_buffers_and_equals_condition() {
     assert!(out.is_empty() && out.fx_n.is_empty() && out.range_violations.is_empty());
 }
 
-#[test]
-fn kinematics_stage_mean_and_tilt() {
-    // Ends A and B of x, then of y: the mean is r, the difference the tilt.
-    let (mut ax, mut bx) = (vec![1.0, 3.0], vec![3.0, 1.0]);
-    kinematics::mean_and_difference_in_place(&mut ax, &mut bx).unwrap();
-    assert_eq!((ax, bx), (vec![2.0, 2.0], vec![-2.0, 2.0]));
-    let (mut ay, mut by) = (vec![-2.0, 0.0], vec![-4.0, 2.0]);
-    kinematics::mean_and_difference_in_place(&mut ay, &mut by).unwrap();
-    assert_eq!((ay, by), (vec![-3.0, 1.0], vec![2.0, -2.0]));
-    assert!(kinematics::mean_and_difference_in_place(&mut [1.0], &mut [1.0, 2.0]).is_err());
-}
-
 // ---------------------------------------------------------------------------------------
 // bad input
 
@@ -903,7 +822,9 @@ fn overflow_in_the_filters_is_refused() {
         .collect();
     let raw = RawRecord::from_scans(&scans, fs).unwrap(); // consecutive scans
     let cal = daq.calibration().clone();
-    assert!(range_check::check_record(&raw, &cal).unwrap().is_empty());
+    for (&ch, col) in raw.channels.iter().zip(&raw.columns) {
+        assert!(range_check::check(ch, col, raw.units, &cal).unwrap().is_none(), "{ch}");
+    }
     let err = condition(&raw, &cal, &mechanics(), &ConditioningConfig::default()).unwrap_err();
     let (what, reason) = bad_input(err);
     assert!(what.contains("conditioned") && reason.contains("overflowed"), "{what}: {reason}");
@@ -956,20 +877,13 @@ fn nan_sample_is_refused_naming_channel_and_index() {
     println!("{err}");
     let (what, _) = bad_input(err);
     assert!(what.contains("f2") && what.contains("123"), "{what}");
-    // And every stage on its own.
+    // And the range check on its own.
     let mut col = vec![0.0; 100];
     col[42] = f64::NAN;
-    for err in [
-        calibrate::to_si(ChannelId::ProbeAX, &col, &cal).unwrap_err(),
-        deskew::align(ChannelId::ProbeAX, &col, 0.0, FS, 4).unwrap_err(),
-        lowpass::filtfilt(ChannelId::ProbeAX, &col, 4, 200.0, FS).unwrap_err(),
-        differentiate::fir_derivative(ChannelId::ProbeAX, &col, 5, FS).unwrap_err(),
-        range_check::check(ChannelId::ProbeAX, &col, RawUnits::Volts, &cal).unwrap_err(),
-    ] {
-        println!("stage: {err}");
-        let (what, _) = bad_input(err);
-        assert!(what.contains("probe_a_x") && what.contains("42"), "{what}");
-    }
+    let err = range_check::check(ChannelId::ProbeAX, &col, RawUnits::Volts, &cal).unwrap_err();
+    println!("range check: {err}");
+    let (what, _) = bad_input(err);
+    assert!(what.contains("probe_a_x") && what.contains("42"), "{what}");
 }
 
 #[test]

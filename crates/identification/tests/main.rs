@@ -17,6 +17,7 @@ mod fuzz;
 mod identify_simulated;
 #[path = "../../../tests/support/json_difference.rs"]
 mod json_difference;
+mod reference;
 mod rv_vs_load_film;
 mod same_bits_on_every_isa;
 mod se_decimation;

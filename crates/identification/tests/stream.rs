@@ -24,7 +24,7 @@ fn config() -> ConditioningConfig {
 /// from `edge` on as soon as its window is in; the blocks and their starts.
 fn blocks_on(isa: Isa, raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
     let calibration = DaqConfig::zhou2004().calibration();
-    let mut zp = ZeroPhaseStream::new(&raw.channels, raw.units, raw.sample_rate_hz, &calibration, &mechanics(), &config()).unwrap().unwrap().with_isa(isa);
+    let mut zp = ZeroPhaseStream::new(&raw.channels, raw.units, raw.sample_rate_hz, &calibration, &mechanics(), &config()).unwrap().with_isa(isa);
     let mut fed = RawRecord { columns: vec![Vec::new(); raw.channels.len()], ..raw.clone() };
     let mut next = zp.edge();
     let mut out = Vec::new();

@@ -64,7 +64,7 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
+use super::{Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
 
@@ -118,12 +118,9 @@ struct Front {
     channel: ChannelId,
     /// Column of the channel in a scan row.
     column: usize,
-    offset_v: f64,
+    /// The channel's constants for readings in volts, and its sensitivity (V per SI unit).
+    volts: Constants,
     sensitivity: f64,
-    gain: f64,
-    /// Readings inside `(lo, hi)` volts are in range.
-    lo_v: f64,
-    hi_v: f64,
     range_si: [f64; 2],
     /// The last in-range reading (in the stream's units), fed to the filters in place of an
     /// out-of-range one.
@@ -278,15 +275,9 @@ impl CausalChain {
             if let Some(other) = ChannelId::ALL.iter().find(|o| **o != ch && columns[o.index()] == column) {
                 return Err(IdentificationError::BadInput { what: format!("channel `{ch}`"), reason: format!("column {column} is also `{other}`'s") });
             }
+            let volts = Constants::of(ch, RawUnits::Volts, calibration)?;
             let c = calibration.channel(ch)?;
             let (offset_v, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
-            if !(sensitivity.is_finite() && sensitivity != 0.0 && offset_v.is_finite()) {
-                return Err(IdentificationError::invalid(
-                    format!("calibration.{ch}.sensitivity_v_per_unit"),
-                    format!("must be finite and non-zero with a finite offset, got {sensitivity} V/unit, offset {offset_v} V"),
-                ));
-            }
-            let (lo_v, hi_v) = range_check::volts_bounds(ch, calibration)?;
             let [a, b] = c.linear_range_v.map(|v| (v - offset_v) / sensitivity);
             // Mid-range: what the filters see until the first in-range reading.
             let mid = match units {
@@ -294,12 +285,9 @@ impl CausalChain {
                 RawUnits::Si => 0.5 * (a + b),
             };
             let last_good = if mid.is_finite() { mid } else { 0.0 };
-            fronts.push(Front { channel: ch, column, offset_v, sensitivity, gain: 1.0 / sensitivity, lo_v, hi_v, range_si: [a.min(b), a.max(b)], last_good });
+            fronts.push(Front { channel: ch, column, volts, sensitivity, range_si: [a.min(b), a.max(b)], last_good });
         }
-        let constants = std::array::from_fn(|k| match units {
-            RawUnits::Volts => chain.volts[k].unwrap_or(Constants::SI),
-            RawUnits::Si => Constants::SI,
-        });
+        let constants = Constants::all(units, calibration)?;
         Ok(Self {
             delays: CausalDelays::of(&chain),
             constants,
@@ -560,11 +548,12 @@ impl Front {
     /// A reading's SI value and whether it is in range (finite, inside the linear range).
     #[inline(always)]
     fn read(&self, units: RawUnits, r: f64) -> (f64, bool) {
+        let k = &self.volts;
         let (volts, value) = match units {
-            RawUnits::Volts => (r, (r - self.offset_v) * self.gain),
-            RawUnits::Si => (self.offset_v + self.sensitivity * r, r),
+            RawUnits::Volts => (r, k.si(r)),
+            RawUnits::Si => (k.offset + self.sensitivity * r, r),
         };
-        (value, (volts > self.lo_v) & (volts < self.hi_v) & value.is_finite())
+        (value, (volts > k.lo) & (volts < k.hi) & value.is_finite())
     }
 
     /// Whether every reading of `col` is in range (the caller then redoes the block holding

@@ -14,11 +14,12 @@
 //! straight into the low-pass's forward pass; the backward pass hands its final output, chunk
 //! by chunk, to both derivatives and eq. 2's inertial part ([`Derivatives`]). Each stage
 //! checks the finiteness of what it writes, so nothing is read again for that. Every value is
-//! formed by the same operations in the same order as the stages one by one (calibrate,
-//! de-skew, kinematics, applied force, filter, differentiate twice, inertia): the same bits
-//! (`fused_front_end_equals_the_stages_bit_for_bit`). When a reading is out of range or not
-//! finite, or the record is in SI units, the stages run one by one instead, so that the
-//! report names the sample; the filter and the derivatives are the same either way.
+//! formed by the same operations in the same order as the stages written one by one in
+//! `tests/chain.rs` (calibrate, de-skew, kinematics, applied force, filter, differentiate
+//! twice, inertia): the same bits. The front end only counts the readings it cannot use
+//! (out of range, not finite); only when it counted one, or the record is in SI units (whose
+//! range it does not check), are the columns read again, to name the reading or to report
+//! the violations of step 2.
 
 use std::ops::Range;
 
@@ -26,11 +27,11 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::deskew::{stencil_any, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
-use super::film_force::{self, Applied};
-use super::lowpass::{Butterworth, Consume8, FromColumns, Produce8, MAX_ORDER};
+use super::film_force::Applied;
+use super::lowpass::{Butterworth, Consume8, Produce8, MAX_ORDER};
 use super::{
-    all_finite, calibrate, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, RawRecord,
-    RawUnits, COLUMNS,
+    all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
+    COLUMNS,
 };
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
@@ -49,9 +50,6 @@ pub struct Chain {
     pub(super) derivative: SavitzkyGolayDerivative,
     /// By channel index: the de-skew stencil (the identity without de-skew).
     pub(super) delays: [FractionalDelay; CHANNEL_COUNT],
-    /// By channel index: the front end's constants for readings in volts (`None` when the
-    /// calibration is unusable: the stages one by one say why).
-    pub(super) volts: [Option<Constants>; CHANNEL_COUNT],
     pub(super) applied: Applied,
     edge: usize,
 }
@@ -116,7 +114,6 @@ impl Chain {
             lowpass,
             derivative,
             delays,
-            volts: ChannelId::ALL.map(|ch| Constants::volts(ch, calibration)),
             applied: Applied::new(mechanics),
             edge,
         })
@@ -228,30 +225,19 @@ impl Chain {
         let mut derived = [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]];
         let mut scratch = std::mem::take(&mut work.scratch);
         let t0 = raw.start_time_s + window.start as f64 / self.sample_rate_hz;
-        let fused = match FrontTiles::new(self, raw, &window, &col_of) {
-            Some(mut tiles) => {
-                tiles.load = std::mem::take(&mut front[8]);
-                tiles.temp = std::mem::take(&mut front[9]);
-                let outcome = self.filter(&mut tiles, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0);
-                front[8] = std::mem::take(&mut tiles.load);
-                front[9] = std::mem::take(&mut tiles.temp);
-                outcome?.filter(|_| tiles.bad == 0)
-            }
-            None => None,
-        };
-        let outcome = match fused {
-            Some(o) => o,
-            None => {
-                // Something to report (or a record of SI values): the stages one by one.
-                let staged = self.staged(raw, &window, &col_of, &mut violations)?;
-                front[8].copy_from_slice(&staged[8]);
-                front[9].copy_from_slice(&staged[9]);
-                let mut columns = FromColumns(std::array::from_fn(|l| &staged[l][..]));
-                let o = self.filter(&mut columns, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0)?;
-                o.map(|o| Outcome { finite: o.finite && all_finite(&front[9]), ..o })
-                    .ok_or_else(|| IdentificationError::invalid("conditioning", "the derivatives did not cover the record"))?
-            }
-        };
+        let mut tiles = FrontTiles::new(self, raw, &window, &col_of)?;
+        tiles.load = std::mem::take(&mut front[8]);
+        tiles.temp = std::mem::take(&mut front[9]);
+        let filtered = self.filter(&mut tiles, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0);
+        front[8] = std::mem::take(&mut tiles.load);
+        front[9] = std::mem::take(&mut tiles.temp);
+        let mut outcome = filtered?.ok_or_else(|| IdentificationError::invalid("conditioning", "the derivatives did not cover the record"))?;
+        if tiles.bad > 0 || raw.units == RawUnits::Si {
+            // The front end counted what it could not use (or does not check an SI record's
+            // range): name it.
+            self.explain(raw, &window, &col_of, &mut violations)?;
+            outcome.finite &= all_finite(&front[9]);
+        }
         let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
         // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
         // non-finite number on. The stages checked their final outputs as they wrote them;
@@ -320,41 +306,35 @@ impl Chain {
         simd::dispatch(self.isa, Filter { chain: self, producer, dynamic, derived, scratch, valid, t0 })
     }
 
-    /// Steps 3, 2, 4 and the linear combinations of steps 5 and 7, stage by stage on the
-    /// window's columns (each stage names what it refuses): `[x, y, tilt_x, tilt_y, X, Y,
-    /// fx (applied), fy (applied), f3, temperature]`; violations of step 2 into `violations`.
-    fn staged(
+    /// Names what the front end could not use, channel by channel in [`ChannelId::ALL`]
+    /// order: a reading that is not finite, or that does not convert to a finite value, is an
+    /// error naming its channel and sample; readings out of the linear range (step 2) are
+    /// reported in `violations`.
+    fn explain(
         &self,
         raw: &RawRecord,
         window: &Range<usize>,
         col_of: &[usize; CHANNEL_COUNT],
         violations: &mut Vec<super::RangeViolation>,
-    ) -> Result<[Vec<f64>; CHANNEL_COUNT], IdentificationError> {
-        let n = window.len();
-        let mut si: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| vec![0.0; n]);
-        let mut tmp = vec![0.0; n];
-        for (ch, buf) in ChannelId::ALL.into_iter().zip(si.iter_mut()) {
+    ) -> Result<(), IdentificationError> {
+        for ch in ChannelId::ALL {
             let column = &raw.columns[col_of[ch.index()]][window.clone()];
-            match raw.units {
-                RawUnits::Volts => calibrate::to_si_into(ch, column, &self.calibration, buf)?,
-                RawUnits::Si => {
-                    if let Some(i) = first_non_finite(column) {
-                        return Err(non_finite_error(ch, i, column[i], "si"));
-                    }
-                    buf.copy_from_slice(column);
+            let k = Constants::of(ch, raw.units, &self.calibration)?;
+            if let Some(i) = column.iter().position(|&v| !k.si(v).is_finite()) {
+                if !column[i].is_finite() {
+                    return Err(non_finite_error(ch, i, column[i], raw.units.name()));
                 }
+                let sensitivity = self.calibration.channel(ch)?.sensitivity_v_per_unit;
+                return Err(IdentificationError::BadInput {
+                    what: format!("channel `{ch}`, sample {i}"),
+                    reason: format!("{} V does not convert to a finite {} with sensitivity {sensitivity}", column[i], ch.unit()),
+                });
             }
             if let Some(v) = range_check::check(ch, column, raw.units, &self.calibration)? {
                 violations.push(v);
             }
-            self.delays[ch.index()].apply_into(buf, &mut tmp)?;
-            std::mem::swap(buf, &mut tmp);
         }
-        let [mut a_x, mut a_y, mut b_x, mut b_y, frame_x, frame_y, mut f1, mut f2, f3, temperature] = si;
-        kinematics::mean_and_difference_in_place(&mut a_x, &mut b_x)?;
-        kinematics::mean_and_difference_in_place(&mut a_y, &mut b_y)?;
-        film_force::applied_in_place(&mut f1, &mut f2, &f3, &self.mechanics)?;
-        Ok([a_x, a_y, b_x, b_y, frame_x, frame_y, f1, f2, f3, temperature])
+        Ok(())
     }
 }
 
@@ -492,11 +472,12 @@ fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
     finite
 }
 
-/// Eq. 2's static part ([`film_force::static_part`]) and the scans' times, `t[i] = t0 + i /
-/// fs`, in one pass: the static part's two sums are chains of dependent adds in index order,
-/// bound by an add's latency per sample, and the times' divisions, four at a time, run beside
-/// them in the pipes the chains leave idle. The same operations in the same order as
-/// `static_part` and a plain loop over the times, so the same bits.
+/// Eq. 2's static part (the mean of `fx`, `fy` over `valid`) and the scans' times, `t[i] =
+/// t0 + i / fs`, in one pass: the static part's two sums are chains of dependent adds in index
+/// order, bound by an add's latency per sample, and the times' divisions, four at a time, run
+/// beside them in the pipes the chains leave idle. The same operations in the same order as
+/// two plain sums (from -0.0, as `Iterator::sum`) and a plain loop over the times, so the same
+/// bits.
 #[inline(always)]
 pub(super) fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
     #[inline(always)]
@@ -550,15 +531,37 @@ pub(super) struct Constants {
 }
 
 impl Constants {
-    /// For readings in volts; `None` when the calibration cannot convert them.
-    pub(super) fn volts(ch: ChannelId, calibration: &Calibration) -> Option<Self> {
-        let c = calibration.channel(ch).ok()?;
+    /// For readings of `ch` in `units`: an error naming the channel when a calibration in
+    /// volts cannot convert them.
+    pub(super) fn of(ch: ChannelId, units: RawUnits, calibration: &Calibration) -> Result<Self, IdentificationError> {
+        if units == RawUnits::Si {
+            return Ok(Self::SI);
+        }
+        let c = calibration.channel(ch)?;
         let (offset, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
         if !(sensitivity.is_finite() && sensitivity != 0.0 && offset.is_finite()) {
-            return None;
+            return Err(IdentificationError::invalid(
+                format!("calibration.{ch}"),
+                format!("sensitivity {sensitivity} V/unit and offset {offset} V must be finite, sensitivity non-zero"),
+            ));
         }
-        let (lo, hi) = range_check::volts_bounds(ch, calibration).ok()?;
-        Some(Self::new(offset, 1.0 / sensitivity, lo, hi))
+        let (lo, hi) = range_check::volts_bounds(ch, calibration)?;
+        Ok(Self::new(offset, 1.0 / sensitivity, lo, hi))
+    }
+
+    /// Every channel's constants for readings in `units`, by channel index.
+    pub(super) fn all(units: RawUnits, calibration: &Calibration) -> Result<[Self; CHANNEL_COUNT], IdentificationError> {
+        let mut k = [Self::SI; CHANNEL_COUNT];
+        for ch in ChannelId::ALL {
+            k[ch.index()] = Self::of(ch, units, calibration)?;
+        }
+        Ok(k)
+    }
+
+    /// Step 3: a reading's value in the channel's SI unit.
+    #[inline(always)]
+    pub(super) fn si(&self, v: f64) -> f64 {
+        (v - self.offset) * self.gain
     }
 
     /// For readings already in SI: `(v - 0) 1 = v`, no range (the stream checks step 2 on
@@ -661,23 +664,21 @@ struct FrontTiles<'a> {
 }
 
 impl<'a> FrontTiles<'a> {
-    /// `None` unless the window is in volts, with usable calibrations and at least a stencil
-    /// long: the stages one by one handle the rest.
-    fn new(chain: &'a Chain, raw: &'a RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT]) -> Option<Self> {
+    /// The front end over `window` of `raw`, whose channel `c` is column `col_of[c.index()]`
+    /// (the caller checked both): an error when a calibration cannot convert the readings.
+    fn new(chain: &'a Chain, raw: &'a RawRecord, window: &Range<usize>, col_of: &[usize; CHANNEL_COUNT]) -> Result<Self, IdentificationError> {
         let len = window.len();
-        if raw.units != RawUnits::Volts || len < 2 {
-            return None;
-        }
+        let constants = Constants::all(raw.units, &chain.calibration)?;
         let mut chans = Vec::with_capacity(CHANNEL_COUNT);
         for ch in ChannelId::ALL {
-            let (delay, k) = (&chain.delays[ch.index()], chain.volts[ch.index()]?);
-            let volts = raw.columns.get(col_of[ch.index()])?.get(window.clone())?;
+            let delay = &chain.delays[ch.index()];
+            let volts = &raw.columns[col_of[ch.index()]][window.clone()];
             if len < delay.taps() {
-                return None;
+                return Err(too_short(len, chain.edge));
             }
-            chans.push(FrontChannel { volts, k, delay, interior: delay.interior(len) });
+            chans.push(FrontChannel { volts, k: constants[ch.index()], delay, interior: delay.interior(len) });
         }
-        Some(Self {
+        Ok(Self {
             chans,
             applied: chain.applied,
             len,
@@ -755,8 +756,9 @@ pub(super) fn front_tile(
             9 => &mut temp[o0..o1],
             _ => &mut t[..o1 - o0],
         };
-        let Constants { offset, gain, lo, hi, si_bounded } = c.k;
-        let si = |v: f64| (v - offset) * gain;
+        let k = c.k;
+        let (lo, hi, si_bounded) = (k.lo, k.hi, k.si_bounded);
+        let si = |v: f64| k.si(v);
         // Outputs a..b use the interior stencil, on readings i0..i1 (inside the record).
         let a = o0.max(c.interior.start).min(o1);
         let b = o1.min(c.interior.end).max(a);

@@ -45,11 +45,6 @@
 //! `N` multiply-adds per sample, each output summed in registers ([`stencil`]); the fused
 //! front end runs the same kernel tile by tile.
 
-use oilfilm_physics::daq::ChannelId;
-
-use std::ops::Range;
-
-use super::first_non_finite;
 use crate::IdentificationError;
 
 /// Largest stencil accepted (beyond this Lagrange weights grow and nothing is gained).
@@ -150,32 +145,6 @@ impl FractionalDelay {
         (re.hypot(im) - 1.0, im.atan2(re))
     }
 
-    /// Applies the delay to `input` into `out` (same length, at least `taps` samples).
-    pub fn apply_into(&self, input: &[f64], out: &mut [f64]) -> Result<(), IdentificationError> {
-        let len = input.len();
-        let taps = self.weights.len();
-        if out.len() != len {
-            return Err(IdentificationError::BadInput { what: "deskew output".into(), reason: format!("buffer has {} samples, input {len}", out.len()) });
-        }
-        if len < taps {
-            return Err(IdentificationError::BadInput {
-                what: "deskew input".into(),
-                reason: format!("{len} samples, a {taps}-tap interpolator needs at least {taps}"),
-            });
-        }
-        // Interior: the stencil inside the record; the front end's kernel, the same sums.
-        let Range { start: lo, end: hi_excl } = self.interior(len);
-        if lo < hi_excl {
-            let from = (lo as isize + self.start) as usize;
-            stencil_any(&self.weights, &input[from..], &mut out[lo..hi_excl]);
-        }
-        // Edges: shifted stencil inside [0, len).
-        for n in (0..lo.min(len)).chain(hi_excl.max(lo.min(len))..len) {
-            out[n] = self.edge_value(n, len, |i| input[i]);
-        }
-        Ok(())
-    }
-
     /// Output indices `lo..hi` whose interior stencil lies inside a record of `len >= taps`
     /// samples; the others are [`FractionalDelay::edge_value`]s.
     pub(crate) fn interior(&self, len: usize) -> std::ops::Range<usize> {
@@ -186,7 +155,7 @@ impl FractionalDelay {
 
     /// Output `n` of a record of `len >= taps` samples with the stencil shifted inside
     /// `[0, len)`; `input(i)` is input sample `i`.
-    pub(crate) fn edge_value(&self, n: usize, len: usize, input: impl Fn(usize) -> f64) -> f64 {
+    pub fn edge_value(&self, n: usize, len: usize, input: impl Fn(usize) -> f64) -> f64 {
         let taps = self.weights.len();
         let mut w = [0.0; MAX_TAPS];
         let w = &mut w[..taps];
@@ -195,29 +164,10 @@ impl FractionalDelay {
         let first = first as usize;
         w.iter().enumerate().map(|(j, a)| a * input(first + j)).sum()
     }
-
-    /// Applies the delay, allocating the output.
-    pub fn apply(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
-        let mut out = vec![0.0; input.len()];
-        self.apply_into(input, &mut out)?;
-        Ok(out)
-    }
-}
-
-/// Re-aligns one channel, converted `offset_s` after each scan start, to the scan starts
-/// (`taps`-point Lagrange interpolation). NaN input is a `BadInput` naming the channel.
-pub fn align(channel: ChannelId, column: &[f64], offset_s: f64, sample_rate_hz: f64, taps: usize) -> Result<Vec<f64>, IdentificationError> {
-    if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
-        return Err(IdentificationError::invalid("sample_rate_hz", format!("must be finite and > 0, got {sample_rate_hz}")));
-    }
-    if let Some(i) = first_non_finite(column) {
-        return Err(super::non_finite_error(channel, i, column[i], "sample"));
-    }
-    FractionalDelay::for_offset(offset_s, sample_rate_hz, taps)?.apply(column)
 }
 
 /// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
-/// that order (as [`FractionalDelay::apply_into`]), with `T` taps known at compile time so
+/// that order, with `T` taps known at compile time so
 /// each output is summed in registers and stored once.
 #[inline(always)]
 pub(crate) fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {

@@ -41,18 +41,13 @@
 //! follow the low-pass's backward pass block by block
 //! ([`SavitzkyGolayDerivative::twice_descending`]), while their input is in cache.
 
-use oilfilm_physics::daq::ChannelId;
-
-use super::{all_finite, first_non_finite};
+use super::all_finite;
 use crate::estimator::qr::{inverse_gram_from_upper, Triangle};
-use crate::simd::{self, Isa, Kernel, Simd};
+use crate::simd::Simd;
 use crate::IdentificationError;
 
 /// Degree of the least-squares polynomial.
 pub const DEGREE: usize = 4;
-
-/// Output samples per block of the interior loop (4 kB of output, L1-resident).
-const BLOCK: usize = 512;
 
 /// Longest half-length accepted.
 pub const MAX_HALF_LENGTH: usize = 64;
@@ -106,29 +101,6 @@ pub struct SavitzkyGolayDerivative {
     left: Vec<f64>,
     /// `M` rows for output `len - M + r`, on `x[len - 2M - 1 ..]`.
     right: Vec<f64>,
-}
-
-/// [`SavitzkyGolayDerivative::apply_into`] as a [`Kernel`].
-struct Apply<'a> {
-    sg: &'a SavitzkyGolayDerivative,
-    input: &'a [f64],
-    out: &'a mut [f64],
-}
-
-impl Kernel for Apply<'_> {
-    type Output = ();
-    #[inline(always)]
-    fn run<S: Simd>(self, simd: S) {
-        let (len, m) = (self.input.len(), self.sg.half_length);
-        let mut start = m;
-        while start < len - m {
-            let end = (start + BLOCK).min(len - m);
-            self.sg.interior(simd, self.input, self.out, start..end);
-            start = end;
-        }
-        self.sg.edge_left(self.input, self.out);
-        self.sg.edge_right(self.input, self.out);
-    }
 }
 
 impl SavitzkyGolayDerivative {
@@ -187,38 +159,11 @@ impl SavitzkyGolayDerivative {
         h / (2.0 * std::f64::consts::PI * freq_hz) - 1.0
     }
 
-    /// Differentiates `input` into `out` (same length, at least `2M + 1` samples).
-    pub fn apply_into(&self, input: &[f64], out: &mut [f64]) -> Result<(), IdentificationError> {
-        let (len, m) = (input.len(), self.half_length);
-        let width = 2 * m + 1;
-        if out.len() != len {
-            return Err(IdentificationError::BadInput {
-                what: "differentiator output".into(),
-                reason: format!("buffer has {} samples, input {len}", out.len()),
-            });
-        }
-        if len < width {
-            return Err(IdentificationError::BadInput {
-                what: "differentiator input".into(),
-                reason: format!("{len} samples, a half-length {m} window needs at least {width}"),
-            });
-        }
-        simd::dispatch(Isa::current(), Apply { sg: self, input, out });
-        Ok(())
-    }
-
-    /// Differentiates `input` twice, as the paper does: `first` is its derivative and
-    /// `second` the derivative of `first` (all three the same length, at least `2M + 1`).
-    pub fn apply_twice_into(&self, input: &[f64], first: &mut [f64], second: &mut [f64]) -> Result<(), IdentificationError> {
-        self.apply_into(input, first)?;
-        self.apply_into(first, second)
-    }
-
-    /// Differentiates, allocating the output.
-    pub fn apply(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
-        let mut out = vec![0.0; input.len()];
-        self.apply_into(input, &mut out)?;
-        Ok(out)
+    /// The edge outputs' weights (per second), `M` rows of `2M + 1`: row `r` of the first
+    /// gives output `r` from the first `2M + 1` inputs, row `r` of the second output
+    /// `len - M + r` from the last `2M + 1`.
+    pub fn edge_weights(&self) -> [&[f64]; 2] {
+        [&self.left, &self.right]
     }
 
     /// Interior outputs `range` (inside `M..len - M`), `M` known at compile time for the
@@ -278,7 +223,7 @@ impl SavitzkyGolayDerivative {
     /// that is not computed yet. Returns whether the outputs of `second` computed in this call
     /// are finite, and their range: one range (possibly empty), just below the previous
     /// call's, so that the ranges cover the column once when `from` has reached 0. Each output
-    /// is computed as [`SavitzkyGolayDerivative::apply_into`] computes it, so the same bits.
+    /// is the centred sum of [`crate::simd::derivative_point`] or an edge row's, so the bits do not depend on the cutting.
     /// The three columns must have the same length, at least `2M + 1`; else nothing is
     /// computed and `None` returned.
     #[inline(always)]
@@ -379,25 +324,32 @@ impl TwiceDescending {
     }
 }
 
-/// One-call derivative (per second) of one channel's samples at `sample_rate_hz` with a
-/// Savitzky-Golay FIR of half-length `half_length`. NaN input is a `BadInput`.
-pub fn fir_derivative(channel: ChannelId, column: &[f64], half_length: usize, sample_rate_hz: f64) -> Result<Vec<f64>, IdentificationError> {
-    if let Some(i) = first_non_finite(column) {
-        return Err(super::non_finite_error(channel, i, column[i], "sample"));
-    }
-    SavitzkyGolayDerivative::new(half_length, sample_rate_hz)?.apply(column)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::simd::Scalar;
 
+    /// The derivative written plainly: an edge row within `M` of either end, the centred sum
+    /// `sum_k c_k (x[i + k] - x[i - k])` in between.
+    fn plain(sg: &SavitzkyGolayDerivative, x: &[f64]) -> Vec<f64> {
+        let (n, m, c) = (x.len(), sg.half_length, &sg.interior);
+        let w = 2 * m + 1;
+        let row = |weights: &[f64], inputs: &[f64]| weights.iter().zip(inputs).map(|(a, b)| a * b).sum::<f64>();
+        (0..n)
+            .map(|i| match i {
+                _ if i < m => row(&sg.left[i * w..(i + 1) * w], &x[..w]),
+                _ if i >= n - m => row(&sg.right[(i + m - n) * w..(i + m - n + 1) * w], &x[n - w..]),
+                _ => (2..=m).fold(c[0] * (x[i + 1] - x[i - 1]), |acc, k| acc + c[k - 1] * (x[i + k] - x[i - k])),
+            })
+            .collect()
+    }
+
     /// The descending form, fed `from` in irregular steps (one sample, a few, a block and
-    /// more, as the low-pass's chunks and a record's end may fall), gives `apply_twice_into`'s
-    /// two derivatives bit for bit, and hands each sample of `second` on exactly once.
+    /// more, as the low-pass's chunks and a record's end may fall), gives the plain
+    /// derivative and the plain derivative of that, bit for bit, and hands each sample of
+    /// `second` on exactly once.
     #[test]
-    fn twice_descending_equals_two_passes_bit_for_bit() {
+    fn twice_descending_equals_two_plain_passes_bit_for_bit() {
         let mut state = 0x9e3779b97f4a7c15u64;
         let mut uniform = move || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -407,8 +359,8 @@ mod tests {
             let sg = SavitzkyGolayDerivative::new(m, 5000.0).unwrap();
             for len in [2 * m + 1, 2 * m + 2, 4 * m + 3, 50, 1000, 1237] {
                 let x: Vec<f64> = (0..len).map(|_| uniform() - 0.5).collect();
-                let (mut f1, mut s1) = (vec![0.0; len], vec![0.0; len]);
-                sg.apply_twice_into(&x, &mut f1, &mut s1).unwrap();
+                let f1 = plain(&sg, &x);
+                let s1 = plain(&sg, &f1);
                 let (mut f2, mut s2) = (vec![f64::NAN; len], vec![f64::NAN; len]);
                 let mut seen = vec![0u32; len];
                 let mut st = TwiceDescending::default();

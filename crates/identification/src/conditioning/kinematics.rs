@@ -13,19 +13,6 @@
 //! Both are linear, so they commute with the (linear, identical for all channels) deskew,
 //! low-pass and differentiator stages; [`super::condition`] applies them before filtering.
 
-use crate::IdentificationError;
-
-/// In place: `a <- (a + b) / 2`, `b <- a - b` (same length).
-pub fn mean_and_difference_in_place(a: &mut [f64], b: &mut [f64]) -> Result<(), IdentificationError> {
-    if a.len() != b.len() {
-        return Err(IdentificationError::BadInput { what: "probe ends A and B".into(), reason: format!("columns of {} and {} samples", a.len(), b.len()) });
-    }
-    for (x, y) in a.iter_mut().zip(b.iter_mut()) {
-        [*x, *y] = mean_and_difference(*x, *y);
-    }
-    Ok(())
-}
-
 /// `[(a + b) / 2, a - b]` for the readings `a`, `b` of the two ends.
 #[inline(always)]
 pub(crate) fn mean_and_difference(a: f64, b: f64) -> [f64; 2] {

@@ -52,9 +52,7 @@
 //! same way ([`Produce8`]), so the conditioning's front end feeds the filter tile by tile
 //! (ADR 0016).
 
-use oilfilm_physics::daq::ChannelId;
-
-use super::{all_finite, first_non_finite};
+use super::all_finite;
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
 
@@ -221,7 +219,7 @@ pub(crate) trait Consume8 {
 const CONSUME_CHUNK: usize = 512;
 
 /// Eight columns as a [`Produce8`].
-pub(crate) struct FromColumns<'a>(pub(crate) [&'a [f64]; 8]);
+struct FromColumns<'a>([&'a [f64]; 8]);
 
 impl Produce8 for FromColumns<'_> {
     type Error = IdentificationError;
@@ -342,26 +340,15 @@ impl Butterworth {
         1.0 / (1.0 + ratio.abs().powi(2 * self.order as i32))
     }
 
-    /// Zero-phase filtering of `input` into `out` (same length, at least 2 samples), using
-    /// `scratch` (resized as needed).
-    pub fn filtfilt_into(&self, input: &[f64], out: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), IdentificationError> {
-        if out.len() != input.len() {
-            return Err(IdentificationError::BadInput {
-                what: "low-pass output".into(),
-                reason: format!("buffer has {} samples, input {}", out.len(), input.len()),
-            });
-        }
-        self.filtfilt_columns(&[input], &mut [out], scratch).map(|_| ())
-    }
-
-    /// Zero-phase filtering of `buf` in place (at least 2 samples), using `scratch`.
-    pub fn filtfilt_in_place(&self, buf: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), IdentificationError> {
-        let input = buf.to_vec();
-        self.filtfilt_into(&input, buf, scratch)
+    /// Zero-phase filtering of one column (at least 2 samples), allocating the output.
+    pub fn filtfilt(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
+        let mut out = vec![0.0; input.len()];
+        self.filtfilt_columns(&[input], &mut [&mut out], &mut Vec::new())?;
+        Ok(out)
     }
 
     /// Zero-phase filtering of several columns of one length (at least 2 samples) in place,
-    /// eight at a time: the same result as [`Butterworth::filtfilt_in_place`] on each.
+    /// eight at a time: the same result as [`Butterworth::filtfilt`] on each.
     pub fn filtfilt_many_in_place(&self, columns: &mut [Vec<f64>], scratch: &mut Vec<f64>) -> Result<(), IdentificationError> {
         let Some(n) = columns.first().map(Vec::len) else { return Ok(()) };
         if let Some((k, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != n) {
@@ -573,20 +560,4 @@ impl Butterworth {
         }
         Ok(finite)
     }
-
-    /// Zero-phase filtering, allocating the output.
-    pub fn filtfilt(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
-        let mut out = vec![0.0; input.len()];
-        self.filtfilt_into(input, &mut out, &mut Vec::new())?;
-        Ok(out)
-    }
-}
-
-/// One-call zero-phase low-pass of one channel: designs the filter and runs it.
-/// NaN input is a `BadInput` naming the channel and sample.
-pub fn filtfilt(channel: ChannelId, column: &[f64], order: usize, cutoff_hz: f64, sample_rate_hz: f64) -> Result<Vec<f64>, IdentificationError> {
-    if let Some(i) = first_non_finite(column) {
-        return Err(super::non_finite_error(channel, i, column[i], "sample"));
-    }
-    Butterworth::design(order, cutoff_hz, sample_rate_hz)?.filtfilt(column)
 }

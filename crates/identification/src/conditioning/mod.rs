@@ -6,7 +6,7 @@
 //!
 //! | paper step | stage | here |
 //! |---|---|---|
-//! | 3 volts -> physical value | [`calibrate`] | first, per channel |
+//! | 3 volts -> physical value | `si = (volts - offset) / sensitivity` | first, per channel (by the reciprocal sensitivity) |
 //! | 2 linear-range check | [`range_check`] | on the raw samples, before any filter |
 //! | 4 "inner-insert filter" (multiplex phase) | [`deskew`] | Lagrange fractional delay per channel |
 //! | 1 low-pass | [`lowpass`] | zero-phase Butterworth, forward-backward, same on every channel |
@@ -55,10 +55,10 @@
 //! CPU has ([`crate::simd`]; the bits do not depend on which). A record ([`condition`]), a
 //! window of one ([`condition_window_into`], buffers reused), a stream of scans
 //! ([`stream::ZeroPhaseStream`]) and the causal chain for live use ([`causal::CausalChain`])
-//! are drivers over it (ADR 0022). The stage modules above are the reference the fused
-//! chain is tested against, bit for bit.
+//! are drivers over it (ADR 0022). The stage modules above hold the designs and the kernels;
+//! `tests/chain.rs` writes the stages out plainly, one after the other, and compares the
+//! chain with them bit for bit.
 
-pub mod calibrate;
 pub mod causal;
 mod chain;
 pub mod deskew;
@@ -530,8 +530,9 @@ pub fn edge_samples(calibration: &Calibration, config: &ConditioningConfig, samp
 mod tests {
     use super::*;
 
-    /// The fused static part and times against `film_force::static_part` and the plain loop,
-    /// bit for bit, on lengths and windows that cut its chunks of four anywhere.
+    /// The fused static part and times against the plain loops (each mean a sum in index order
+    /// from -0.0, as `Iterator::sum`), bit for bit, on lengths and windows that cut its chunks
+    /// of four anywhere.
     #[test]
     fn static_part_and_times_equals_the_two_loops() {
         let mut state = 7u64;
@@ -550,7 +551,8 @@ mod tests {
                 }
                 let mut t = vec![f64::NAN; n];
                 let fused = chain::static_part_and_times(&fx, &fy, a..b, t0, fs, &mut t);
-                let reference = film_force::static_part(&fx, &fy, a..b).unwrap();
+                let mean = |f: &[f64]| f[a..b].iter().sum::<f64>() / (b - a) as f64;
+                let reference = [mean(&fx), mean(&fy)];
                 assert_eq!(fused.map(f64::to_bits), reference.map(f64::to_bits), "n {n}, {a}..{b}");
                 for (i, &ti) in t.iter().enumerate() {
                     assert_eq!(ti.to_bits(), (t0 + i as f64 / fs).to_bits(), "n {n}, {a}..{b}, time {i}");

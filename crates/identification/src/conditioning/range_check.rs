@@ -22,7 +22,7 @@
 
 use oilfilm_physics::daq::{Calibration, ChannelId};
 
-use super::{first_non_finite, non_finite_error, RangeViolation, RawRecord, RawUnits};
+use super::{first_non_finite, non_finite_error, RangeViolation, RawUnits};
 use crate::IdentificationError;
 
 /// Checks one column of `channel` (in `units`) against its calibrated linear range.
@@ -79,16 +79,4 @@ pub(crate) fn volts_bounds(channel: ChannelId, calibration: &Calibration) -> Res
     let [lo_v, hi_v] = calibration.channel(channel)?.linear_range_v;
     let margin = 0.5 * calibration.lsb_v();
     Ok((lo_v + margin, hi_v - margin))
-}
-
-/// Checks every column of a record; violations in the record's channel order.
-pub fn check_record(raw: &RawRecord, calibration: &Calibration) -> Result<Vec<RangeViolation>, IdentificationError> {
-    raw.validate_shape()?;
-    let mut out = Vec::new();
-    for (&ch, col) in raw.channels.iter().zip(&raw.columns) {
-        if let Some(v) = check(ch, col, raw.units, calibration)? {
-            out.push(v);
-        }
-    }
-    Ok(out)
 }

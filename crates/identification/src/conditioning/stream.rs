@@ -74,8 +74,7 @@ pub struct ZeroPhaseStream {
 
 impl ZeroPhaseStream {
     /// A stream of records whose columns are `channels` (each of the ten once, any order) in
-    /// `units` at `sample_rate_hz`. The chain needs usable calibrations; without them,
-    /// `Ok(None)`: condition windows instead (they name what is wrong).
+    /// `units` at `sample_rate_hz`; an error names a field or calibration the chain cannot use.
     pub fn new(
         channels: &[ChannelId],
         units: RawUnits,
@@ -83,7 +82,7 @@ impl ZeroPhaseStream {
         calibration: &Calibration,
         mechanics: &Mechanics,
         config: &ConditioningConfig,
-    ) -> Result<Option<Self>, IdentificationError> {
+    ) -> Result<Self, IdentificationError> {
         let chain = Chain::new(calibration, mechanics, config, sample_rate_hz)?;
         let mut col_of = [usize::MAX; CHANNEL_COUNT];
         for (k, c) in channels.iter().enumerate() {
@@ -95,16 +94,9 @@ impl ZeroPhaseStream {
                 reason: "missing from the stream; conditioning needs all ten channels".into(),
             });
         }
-        let mut constants = [Constants::SI; CHANNEL_COUNT];
-        if units == RawUnits::Volts {
-            for ch in ChannelId::ALL {
-                // Every reading would be unusable: the windowed conditioning says why.
-                let Some(k) = chain.volts[ch.index()] else { return Ok(None) };
-                constants[ch.index()] = k;
-            }
-        }
+        let constants = Constants::all(units, chain.calibration())?;
         let back = chain.reach().0;
-        Ok(Some(Self {
+        Ok(Self {
             chain,
             units,
             col_of,
@@ -120,7 +112,7 @@ impl ZeroPhaseStream {
             back: Vec::new(),
             columns: Default::default(),
             derived: Default::default(),
-        }))
+        })
     }
 
     /// The same stream with its kernels on `isa` (see [`Chain::with_isa`]; the bits do not
