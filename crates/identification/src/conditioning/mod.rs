@@ -393,11 +393,6 @@ impl Conditioned {
             reason: self.range_violations.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
         })
     }
-
-    /// The dynamic film force (`F` minus its static part) at sample `i`.
-    pub fn dynamic_force_n(&self, i: usize) -> Option<[f64; 2]> {
-        Some([self.fx_n.get(i)? - self.static_force_n[0], self.fy_n.get(i)? - self.static_force_n[1]])
-    }
 }
 
 /// Whether every value of `x` is finite, branch-free: `v - v` is 0 for a finite `v` and NaN
