@@ -62,7 +62,7 @@ use std::ops::Range;
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::chain::{Constants, FrontScratch};
+use super::chain::{Constants, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
 use super::{Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
 use crate::simd::{self, Kernel, Simd};
@@ -191,11 +191,8 @@ struct Buffers {
     /// Readings (in range, or held) by channel index, scans `raw_first ..`.
     raw: [Vec<f64>; CHANNEL_COUNT],
     raw_first: u64,
-    /// This call's `[x, y, tilt_x, tilt_y, X, Y, F_x, F_y]` (applied force), low-passed in
-    /// place, and its de-skewed bellows' load and temperature.
-    frames: Vec<[f64; 8]>,
-    load: Vec<f64>,
-    temperature: Vec<f64>,
+    /// This call's front-end output, its frames low-passed in place.
+    front: FrontOut,
     /// Low-passed `x, y, tilt_x, tilt_y, X, Y, F_x, F_y`, then the unfiltered `f3` and
     /// temperature, low-pass indices `filtered_first ..`.
     filtered: [Vec<f64>; 10],
@@ -418,15 +415,15 @@ impl Kernel for Push<'_> {
         if first_n < end_n {
             let count = (end_n - first_n) as usize;
             let m0 = (first_n - ahead) as usize;
-            let (frames, f3, temperature) = (&mut buf.frames, &mut buf.load, &mut buf.temperature);
-            for v in [&mut *f3, &mut *temperature] {
-                v.clear();
-            }
-            frames.clear();
+            let front = &mut buf.front;
+            front.frames.clear();
+            front.load.clear();
+            front.temp.clear();
             let cols = buf.raw.each_ref().map(Vec::as_slice);
             // The raw columns keep the last `L + lookback` scans, every reading the stencils
             // of `m0..` reach: this cannot fail.
-            let _ = c.chain.front_frames(&c.constants, cols, buf.raw_first as usize, m0..m0 + count, &mut c.front, frames, f3, temperature);
+            let _ = c.chain.front_frames(&c.constants, cols, buf.raw_first as usize, m0..m0 + count, &mut c.front, front);
+            let FrontOut { frames, load: f3, temp: temperature } = front;
 
             // Low-pass: index `p = m - lookback`, started in the steady state of its first input.
             let p0 = c.lowpassed;

@@ -226,11 +226,11 @@ impl Chain {
         let mut scratch = std::mem::take(&mut work.scratch);
         let t0 = raw.start_time_s + window.start as f64 / self.sample_rate_hz;
         let mut tiles = FrontTiles::new(self, raw, &window, &col_of)?;
-        tiles.load = std::mem::take(&mut front[8]);
-        tiles.temp = std::mem::take(&mut front[9]);
+        tiles.s.load = std::mem::take(&mut front[8]);
+        tiles.s.temp = std::mem::take(&mut front[9]);
         let filtered = self.filter(&mut tiles, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0);
-        front[8] = std::mem::take(&mut tiles.load);
-        front[9] = std::mem::take(&mut tiles.temp);
+        front[8] = std::mem::take(&mut tiles.s.load);
+        front[9] = std::mem::take(&mut tiles.s.temp);
         let mut outcome = filtered?.ok_or_else(|| IdentificationError::invalid("conditioning", "the derivatives did not cover the record"))?;
         if tiles.bad > 0 || raw.units == RawUnits::Si {
             // The front end counted what it could not use (or does not check an SI record's
@@ -582,35 +582,39 @@ pub(super) struct FrontChannel<'a> {
     pub(super) interior: Range<usize>,
 }
 
-/// The front end's working memory when it runs over a stream of scans ([`Chain::front_frames`]).
+/// The front end's working memory ([`front_tile`]): the tile of de-skewed channels, the
+/// stencil's converted readings, the bellows' load and the temperature by scan (a record's
+/// own columns, or a stream tile's), and over a stream the tile's eight dynamic lanes.
 #[derive(Clone)]
 pub(super) struct FrontScratch {
     tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
     input: [f64; TILE + MAX_TAPS],
-    lanes: [Vec<f64>; 8],
     load: Vec<f64>,
     temp: Vec<f64>,
+    lanes: [Vec<f64>; 8],
 }
 
 impl Default for FrontScratch {
     fn default() -> Self {
-        Self {
-            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
-            input: [0.0; TILE + MAX_TAPS],
-            lanes: std::array::from_fn(|_| vec![0.0; TILE]),
-            load: Vec::new(),
-            temp: Vec::new(),
-        }
+        Self { tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]), input: [0.0; TILE + MAX_TAPS], load: Vec::new(), temp: Vec::new(), lanes: Default::default() }
     }
+}
+
+/// What the front end appends over a stream ([`Chain::front_frames`]): each scan's eight
+/// dynamic lanes `[x, y, tilt_x, tilt_y, X, Y, Fx, Fy]` (applied force), its bellows' load and
+/// its temperature.
+#[derive(Clone, Debug, Default)]
+pub(super) struct FrontOut {
+    pub(super) frames: Vec<[f64; 8]>,
+    pub(super) load: Vec<f64>,
+    pub(super) temp: Vec<f64>,
 }
 
 impl Chain {
     /// The front end over the output scans `out` of a stream whose raw readings of channel
     /// `k` are `cols[k]` from scan `first` on (they must hold every reading the stencils of
-    /// `out` reach): the eight dynamic lanes of each scan appended to `frames`, its bellows'
-    /// load and temperature to `load` and `temp`. How many readings it found unusable.
+    /// `out` reach), appended to `into`. How many readings it found unusable.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)] // the stream's readings and the three kinds of output
     pub(super) fn front_frames(
         &self,
         constants: &[Constants; CHANNEL_COUNT],
@@ -618,11 +622,14 @@ impl Chain {
         first: usize,
         out: Range<usize>,
         s: &mut FrontScratch,
-        frames: &mut Vec<[f64; 8]>,
-        load: &mut Vec<f64>,
-        temp: &mut Vec<f64>,
+        into: &mut FrontOut,
     ) -> Result<usize, IdentificationError> {
         let (back, ahead) = self.reach();
+        // The lanes are the tile's dynamic columns: out of the scratch while it is lent too.
+        let mut lanes = std::mem::take(&mut s.lanes);
+        for l in &mut lanes {
+            l.resize(TILE, 0.0);
+        }
         let (mut p, mut bad) = (out.start, 0);
         while p < out.end {
             let q = (p + TILE).min(out.end);
@@ -639,13 +646,13 @@ impl Chain {
             let o = back..back + (q - p);
             s.load.resize(o.end, 0.0);
             s.temp.resize(o.end, 0.0);
-            let mut lanes = s.lanes.each_mut().map(|l| &mut l[..]);
-            bad += front_tile(&chans, &self.applied, w1 - w0, o.start, o.clone(), &mut s.tile, &mut s.input, &mut lanes, &mut s.load, &mut s.temp);
-            frames.extend((0..q - p).map(|i| std::array::from_fn(|l| s.lanes[l][i])));
-            load.extend_from_slice(&s.load[o.clone()]);
-            temp.extend_from_slice(&s.temp[o]);
+            bad += front_tile(&chans, &self.applied, w1 - w0, o.start, o.clone(), s, &mut lanes.each_mut().map(|l| &mut l[..]));
+            into.frames.extend((0..q - p).map(|i| std::array::from_fn(|l| lanes[l][i])));
+            into.load.extend_from_slice(&s.load[o.clone()]);
+            into.temp.extend_from_slice(&s.temp[o]);
             p = q;
         }
+        s.lanes = lanes;
         Ok(bad)
     }
 }
@@ -655,10 +662,8 @@ struct FrontTiles<'a> {
     chans: Vec<FrontChannel<'a>>,
     applied: Applied,
     len: usize,
-    tile: Box<[[f64; TILE]; CHANNEL_COUNT]>,
-    input: [f64; TILE + MAX_TAPS],
-    load: Vec<f64>,
-    temp: Vec<f64>,
+    /// The record's load and temperature columns are the scratch's while it runs.
+    s: FrontScratch,
     /// Readings out of range or not finite so far.
     bad: usize,
 }
@@ -678,16 +683,7 @@ impl<'a> FrontTiles<'a> {
             }
             chans.push(FrontChannel { volts, k: constants[ch.index()], delay, interior: delay.interior(len) });
         }
-        Ok(Self {
-            chans,
-            applied: chain.applied,
-            len,
-            tile: Box::new([[0.0; TILE]; CHANNEL_COUNT]),
-            input: [0.0; TILE + MAX_TAPS],
-            load: Vec::new(),
-            temp: Vec::new(),
-            bad: 0,
-        })
+        Ok(Self { chans, applied: chain.applied, len, s: FrontScratch::default(), bad: 0 })
     }
 }
 
@@ -699,7 +695,7 @@ impl Produce8 for FrontTiles<'_> {
         let mut o0 = from;
         while o0 < to {
             let o1 = (o0 + TILE).min(to);
-            self.bad += front_tile(&self.chans, &self.applied, self.len, from, o0..o1, &mut self.tile, &mut self.input, cols, &mut self.load, &mut self.temp);
+            self.bad += front_tile(&self.chans, &self.applied, self.len, from, o0..o1, &mut self.s, cols);
             o0 = o1;
         }
         Ok(())
@@ -725,24 +721,22 @@ fn prefetch(x: &[f64], range: Range<usize>) {
 /// Calibration (step 3), range count (step 2), de-skew (step 4) and the linear combinations
 /// of steps 5 and 7 for the scans `o.start..o.end` (at most [`TILE`]) of a window of `len`
 /// scans whose dynamic columns start at scan `base`: `dynamic` = `[x, y, tilt_x, tilt_y,
-/// frame_x, frame_y, fx (applied), fy (applied)]`, `load` and `temp` indexed by scan. Returns
-/// how many readings it found out of range or not finite: zero exactly when every reading of
-/// the tile is usable (a reading just past the tile, which its stencil reads, may be counted
-/// too; the callers only ask for zero).
+/// frame_x, frame_y, fx (applied), fy (applied)]`, the scratch's load and temperature indexed
+/// by scan. Returns how many readings it found out of range or not finite: zero exactly when
+/// every reading of the tile is usable (a reading just past the tile, which its stencil reads,
+/// may be counted too; the callers only ask for zero).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)] // the tile's inputs and its four kinds of output, all plain
-pub(super) fn front_tile(
+fn front_tile(
     chans: &[FrontChannel<'_>],
     applied: &Applied,
     len: usize,
     base: usize,
     o: Range<usize>,
-    tile: &mut [[f64; TILE]; CHANNEL_COUNT],
-    input: &mut [f64; TILE + MAX_TAPS],
+    s: &mut FrontScratch,
     dynamic: &mut [&mut [f64]; 8],
-    load: &mut [f64],
-    temp: &mut [f64],
 ) -> usize {
+    let FrontScratch { tile, input, load, temp, .. } = s;
+    let tile = &mut **tile;
     let (o0, o1) = (o.start, o.end);
     let mut bad = 0;
     for (k, (c, t)) in chans.iter().zip(tile.iter_mut()).enumerate() {

@@ -21,7 +21,7 @@
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::chain::{Constants, Derivatives, FrontScratch};
+use super::chain::{Constants, Derivatives, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
 use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawRecord, RawUnits};
 use crate::simd::{self, Kernel, Simd};
@@ -53,11 +53,10 @@ pub struct ZeroPhaseStream {
     constants: [Constants; CHANNEL_COUNT],
     /// The front end and the forward pass are done for stream scans `..produced`.
     produced: usize,
-    /// Their outputs for scans `kept_from..produced`: the forward pass's eight lanes
-    /// `[x, y, tilt_x, tilt_y, X, Y, Fx, Fy]` and the de-skewed temperature.
+    /// Their outputs for scans `kept_from..produced`: the front end's, with its frames through
+    /// the forward pass (its load is not kept).
     kept_from: usize,
-    frames: Vec<[f64; 8]>,
-    temperature: Vec<f64>,
+    out: FrontOut,
     /// `None` until the next finite front-end output (at the start, and after one that is not).
     forward: Option<ForwardStream>,
     /// Scans whose front-end output is not finite, ascending (dropped once no block's
@@ -65,7 +64,6 @@ pub struct ZeroPhaseStream {
     bad: Vec<usize>,
     // Working memory, reused.
     front: FrontScratch,
-    load: Vec<f64>,
     back: Vec<[f64; 8]>,
     /// The block's final low-passed columns and `[first, second]` derivatives of x, y, X, Y.
     columns: [Vec<f64>; 8],
@@ -103,12 +101,10 @@ impl ZeroPhaseStream {
             constants,
             produced: back,
             kept_from: back,
-            frames: Vec::new(),
-            temperature: Vec::new(),
+            out: FrontOut::default(),
             forward: None,
             bad: Vec::new(),
             front: FrontScratch::default(),
-            load: Vec::new(),
             back: Vec::new(),
             columns: Default::default(),
             derived: Default::default(),
@@ -162,7 +158,7 @@ impl ZeroPhaseStream {
             return Ok(None);
         }
         self.back.clear();
-        self.back.extend_from_slice(&self.frames[back.start - self.kept_from..back.end - self.kept_from]);
+        self.back.extend_from_slice(&self.out.frames[back.start - self.kept_from..back.end - self.kept_from]);
         let n = len + 4 * m;
         for c in self.columns.iter_mut().chain(self.derived.iter_mut().flatten()) {
             c.resize(n, 0.0);
@@ -181,7 +177,7 @@ impl ZeroPhaseStream {
             ay_m_s2: cut(ay),
             fx_n: cut(fx),
             fy_n: cut(fy),
-            temperature_c: self.temperature[start - self.kept_from..start + len - self.kept_from].to_vec(),
+            temperature_c: self.out.temp[start - self.kept_from..start + len - self.kept_from].to_vec(),
             range_violations: Vec::new(),
         };
         for ch in ChannelId::ALL {
@@ -199,8 +195,8 @@ impl ZeroPhaseStream {
         let keep = next.saturating_sub(2 * self.chain.derivative.half_length()).max(self.kept_from).min(self.produced);
         let dead = keep - self.kept_from;
         if dead > 0 && dead >= 4 * (self.produced - keep) {
-            self.frames.drain(..dead);
-            self.temperature.drain(..dead);
+            self.out.frames.drain(..dead);
+            self.out.temp.drain(..dead);
             self.kept_from = keep;
         }
         let reach_from = next.saturating_sub(self.edge() + self.chain.reach().0);
@@ -232,22 +228,23 @@ impl Kernel for Advance<'_> {
             });
         }
         let cols: [&[f64]; CHANNEL_COUNT] = std::array::from_fn(|k| raw.columns.get(s.col_of[k]).map_or(&[][..], Vec::as_slice));
-        let new_from = s.frames.len();
-        s.load.clear();
-        s.chain.front_frames(&s.constants, cols, offset, s.produced..end, &mut s.front, &mut s.frames, &mut s.load, &mut s.temperature)?;
+        let new_from = s.out.frames.len();
+        s.out.load.clear();
+        s.chain.front_frames(&s.constants, cols, offset, s.produced..end, &mut s.front, &mut s.out)?;
+        let FrontOut { frames, temp, .. } = &mut s.out;
         // The forward pass over the new frames, restarting in steady state after any frame
         // (or temperature) that is not finite.
         let mut i = new_from;
-        while i < s.frames.len() {
+        while i < frames.len() {
             let mut j = i;
-            while j < s.frames.len() && s.frames[j].iter().fold(s.temperature[j].is_finite(), |ok, v| ok & v.is_finite()) {
+            while j < frames.len() && frames[j].iter().fold(temp[j].is_finite(), |ok, v| ok & v.is_finite()) {
                 j += 1;
             }
             if j > i {
-                let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(s.frames[i]));
-                s.chain.lowpass.forward_run(st, &mut s.frames[i..j]);
+                let st = s.forward.get_or_insert_with(|| s.chain.lowpass.forward_steady(frames[i]));
+                s.chain.lowpass.forward_run(st, &mut frames[i..j]);
             }
-            if j < s.frames.len() {
+            if j < frames.len() {
                 s.bad.push(s.produced + (j - new_from));
                 s.forward = None;
                 j += 1;
