@@ -279,6 +279,10 @@ impl RosNode {
     /// A node named by `args` in domain `ROS_DOMAIN_ID`, its log going to `/rosout` from now
     /// on. It has parameter services once [`RosNode::declare_parameters`] is called.
     pub fn new(args: &NodeArgs) -> Result<Self, NodeError> {
+        with_stop_signals_blocked(|| Self::start(args))
+    }
+
+    fn start(args: &NodeArgs) -> Result<Self, NodeError> {
         let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?)).map_err(|e| mw("context", e))?;
         let options = NodeOptions::new().enable_rosout(false).start_parameter_services(false);
         let node_name = NodeName::new(&args.namespace, &args.name).map_err(|e| mw("node name", format!("{e:?}")))?;
@@ -723,6 +727,28 @@ pub fn shutdown_flag() -> Result<Arc<std::sync::atomic::AtomicBool>, NodeError> 
     let f = Arc::clone(&flag);
     ctrlc::set_handler(move || f.store(true, std::sync::atomic::Ordering::SeqCst)).map_err(|e| mw("signal handler", e))?;
     Ok(flag)
+}
+
+/// Runs `f` with SIGINT and SIGTERM blocked in the calling thread, so that every thread it
+/// starts inherits the mask: RustDDS's event loops, which stop for good when a signal
+/// interrupts their `poll` ("dp_event_loop poll failed: Interrupted system call"), after which
+/// nothing the node writes leaves the process, the exciter's ramp to zero included. The
+/// process's stop signals then go to a thread that does not block them (the node's own), which
+/// the handler of [`shutdown_flag`] serves.
+fn with_stop_signals_blocked<R>(f: impl FnOnce() -> R) -> R {
+    // SAFETY: `sigset_t` is plain data that `sigemptyset` initialises; `pthread_sigmask` only
+    // changes the calling thread's mask, and the old mask is put back on the way out.
+    unsafe {
+        let mut stop: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut stop);
+        libc::sigaddset(&mut stop, libc::SIGINT);
+        libc::sigaddset(&mut stop, libc::SIGTERM);
+        let mut before: libc::sigset_t = std::mem::zeroed();
+        libc::pthread_sigmask(libc::SIG_BLOCK, &stop, &mut before);
+        let out = f();
+        libc::pthread_sigmask(libc::SIG_SETMASK, &before, std::ptr::null_mut());
+        out
+    }
 }
 
 /// Logs to stderr, and to `/rosout` once the process has a node ([`crate::logging`]).

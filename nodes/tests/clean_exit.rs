@@ -7,6 +7,12 @@
 //! ("Cannot remove Reader ... Disconnected"), 39 of them at the end of every `oilfilm launch`.
 //! Dropping a `RosNode` (which `RosNode::shutdown` does) now joins the spinner while it still
 //! holds the context, on every path out of a node.
+//!
+//! A stop signal delivered to one of RustDDS's threads interrupts its `poll`, and its event
+//! loop then stops for good ("dp_event_loop poll failed: Interrupted system call"): nothing the
+//! node writes afterwards leaves the process, the exciter's ramp to zero included. So every
+//! RustDDS thread blocks SIGINT and SIGTERM, and the node's main thread takes them; the test
+//! reads each thread's signal mask from `/proc`.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
@@ -47,6 +53,14 @@ fn a_node_stopped_with_sigint_exits_0_without_an_error_line() {
     }
     // Let discovery and the announcer run a moment, as in any real run.
     std::thread::sleep(Duration::from_millis(1500));
+    let threads = threads(child.id());
+    let dds: Vec<&(String, u64)> = threads.iter().filter(|(name, _)| name.starts_with("RustDDS")).collect();
+    assert!(dds.len() >= 2, "RustDDS's threads not found: {threads:?}");
+    for (name, blocked) in &dds {
+        assert!(blocked & STOP_SIGNALS == STOP_SIGNALS, "thread `{name}` does not block SIGINT and SIGTERM (mask {blocked:#x}): {threads:?}");
+    }
+    let main = threads.iter().find(|(name, _)| name.starts_with("oilfilm-estim")).expect("the main thread is named after the binary");
+    assert!(main.1 & STOP_SIGNALS == 0, "the main thread blocks the stop signals (mask {:#x}): none could stop the node", main.1);
     let sent = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("running kill");
     assert!(sent.success(), "kill -INT failed");
     let deadline = Instant::now() + Duration::from_secs(20);
@@ -67,4 +81,22 @@ fn a_node_stopped_with_sigint_exits_0_without_an_error_line() {
     assert!(errors.is_empty(), "{} error line(s) on the way out:\n{}", errors.len(), log.join("\n"));
     // The log was read to the end: the node said it was starting and gave its parameters.
     assert!(log.iter().any(|l| l.contains("starting")), "{}", log.join("\n"));
+}
+
+/// SIGINT (2) and SIGTERM (15) in a `/proc` signal mask (bit `n - 1` for signal `n`).
+const STOP_SIGNALS: u64 = (1 << 1) | (1 << 14);
+
+/// Each thread of process `pid`: its name and the signals it blocks (`SigBlk` of
+/// `/proc/<pid>/task/<tid>/status`).
+fn threads(pid: u32) -> Vec<(String, u64)> {
+    let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).expect("the node's threads in /proc");
+    tasks
+        .map(|task| {
+            let dir = task.expect("a thread's entry").path();
+            let name = std::fs::read_to_string(dir.join("comm")).unwrap_or_default().trim().to_string();
+            let status = std::fs::read_to_string(dir.join("status")).unwrap_or_default();
+            let blocked = status.lines().find_map(|l| l.strip_prefix("SigBlk:")).and_then(|hex| u64::from_str_radix(hex.trim(), 16).ok());
+            (name, blocked.expect("SigBlk in a thread's status"))
+        })
+        .collect()
 }
