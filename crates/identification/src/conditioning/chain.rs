@@ -493,7 +493,7 @@ pub(super) fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>,
     let (before, rest) = t.split_at_mut(a);
     let (inside, after) = rest.split_at_mut(b - a);
     times(before, 0, t0, fs);
-    // From -0.0, as `Iterator::sum` (and `static_part`).
+    // From -0.0, as `Iterator::sum`.
     let (mut sx, mut sy) = (-0.0, -0.0);
     let (tc, tr) = inside.as_chunks_mut::<4>();
     let (xc, xr) = fx.as_chunks::<4>();
@@ -564,8 +564,8 @@ impl Constants {
         (v - self.offset) * self.gain
     }
 
-    /// For readings already in SI: `(v - 0) 1 = v`, no range (the stream checks step 2 on
-    /// the raw window), non-finite readings counted.
+    /// For readings already in SI: `(v - 0) 1 = v`, no range (the drivers check step 2 on
+    /// the raw readings), non-finite readings counted.
     pub(super) const SI: Self = Self { offset: 0.0, gain: 1.0, lo: f64::NEG_INFINITY, hi: f64::INFINITY, si_bounded: false };
 
     fn new(offset: f64, gain: f64, lo: f64, hi: f64) -> Self {
@@ -576,7 +576,7 @@ impl Constants {
 
 /// One channel of a front-end call: its constants, stencil and raw readings.
 pub(super) struct FrontChannel<'a> {
-    pub(super) volts: &'a [f64],
+    pub(super) readings: &'a [f64],
     pub(super) k: Constants,
     pub(super) delay: &'a FractionalDelay,
     pub(super) interior: Range<usize>,
@@ -636,12 +636,12 @@ impl Chain {
             let (w0, w1) = (p - back - first, q + ahead - first);
             let mut chans = Vec::with_capacity(CHANNEL_COUNT);
             for ch in ChannelId::ALL {
-                let volts = cols[ch.index()].get(w0..w1).ok_or_else(|| IdentificationError::BadInput {
+                let readings = cols[ch.index()].get(w0..w1).ok_or_else(|| IdentificationError::BadInput {
                     what: format!("column `{ch}`"),
                     reason: format!("scans {}..{} of the stream missing", w0 + first, w1 + first),
                 })?;
                 let delay = &self.delays[ch.index()];
-                chans.push(FrontChannel { volts, k: constants[ch.index()], delay, interior: delay.interior(w1 - w0) });
+                chans.push(FrontChannel { readings, k: constants[ch.index()], delay, interior: delay.interior(w1 - w0) });
             }
             let o = back..back + (q - p);
             s.load.resize(o.end, 0.0);
@@ -677,11 +677,11 @@ impl<'a> FrontTiles<'a> {
         let mut chans = Vec::with_capacity(CHANNEL_COUNT);
         for ch in ChannelId::ALL {
             let delay = &chain.delays[ch.index()];
-            let volts = &raw.columns[col_of[ch.index()]][window.clone()];
+            let readings = &raw.columns[col_of[ch.index()]][window.clone()];
             if len < delay.taps() {
                 return Err(too_short(len, chain.edge));
             }
-            chans.push(FrontChannel { volts, k: constants[ch.index()], delay, interior: delay.interior(len) });
+            chans.push(FrontChannel { readings, k: constants[ch.index()], delay, interior: delay.interior(len) });
         }
         Ok(Self { chans, applied: chain.applied, len, s: FrontScratch::default(), bad: 0 })
     }
@@ -740,7 +740,7 @@ fn front_tile(
     let (o0, o1) = (o.start, o.end);
     let mut bad = 0;
     for (k, (c, t)) in chans.iter().zip(tile.iter_mut()).enumerate() {
-        prefetch(c.volts, o1..o1 + (o1 - o0));
+        prefetch(c.readings, o1..o1 + (o1 - o0));
         // The frame probes, the bellows' load and the temperature are not combined with
         // other channels: de-skewed straight into their columns.
         let t: &mut [f64] = match k {
@@ -764,26 +764,26 @@ fn front_tile(
         // two. `&` and `|`, not `&&`: no branch per reading, so the count vectorises.
         let check_while_converting = si_bounded && a == o0 && b == o1 && i0 <= o0 && i1 >= o1;
         if !check_while_converting {
-            for &v in &c.volts[o0..o1] {
+            for &v in &c.readings[o0..o1] {
                 bad += (!((v > lo) & (v < hi)) | (!si_bounded & !si(v).is_finite())) as usize;
             }
         }
         if a < b {
             let x = &mut input[..i1 - i0];
             if check_while_converting {
-                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                for (x, &v) in x.iter_mut().zip(&c.readings[i0..i1]) {
                     *x = si(v);
                     bad += !((v > lo) & (v < hi)) as usize;
                 }
             } else {
-                for (x, &v) in x.iter_mut().zip(&c.volts[i0..i1]) {
+                for (x, &v) in x.iter_mut().zip(&c.readings[i0..i1]) {
                     *x = si(v);
                 }
             }
             stencil_any(w, x, &mut t[a - o0..b - o0]);
         }
         for n in (o0..a).chain(b..o1) {
-            t[n - o0] = c.delay.edge_value(n, len, |i| si(c.volts[i]));
+            t[n - o0] = c.delay.edge_value(n, len, |i| si(c.readings[i]));
         }
     }
     let [a_x, a_y, b_x, b_y, _, _, f1, f2, _, _] = &*tile;
