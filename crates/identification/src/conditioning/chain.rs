@@ -235,7 +235,7 @@ impl Chain {
         if tiles.bad > 0 || raw.units == RawUnits::Si {
             // The front end counted what it could not use (or does not check an SI record's
             // range): name it.
-            self.explain(raw, &window, &col_of, &mut violations)?;
+            self.explain(&tiles.chans, raw.units, &mut violations)?;
             outcome.finite &= all_finite(&front[9]);
         }
         let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
@@ -306,23 +306,16 @@ impl Chain {
         simd::dispatch(self.isa, Filter { chain: self, producer, dynamic, derived, scratch, valid, t0 })
     }
 
-    /// Names what the front end could not use, channel by channel in [`ChannelId::ALL`]
-    /// order: a reading that is not finite, or that does not convert to a finite value, is an
+    /// Names what the front end could not use, from its channels `chans` (in [`ChannelId::ALL`]
+    /// order, their readings in `units`): a reading that is not finite, or that does not convert to a finite value, is an
     /// error naming its channel and sample; readings out of the linear range (step 2) are
     /// reported in `violations`.
-    fn explain(
-        &self,
-        raw: &RawRecord,
-        window: &Range<usize>,
-        col_of: &[usize; CHANNEL_COUNT],
-        violations: &mut Vec<super::RangeViolation>,
-    ) -> Result<(), IdentificationError> {
-        for ch in ChannelId::ALL {
-            let column = &raw.columns[col_of[ch.index()]][window.clone()];
-            let k = Constants::of(ch, raw.units, &self.calibration)?;
-            if let Some(i) = column.iter().position(|&v| !k.si(v).is_finite()) {
+    fn explain(&self, chans: &[FrontChannel<'_>], units: RawUnits, violations: &mut Vec<super::RangeViolation>) -> Result<(), IdentificationError> {
+        for (ch, c) in ChannelId::ALL.into_iter().zip(chans) {
+            let column = c.readings;
+            if let Some(i) = column.iter().position(|&v| !c.k.si(v).is_finite()) {
                 if !column[i].is_finite() {
-                    return Err(non_finite_error(ch, i, column[i], raw.units.name()));
+                    return Err(non_finite_error(ch, i, column[i], units.name()));
                 }
                 let sensitivity = self.calibration.channel(ch)?.sensitivity_v_per_unit;
                 return Err(IdentificationError::BadInput {
@@ -330,7 +323,7 @@ impl Chain {
                     reason: format!("{} V does not convert to a finite {} with sensitivity {sensitivity}", column[i], ch.unit()),
                 });
             }
-            if let Some(v) = range_check::check(ch, column, raw.units, &self.calibration)? {
+            if let Some(v) = range_check::check(ch, column, units, &self.calibration)? {
                 violations.push(v);
             }
         }
