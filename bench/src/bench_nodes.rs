@@ -27,6 +27,7 @@ use oilfilm_graph::topics;
 use oilfilm_identification::conditioning::{self, RawRecord, RawUnits};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::calibration_for;
+use oilfilm_identification::pipeline::mechanics_of;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_msgs::{CoefficientEstimate, ConditionedFrame, DaqFrame};
 use oilfilm_nodes::dds::RosNode;
@@ -189,7 +190,7 @@ fn run_case(case: &Case, seconds: f64, bin_dir: &Path) -> Result<String> {
     let calibration = calibration_for(&rig, &probe, &offsets[..kept.len()])?;
     let (edge, s0) = match case.chain {
         Chain::ZeroPhase => {
-            let edge = conditioning::edge_samples(&calibration, &cp.conditioning()?, case.rate_hz)?;
+            let edge = conditioning::Chain::new(&calibration, &mechanics_of(&rig), &cp.conditioning()?, case.rate_hz)?.edge();
             (edge, edge as u64)
         }
         Chain::Causal => {

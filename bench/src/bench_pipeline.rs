@@ -63,8 +63,10 @@ pub fn run(seconds: f64, python: Option<PathBuf>) -> Result<()> {
     //    same work the Python pipeline does; and the full estimator (lines, HAC errors, flags).
     // Every call below is made once outside the timing first, so its errors surface as errors.
     let mut out = Conditioned::default();
-    conditioning::condition_into(&raw, &cal, &mech, &ccfg, &mut out)?;
-    let t_cond = best_of(REPEATS, || black_box(conditioning::condition_into(&raw, &cal, &mech, &ccfg, &mut out).is_ok()));
+    // The chain designed in each call, as `conditioning::condition` does.
+    let condition_into = |out: &mut Conditioned| conditioning::Chain::new(&cal, &mech, &ccfg, raw.sample_rate_hz).and_then(|c| c.condition_into(&raw, out));
+    condition_into(&mut out)?;
+    let t_cond = best_of(REPEATS, || black_box(condition_into(&mut out).is_ok()));
     let valid = out.valid.clone();
     let window = WINDOW.min(valid.len());
     let est = EstimatorConfig { window, hop: window, ..Default::default() };

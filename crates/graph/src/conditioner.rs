@@ -5,7 +5,7 @@
 //! Streaming zero-phase filtering: the chain is non-causal (forward-backward low-pass,
 //! centred derivatives, de-skew interpolation), so an output block of `block_scans` samples
 //! is out once `edge` raw samples past it are in, where `edge` is what the chain itself trims
-//! from a record ([`conditioning::edge_samples`]). The front end and the low-pass's forward
+//! from a record ([`conditioning::Chain::edge`]). The front end and the low-pass's forward
 //! pass run once per scan, carried from frame to frame, and each block's backward pass starts
 //! on the forward output past it ([`conditioning::stream`], ADR 0019); a block whose window
 //! (`edge` scans on either side) holds a reading the front end cannot use is conditioned as
@@ -181,7 +181,9 @@ struct Stream {
     channels: Vec<ChannelId>,
     offsets_s: Vec<f64>,
     rig: String,
-    calibration: oilfilm_physics::daq::Calibration,
+    /// The zero-phase chain for the stream's calibration, which conditions a block the stream
+    /// leaves to it as a window of `raw` (`None` for the causal chain).
+    window: Option<conditioning::Chain>,
     /// Scan index of `raw.columns[*][0]`.
     first_scan: u64,
     /// The stream's first scan and its rig time: every stamp is computed from these, so
@@ -190,8 +192,7 @@ struct Stream {
     origin_stamp: Stamp,
     /// The scans received and still needed, one column per channel in the stream's order
     /// (channels and units fixed for the stream): read by the zero-phase stream, and by the
-    /// windowed conditioning of a block the stream leaves to it
-    /// ([`conditioning::condition_window_into`], in place). Scans no block needs any more
+    /// windowed conditioning of a block the stream leaves to it (`window`, in place). Scans no block needs any more
     /// are dropped in batches (see [`ConditionerCore::condition_block`]).
     raw: RawRecord,
     /// Next scan to publish.
@@ -421,13 +422,16 @@ impl ConditionerCore {
         };
         let calibration = calibration_for(&self.rig, &probe, &offsets_s)?;
         let units = if frame.units == DaqFrame::UNITS_SI { RawUnits::Si } else { RawUnits::Volts };
-        let mut zero_phase = None;
+        let (mut zero_phase, mut window) = (None, None);
         let (edge, causal) = match self.chain {
             Chain::ZeroPhase => {
                 // A stream that cannot be set up (a channel missing, say) leaves every block
                 // to the windowed conditioning, which names what is wrong in each block.
                 zero_phase = ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().map(Box::new);
-                (conditioning::edge_samples(&calibration, &self.config, frame.sample_rate_hz)?, None)
+                let chain = conditioning::Chain::new(&calibration, &self.mechanics, &self.config, frame.sample_rate_hz)?;
+                let edge = chain.edge();
+                window = Some(chain);
+                (edge, None)
             }
             Chain::Causal => {
                 let mut columns = [usize::MAX; CHANNEL_COUNT];
@@ -456,7 +460,7 @@ impl ConditionerCore {
             units: frame.units,
             offsets_s,
             rig: frame.rig.clone(),
-            calibration,
+            window,
             first_scan: frame.first_scan,
             origin_scan: frame.first_scan,
             origin_stamp: Stamp::from_time(&frame.header.stamp),
@@ -565,28 +569,29 @@ impl ConditionerCore {
                     reason: format!("scans from {} needed, the record starts at {offset}", start - edge),
                 });
             };
-            conditioning::condition_window_into(&s.raw, begin..begin + block + 2 * edge, &s.calibration, &self.mechanics, &self.config, &mut self.work).map(
-                |()| {
-                    let w = &self.work;
-                    let r = edge..edge + block;
-                    if w.valid != r {
-                        frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
-                    }
-                    let cut = |v: &[f64]| v[r.clone()].to_vec();
-                    Block {
-                        x_m: cut(&w.x_m),
-                        y_m: cut(&w.y_m),
-                        vx_m_s: cut(&w.vx_m_s),
-                        vy_m_s: cut(&w.vy_m_s),
-                        ax_m_s2: cut(&w.ax_m_s2),
-                        ay_m_s2: cut(&w.ay_m_s2),
-                        fx_n: cut(&w.fx_n),
-                        fy_n: cut(&w.fy_n),
-                        temperature_c: cut(&w.temperature_c),
-                        range_violations: w.range_violations.clone(),
-                    }
-                },
-            )
+            let Some(chain) = s.window.as_ref() else {
+                return Err(oilfilm_identification::IdentificationError::invalid("chain", "the causal chain conditions no window"));
+            };
+            chain.condition_window_into(&s.raw, begin..begin + block + 2 * edge, &mut self.work).map(|()| {
+                let w = &self.work;
+                let r = edge..edge + block;
+                if w.valid != r {
+                    frame.flags.push(format!("internal: chain valid range {:?}, expected {r:?}", w.valid));
+                }
+                let cut = |v: &[f64]| v[r.clone()].to_vec();
+                Block {
+                    x_m: cut(&w.x_m),
+                    y_m: cut(&w.y_m),
+                    vx_m_s: cut(&w.vx_m_s),
+                    vy_m_s: cut(&w.vy_m_s),
+                    ax_m_s2: cut(&w.ax_m_s2),
+                    ay_m_s2: cut(&w.ay_m_s2),
+                    fx_n: cut(&w.fx_n),
+                    fy_n: cut(&w.fy_n),
+                    temperature_c: cut(&w.temperature_c),
+                    range_violations: w.range_violations.clone(),
+                }
+            })
         });
         match outcome {
             Ok(b) => {

@@ -15,7 +15,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
-use oilfilm_identification::conditioning::{condition, condition_into, lowpass, range_check, Chain, ConditioningConfig, Mechanics, RawRecord, RawUnits};
+use oilfilm_identification::conditioning::{condition, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
 
@@ -69,11 +69,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let channels = raw.channels.len();
     let all = n * channels;
     println!("record: {n} scans x {channels} channels = {all} samples at {fs} Hz; best of {repeats} runs");
+    // The chain designed in each call, as `condition` does.
+    let condition_into = |raw: &RawRecord, out: &mut Conditioned| Chain::new(&cal, &mech, &conf, fs).and_then(|c| c.condition_into(raw, out));
     if only_into {
         // `... [scans] [repeats] into`: only `condition_into`, for a profiler.
         let mut out = condition(&raw, &cal, &mech, &conf)?;
         let t = best_of(repeats, || {
-            condition_into(&raw, &cal, &mech, &conf, &mut out).unwrap(); // validated above
+            condition_into(&raw, &mut out).unwrap(); // validated above
             black_box(&out);
         });
         report("condition_into (reusing the output buffers)", all, t);
@@ -91,7 +93,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut best = [f64::INFINITY; 6];
         for _ in 0..repeats {
             best[0] = best[0].min(best_of(1, || {
-                condition_into(&raw, &cal, &mech, &conf, &mut whole).unwrap(); // validated above
+                condition_into(&raw, &mut whole).unwrap(); // validated above
                 black_box(&whole);
             }));
             for (b, &size) in best[1..].iter_mut().zip(&sizes) {
@@ -147,7 +149,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     report("condition (steps 1-7, all ten channels)", all, t);
     let mut out = condition(&raw, &cal, &mech, &conf)?;
     let t = best_of(repeats, || {
-        condition_into(&raw, &cal, &mech, &conf, &mut out).unwrap(); // validated above
+        condition_into(&raw, &mut out).unwrap(); // validated above
         black_box(&out);
     });
     report("condition_into (reusing the output buffers)", all, t);
@@ -158,7 +160,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         col.iter_mut().for_each(|v| *v = (*v - c.offset_v) / c.sensitivity_v_per_unit);
     }
     let t = best_of(repeats, || {
-        condition_into(&si, &cal, &mech, &conf, &mut out).unwrap(); // the same record in SI
+        condition_into(&si, &mut out).unwrap(); // the same record in SI
         black_box(&out);
     });
     report("condition_into, the record in SI", all, t);

@@ -5,9 +5,7 @@
 
 use crate::{reference, volts_record};
 
-use oilfilm_identification::conditioning::{
-    condition, condition_window_into, deskew, differentiate, lowpass, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord,
-};
+use oilfilm_identification::conditioning::{condition, deskew, differentiate, lowpass, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord};
 use oilfilm_identification::simd::Isa;
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{ChannelId, DaqConfig};
@@ -26,6 +24,7 @@ fn a_window_conditions_as_a_record_of_its_scans() {
     raw.start_time_s = 2.5;
     // Far outside the probe's range (and finite): step 2 reports it.
     raw.columns[2][3500] = 1.0e3;
+    let chain = Chain::new(&calibration, &mechanics, &config, raw.sample_rate_hz).unwrap();
     let mut work = Conditioned::default();
     for window in [0..6000, 1000..4234, 2500..5000, 3766..6000, 1000..4234] {
         let alone = RawRecord {
@@ -34,7 +33,7 @@ fn a_window_conditions_as_a_record_of_its_scans() {
             ..raw.clone()
         };
         let expected = condition(&alone, &calibration, &mechanics, &config).unwrap();
-        condition_window_into(&raw, window.clone(), &calibration, &mechanics, &config, &mut work).unwrap();
+        chain.condition_window_into(&raw, window.clone(), &mut work).unwrap();
         assert!(work == expected, "window {window:?}");
         let flagged = window.contains(&3500);
         assert_eq!(!work.range_violations.is_empty(), flagged, "window {window:?}");
@@ -42,7 +41,7 @@ fn a_window_conditions_as_a_record_of_its_scans() {
             assert_eq!(work.range_violations[0].index, 3500 - window.start);
         }
     }
-    let e = condition_window_into(&raw, 5000..7000, &calibration, &mechanics, &config, &mut work).unwrap_err().to_string();
+    let e = chain.condition_window_into(&raw, 5000..7000, &mut work).unwrap_err().to_string();
     assert!(e.contains("window") && e.contains("6000"), "{e}");
 }
 

@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 use crate::reference;
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::{
-    condition, condition_into, deskew, differentiate, lowpass, range_check, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
+    condition, deskew, differentiate, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
 };
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
@@ -745,8 +745,9 @@ fn condition_into_reuses_buffers_and_equals_condition() {
     let cfg = ConditioningConfig::default();
     let long = sc.si_record(4000, &cal);
     let short = sc.si_record(1500, &cal);
+    let chain = Chain::new(&cal, &sc.mech, &cfg, long.sample_rate_hz).unwrap();
     let mut out = Conditioned::default();
-    condition_into(&long, &cal, &sc.mech, &cfg, &mut out).unwrap();
+    chain.condition_into(&long, &mut out).unwrap();
     assert_eq!(out, condition(&long, &cal, &sc.mech, &cfg).unwrap());
     // A second, shorter record into the same output: same result as fresh, and the same
     // seventeen allocations (the pool hands them out in other roles, e.g. f1's becomes fx).
@@ -777,7 +778,7 @@ fn condition_into_reuses_buffers_and_equals_condition() {
         p
     };
     let before = buffers(&out);
-    condition_into(&short, &cal, &sc.mech, &cfg, &mut out).unwrap();
+    chain.condition_into(&short, &mut out).unwrap();
     let fresh = condition(&short, &cal, &sc.mech, &cfg).unwrap();
     let reused = buffers(&out) == before;
     println!("reused output: {} samples, valid {:?}; same 17 allocations: {reused}", out.len(), out.valid);
@@ -786,7 +787,7 @@ fn condition_into_reuses_buffers_and_equals_condition() {
     // On error the output is left empty, never half-written.
     let mut bad = short.clone();
     bad.columns[0][10] = f64::NAN;
-    assert!(condition_into(&bad, &cal, &sc.mech, &cfg, &mut out).is_err());
+    assert!(chain.condition_into(&bad, &mut out).is_err());
     assert!(out.is_empty() && out.fx_n.is_empty() && out.range_violations.is_empty());
 }
 

@@ -5,7 +5,7 @@
 use crate::volts_record;
 
 use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
-use oilfilm_identification::conditioning::{condition, condition_window_into, Conditioned, ConditioningConfig, Mechanics, RawRecord};
+use oilfilm_identification::conditioning::{condition, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord};
 use oilfilm_identification::simd::Isa;
 use oilfilm_physics::daq::DaqConfig;
 use volts_record::volts_record;
@@ -92,7 +92,10 @@ fn blocks_match_the_windowed_conditioning_and_do_not_depend_on_the_cuts() {
         assert_eq!(b.x_m.len(), 1_000);
         vs_whole = vs_whole.max(worst(b, &whole, *start));
         let edge = whole.valid.start;
-        condition_window_into(&raw, start - edge..start + 1_000 + edge, &calibration, &mechanics(), &config(), &mut window).unwrap();
+        Chain::new(&calibration, &mechanics(), &config(), raw.sample_rate_hz)
+            .unwrap()
+            .condition_window_into(&raw, start - edge..start + 1_000 + edge, &mut window)
+            .unwrap();
         vs_window = vs_window.max(worst(b, &window, edge));
     }
     println!("largest relative difference: {vs_whole:.2e} from the whole record, {vs_window:.2e} from the windows");
@@ -141,7 +144,7 @@ fn a_nan_is_left_to_the_windows_and_a_range_violation_reported_as_they_report_it
     for (start, b) in blocks(&raw, 500, 1_000) {
         let b = b.expect("finite readings");
         let w = start - edge..start + 1_000 + edge;
-        condition_window_into(&raw, w.clone(), &calibration, &mechanics(), &config(), &mut window).unwrap();
+        Chain::new(&calibration, &mechanics(), &config(), raw.sample_rate_hz).unwrap().condition_window_into(&raw, w.clone(), &mut window).unwrap();
         assert_eq!(b.range_violations, window.range_violations, "block {start}");
         assert_eq!(b.range_violations.is_empty(), !w.contains(&6_100), "block {start}");
     }

@@ -54,31 +54,6 @@ pub struct Chain {
     edge: usize,
 }
 
-/// The filters a configuration asks for: the low-pass of `order`, the differentiator, the
-/// de-skew stencils, and the scans their edge effects spoil at each end of a record.
-type Designs = (Butterworth, SavitzkyGolayDerivative, [FractionalDelay; CHANNEL_COUNT], usize);
-
-fn designs(calibration: &Calibration, config: &ConditioningConfig, fs: f64, order: usize) -> Result<Designs, IdentificationError> {
-    let lowpass = Butterworth::design(order, config.lowpass_cutoff_hz, fs)?;
-    let derivative = SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
-    config.check_taps()?;
-    let mut delays: [FractionalDelay; CHANNEL_COUNT] = std::array::from_fn(|_| FractionalDelay::identity());
-    if config.deskew {
-        for ch in ChannelId::ALL {
-            delays[ch.index()] = FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
-        }
-    }
-    let trim = delays.iter().map(FractionalDelay::edge_samples).max().unwrap_or(0);
-    let edge = trim + lowpass.settling_samples() + 2 * derivative.half_length();
-    Ok((lowpass, derivative, delays, edge))
-}
-
-/// The scans at each end of a record that the stages' edge effects spoil (see
-/// [`super::edge_samples`]).
-pub(super) fn edge_of(calibration: &Calibration, config: &ConditioningConfig, fs: f64) -> Result<usize, IdentificationError> {
-    designs(calibration, config, fs, config.lowpass_order).map(|d| d.3)
-}
-
 impl Chain {
     /// Designs the zero-phase chain. Every field is checked; errors name it
     /// (`conditioning.lowpass_cutoff_hz`, `mechanics.housing_mass_kg`, ...).
@@ -104,8 +79,18 @@ impl Chain {
     }
 
     fn with_order(calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, fs: f64, order: usize) -> Result<Self, IdentificationError> {
-        let (lowpass, derivative, delays, edge) = designs(calibration, config, fs, order)?;
+        let lowpass = Butterworth::design(order, config.lowpass_cutoff_hz, fs)?;
+        let derivative = SavitzkyGolayDerivative::new(config.differentiator_half_length, fs)?;
+        config.check_taps()?;
         mechanics.validate()?;
+        let mut delays: [FractionalDelay; CHANNEL_COUNT] = std::array::from_fn(|_| FractionalDelay::identity());
+        if config.deskew {
+            for ch in ChannelId::ALL {
+                delays[ch.index()] = FractionalDelay::for_offset(calibration.sample_offset_s(ch)?, fs, config.deskew_taps)?;
+            }
+        }
+        let trim = delays.iter().map(FractionalDelay::edge_samples).max().unwrap_or(0);
+        let edge = trim + lowpass.settling_samples() + 2 * derivative.half_length();
         Ok(Self {
             isa: Isa::current(),
             sample_rate_hz: fs,
@@ -159,10 +144,17 @@ impl Chain {
     /// Steps 1-7 on a whole record.
     pub fn condition(&self, raw: &RawRecord) -> Result<Conditioned, IdentificationError> {
         let mut out = Conditioned::default();
-        self.condition_window_into(raw, 0..raw.len(), &mut out)?;
+        self.condition_into(raw, &mut out)?;
         // The result is kept by the caller; the low-pass's scratch is not part of it.
         out.work.scratch = Vec::new();
         Ok(out)
+    }
+
+    /// [`Chain::condition`] into `out`'s buffers: record after record into the same
+    /// `Conditioned` allocates nothing of size once they are large enough. On error `out`
+    /// is left empty.
+    pub fn condition_into(&self, raw: &RawRecord, out: &mut Conditioned) -> Result<(), IdentificationError> {
+        self.condition_window_into(raw, 0..raw.len(), out)
     }
 
     /// Steps 1-7 on the scans `window` of `raw`, into `out`'s buffers (nothing of size is

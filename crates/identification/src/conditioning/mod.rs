@@ -306,7 +306,7 @@ impl std::fmt::Display for RangeViolation {
 }
 
 /// A conditioned record on ONE time base (the scan start times), all SI.
-/// `Conditioned::default()` is empty; [`condition_into`] reuses its buffers.
+/// `Conditioned::default()` is empty; [`Chain::condition_into`] reuses its buffers.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct Conditioned {
     /// Scan start times (s).
@@ -339,11 +339,11 @@ pub struct Conditioned {
     pub valid: Range<usize>,
     /// Empty when every channel stayed in its linear range.
     pub range_violations: Vec<RangeViolation>,
-    /// What [`condition_into`] keeps for the next call besides the buffers.
+    /// What [`Chain::condition_into`] keeps for the next call besides the buffers.
     work: Work,
 }
 
-/// [`condition_into`]'s memory between calls that is not part of the result. Any two
+/// [`Chain::condition_into`]'s memory between calls that is not part of the result. Any two
 /// compare equal, and it prints as nothing, so a `Conditioned` compares and prints as its
 /// data.
 #[derive(Clone, Default)]
@@ -351,8 +351,8 @@ struct Work {
     /// The housing's y velocity (not an output) when the derivatives follow the low-pass.
     velocity: Vec<f64>,
     /// The low-pass's scratch: its reflections and its forward pass's output (eight values
-    /// per scan, `lowpass::Butterworth::filtfilt8_fed`). Kept between [`condition_into`]
-    /// calls, not returned by [`condition`].
+    /// per scan, `lowpass::Butterworth::filtfilt8_fed`). Kept between
+    /// [`Chain::condition_into`] calls, not returned by [`condition`].
     scratch: Vec<f64>,
 }
 
@@ -475,50 +475,6 @@ impl Conditioned {
             take(&mut self.static_load_n),
         ]
     }
-}
-
-/// [`condition`] into `out`, reusing its column buffers: conditioning record after record
-/// into the same `Conditioned` allocates nothing of size once the buffers are large enough.
-/// On error `out` is left empty.
-pub fn condition_into(
-    raw: &RawRecord,
-    calibration: &Calibration,
-    mechanics: &Mechanics,
-    config: &ConditioningConfig,
-    out: &mut Conditioned,
-) -> Result<(), IdentificationError> {
-    condition_window_into(raw, 0..raw.len(), calibration, mechanics, config, out)
-}
-
-/// [`condition_into`] on the scans `window` of `raw`: the result (indices, `valid`, range
-/// violations, bits) is the one [`condition_into`] gives for a record holding only those
-/// scans and starting `window.start` scans later, without copying them into one. A window
-/// that does not fit in the record is a `BadInput`.
-pub fn condition_window_into(
-    raw: &RawRecord,
-    window: Range<usize>,
-    calibration: &Calibration,
-    mechanics: &Mechanics,
-    config: &ConditioningConfig,
-    out: &mut Conditioned,
-) -> Result<(), IdentificationError> {
-    match Chain::new(calibration, mechanics, config, raw.sample_rate_hz) {
-        Ok(chain) => chain.condition_window_into(raw, window, out),
-        Err(e) => {
-            out.take_columns();
-            *out = Conditioned { work: std::mem::take(&mut out.work), ..Conditioned::default() };
-            Err(e)
-        }
-    }
-}
-
-/// Samples at each end of a conditioned record that the stages' edge effects spoil (the
-/// de-skew interpolator's half-length, the low-pass settling to 1e-7 and twice the
-/// differentiator's half-length): [`condition`] marks `edge..n - edge` valid. A streaming
-/// conditioner that conditions a block with this many extra samples on each side gets the
-/// whole block valid.
-pub fn edge_samples(calibration: &Calibration, config: &ConditioningConfig, sample_rate_hz: f64) -> Result<usize, IdentificationError> {
-    chain::edge_of(calibration, config, sample_rate_hz)
 }
 
 #[cfg(test)]
