@@ -1,20 +1,18 @@
 //! The CPU's vector instructions, chosen in one place.
 //!
-//! The crate's hot loops are written once. Where the compiler's own vectorisation serves, a
-//! loop is plain Rust marked `#[inline(always)]`; where it was measured slower (register
-//! transposes, the differentiator's shifted loads), the loop is a method of [`Simd`] with
-//! one implementation per instruction set.
-//! [`dispatch`] is the one place that asks the CPU: it runs a [`Kernel`] inside a function
-//! compiled for the chosen set, so that every loop the kernel inlines is compiled for it too,
-//! and hands the kernel that set's token, whose [`Simd`] methods are the set's kernels. Only
-//! [`dispatch`] makes a token, and only after the CPU was found to have its set: that is what
-//! makes the intrinsics behind the tokens sound.
+//! The crate's hot loops are written once: plain Rust marked `#[inline(always)]` where the
+//! compiler's own vectorisation serves, a method of `Simd` with one implementation per
+//! instruction set where it was measured slower. `dispatch` is the one place that asks the
+//! CPU: it runs a `Kernel` inside a function compiled for the chosen set, so that every loop
+//! the kernel inlines is compiled for it too, and hands it that set's token. Only `dispatch`
+//! makes a token, and only after the CPU was found to have its set: that is what makes the
+//! intrinsics behind the tokens sound.
 //!
 //! No kernel uses a fused multiply-add and every sum is formed in the same order in every
-//! implementation, so a result is the same bit for bit whichever set runs (the tests force
-//! each set this CPU has and compare it with [`Isa::Scalar`]). `OILFILM_SIMD=scalar`, `avx2`
-//! or `avx512` caps the set for a whole process; `tests/run-all.sh` uses it to check that an
-//! identification does not depend on it.
+//! implementation, so every set gives the bits of [`Isa::Scalar`]. `OILFILM_SIMD=scalar`,
+//! `avx2` or `avx512` caps the set for a whole process.
+//!
+//! See docs/manual/conditioning.md#instruction-sets.
 
 use std::cell::Cell;
 use std::sync::OnceLock;

@@ -1,62 +1,17 @@
-//! A **causal** conditioning chain for live use: the same steps as [`super::condition`]
-//! (calibration, linear-range check, de-skew, low-pass, kinematics, Savitzky-Golay
-//! derivatives, eq. 2), run scan by scan with its state carried from one call to the next, so
-//! a sample is out a fixed, short delay after it was acquired instead of after the zero-phase
-//! filter's edge (ADR 0014).
+//! A **causal** conditioning chain for live use: the same steps as [`super::condition`],
+//! run scan by scan with its state carried from one call to the next, so a sample is out a
+//! fixed, short delay after it was acquired instead of after the zero-phase filter's edge
+//! (ADR 0014).
 //!
-//! ## Why a causal filter leaves the coefficients alone
-//! The film model `F = K r + C r' (+ M r'')` is linear and time-invariant. Applying one causal
-//! LTI filter `H` to the force and to every regressor gives `H F = K (H r) + C (H r') (+ ...)`
-//! with the same `K`, `C`, `M`: only the weighting of the noise changes. The zero-phase chain
-//! is one choice of `H`; this chain is another. What must hold is that every column sees
-//! **exactly** the same `H`: after de-skew (which puts the channels on one time base; its
-//! common integer delay is part of `H`), one low-pass on every dynamic column, and the
-//! derivatives and the force evaluated at one common delay.
+//! The coefficients are unchanged only if every column sees **exactly** the same causal
+//! filter `H`: one low-pass on every dynamic column, the derivatives and the force at one
+//! common delay ([`CausalDelays`]). Each sample goes through the same operations in the same
+//! order whatever block it came in and whichever instruction set runs, so the output is the
+//! same bit for bit however the scans are cut; `tests/causal_block_path.rs` keeps the plain
+//! scan-by-scan chain as the reference.
 //!
-//! ## The stages and their delays (scans)
-//! | stage | here | delay |
-//! |---|---|---|
-//! | calibration, range check | per reading, on the raw value | 0 |
-//! | de-skew | the same Lagrange stencils as [`super::deskew`], output at scan `n - L` | `L` = the furthest stencil reaches ahead |
-//! | kinematics, applied force | `r` = mean of ends A, B; `(c1 f1 + c2 f2, s1 f1 + s2 f2 + f3 - m g)` | 0 |
-//! | low-pass | Butterworth of order `2 N` ([`causal_order`]), forward only, on `x, y, X, Y, F_x, F_y` | none counted (its phase is part of `H`) |
-//! | derivatives | Savitzky-Golay, centred, twice: `r'` at `p - M`, `r''` at `p - 2M` | `2 M`, the same for `r, r', r'', X'', F` |
-//! | eq. 2 | `F = F_applied - m X''` at the common delay | 0 |
-//!
-//! So a sample of time index `m` (scans since the chain started) is out when scan
-//! `m + delay_scans()` is pushed ([`CausalDelays::delay_scans`]: `L + 2M`, 11 scans for the
-//! 5 kHz defaults). Its time index means: the scan whose start time the de-skew and the
-//! differentiators align it to. The low-pass's own phase lag (its group delay, about
-//! 15 ms at DC for order 8 at 55.5 Hz) is **not** removed: it is common to every column and
-//! so part of `H`. A consumer comparing conditioned signals with the rig's own time (not
-//! needed for the coefficients) must allow for it.
-//!
-//! ## Start
-//! The low-pass starts in the DC steady state of its first input (as [`super::lowpass`]
-//! does); its transient has decayed to `1e-7` after `settling` samples. The first sample
-//! out is time index [`CausalDelays::first_index`] = lookback + settling + `2M`: as the
-//! zero-phase chain trims its record's ends. From then on every pushed scan gives exactly
-//! one sample.
-//!
-//! ## Out-of-range and non-finite readings
-//! A reading out of its channel's linear range (paper step 2; non-finite readings count as
-//! out of range) is reported as a [`RangeViolation`] (index = the scan since the chain
-//! started, `count` = consecutive readings of that channel) and every output it can reach
-//! is marked invalid: the de-skew stencils, the low-pass until it has settled, and the
-//! differentiators' reach ([`CausalChain::influence`]). The filters are fed the channel's
-//! last in-range value instead, so the state stays finite and bounded and the chain goes
-//! on once the probe is back.
-//!
-//! ## Bit for bit, block by block
-//! A call runs stage by stage over its whole block on the prepared chain's kernels
-//! ([`super::Chain`]: the front end's de-skew stencils, the low-pass's forward pass over
-//! frames of eight lanes, the differentiator's interior), with what the next call needs
-//! carried over: the last scans the stencils reach back to, the low-pass's state, the last
-//! `2M` low-passed samples and velocities. Each sample goes through the same operations in
-//! the same order whatever block it came in and whichever instruction set runs, so the output
-//! depends on neither. `tests/causal_block_path.rs` keeps a scan-by-scan chain, written
-//! plainly, as the reference and compares bits for many cuttings, with out-of-range readings
-//! in them.
+//! Why, the delays, the start and out-of-range readings:
+//! docs/manual/conditioning.md#the-causal-chain.
 
 use std::ops::Range;
 

@@ -2,24 +2,15 @@
 //! rig's mechanics and the configuration (as a planner prepares an FFT), and the front end
 //! and the record driver every way of running the chain shares (ADR 0022).
 //!
-//! [`Chain`] owns the de-skew stencils, the low-pass, the differentiator, eq. 2's constants
-//! and the instruction set its kernels run on. A record (or a window of one) goes through it
-//! in one fused pass per filter direction ([`Chain::condition_window_into`]); the zero-phase
-//! stream ([`super::stream`]) and the causal chain ([`super::causal`]) are drivers over the
-//! same object and the same kernels.
+//! A record goes through [`Chain`] in one fused pass per filter direction
+//! ([`Chain::condition_window_into`]): the front end runs tile by tile ([`front_tile`])
+//! straight into the low-pass, whose backward pass feeds the derivatives and eq. 2
+//! ([`Derivatives`]). Every value is formed by the same operations in the same order as the
+//! stages written out plainly in `tests/reference.rs`: `tests/chain.rs` checks the bits.
+//! The zero-phase stream ([`super::stream`]) and the causal chain ([`super::causal`]) are
+//! drivers over the same object and kernels.
 //!
-//! ## The fused record
-//! Calibration, range count, de-skew and the linear combinations of steps 5 and 7 run scan
-//! tile by scan tile in L1 ([`front_tile`]), reading each raw column once; the tile goes
-//! straight into the low-pass's forward pass; the backward pass hands its final output, chunk
-//! by chunk, to both derivatives and eq. 2's inertial part ([`Derivatives`]). Each stage
-//! checks the finiteness of what it writes, so nothing is read again for that. Every value is
-//! formed by the same operations in the same order as the stages written one by one in
-//! `tests/chain.rs` (calibrate, de-skew, kinematics, applied force, filter, differentiate
-//! twice, inertia): the same bits. The front end only counts the readings it cannot use
-//! (out of range, not finite); only when it counted one, or the record is in SI units (whose
-//! range it does not check), are the columns read again, to name the reading or to report
-//! the violations of step 2.
+//! Design: docs/manual/conditioning.md#one-prepared-chain.
 
 use std::ops::Range;
 

@@ -1,49 +1,15 @@
-//! Step 4 of Zhou et al. (2004), section 3.1: the card converts the ten channels "one by one
-//! in turn", so "phase differences among channels exist"; the paper's "inner-insert filter"
-//! (interpolation, smoothing, re-sampling) rebuilds simultaneous samples. Here that is a
-//! **fractional-delay FIR** per channel (the smoothing is the separate [`super::lowpass`]).
+//! Step 4 of Zhou et al. (2004), section 3.1, the paper's "inner-insert filter": the card
+//! converts the channels one by one in turn, and a **fractional-delay FIR** per channel
+//! (Lagrange interpolation) rebuilds simultaneous samples. The smoothing is the separate
+//! [`super::lowpass`].
 //!
-//! ## What is computed
-//! Channel `k` was converted `d_k = calibration.sample_offset_s(k)` after each scan start
-//! `t_n`, so its samples are `y[n] = s(t_n + d_k)`. The scan-start value `s(t_n)` is the
-//! sequence `y` read at the fractional index `n - D`, `D = d_k f_s`: a delay by `D` samples
-//! (Laakso, Valimaki, Karjalainen & Laine, "Splitting the unit delay", IEEE Signal
-//! Processing Magazine 13(1), 1996, section on Lagrange interpolation).
+//! The `N` taps sit on `n + s .. n + s + N - 1` with `s = ceil(-D - N/2)`, so the
+//! interpolation point lies within half a sample of the stencil centre; near either end the
+//! stencil is shifted to stay inside the record, and those samples are outside
+//! [`super::Conditioned::valid`].
 //!
-//! ## Why Lagrange interpolation
-//! The signals of interest (0-80 Hz at 5 kHz, at most 0.1 rad/sample) sit deep in the band
-//! where the Lagrange fractional delay is *maximally flat*: its error vanishes with all
-//! derivatives up to order `N - 1` at DC (Laakso et al. 1996, section on maximally flat FIR
-//! design), i.e. it is exact for polynomials of degree `N - 1`; with the stencil centred as
-//! below its magnitude response never exceeds one (checked numerically here for 2..16 taps,
-//! every delay in [0, 1] and every frequency), so it never amplifies noise. A windowed sinc of the same accuracy at 80 Hz would need many more taps. The
-//! `N` taps sit on `n + s .. n + s + N - 1` with `s = ceil(-D - N/2)`, so the interpolation
-//! point lies within half a sample of the stencil centre (the best-conditioned position).
-//!
-//! Error at 80 Hz, 5 kHz, for every offset `0, 10, .., 90 us` of the default schedule
-//! (worst case over the ten channels; [`FractionalDelay::error_at`] computes it, the tests
-//! check it):
-//!
-//! | taps `N` | amplitude error | phase error (rad) |
-//! |---|---|---|
-//! | 2 (linear) | 1.3e-3 | 1.6e-5 |
-//! | 3 | 2.1e-6 | 6.1e-5 |
-//! | **4 (cubic, default)** | **2.4e-6** | **3.6e-8** |
-//! | 6 | 5.0e-9 | 7.9e-11 |
-//!
-//! so the default meets the target (< 1e-4 relative amplitude, < 1e-5 rad phase) with a
-//! factor of 40 to spare. Without deskew, the phase error of channel `k` at angular
-//! frequency `w` is exactly `w d_k` (1/2 mrad per 10 us at 80 Hz, 4.5 mrad for the tenth
-//! channel), which is what biases cross-coupled damping.
-//!
-//! ## Edges
-//! Within `N` samples of either end the stencil is shifted to stay inside the record
-//! (still exact for polynomials of degree `N - 1`, less accurate for sines); those samples
-//! are outside [`super::Conditioned::valid`].
-//!
-//! ## Cost
-//! `N` multiply-adds per sample, each output summed in registers ([`stencil`]); the fused
-//! front end runs the same kernel tile by tile.
+//! Why Lagrange, the error table and the literature:
+//! docs/manual/conditioning.md#step-4-de-skew.
 
 use crate::IdentificationError;
 

@@ -1,45 +1,14 @@
-//! Step 6 of Zhou et al. (2004), section 3.1: "calculate the velocity from displacement using
-//! a differential FIR filter. After that, derive the acceleration from velocity reusing the
-//! differential FIR filter." We do exactly that with one symmetric FIR differentiator.
+//! Step 6 of Zhou et al. (2004), section 3.1: velocity from displacement with a differential
+//! FIR filter, then acceleration from velocity with the same filter.
 //!
-//! ## The filter: Savitzky-Golay first derivative
-//! A. Savitzky & M. J. E. Golay, "Smoothing and differentiation of data by simplified least
-//! squares procedures", Analytical Chemistry 36(8), 1964: fit a polynomial of degree
-//! [`DEGREE`] (= 4) by least squares to the `2M + 1` samples around `n` and take its slope
-//! at `n`. The weights do not depend on the data, so this is an FIR filter; for the centred
-//! window the weights are **antisymmetric**, `c_{-k} = -c_k`, so the response is
-//! `H(w) = 2j sum_k c_k sin(k w)`: purely imaginary, i.e. exactly the +90 degrees of an
-//! ideal differentiator with **no delay at any frequency** (the weights are antisymmetrised
-//! after the solve so that this holds to the last bit). Degree 4 makes it exact for
-//! polynomials up to degree 4 and its relative gain error grows as `w^4`, not `w^2` as for
-//! the quadratic fit, so a short window stays accurate over the whole 0-80 Hz band.
+//! The filter is the Savitzky-Golay first derivative of degree [`DEGREE`]; its weights are
+//! antisymmetrised after the solve, so that its response is exactly the +90 degrees of an
+//! ideal differentiator, to the last bit. Near either end the window is one-sided (after
+//! Gorry), and the conditioning trims `2M` from [`super::Conditioned::valid`], one `M` per
+//! pass.
 //!
-//! Relative gain error `H(w) / (j w) - 1` at 80 Hz, 5 kHz ([`SavitzkyGolayDerivative::gain_error`]):
-//!
-//! | half-length `M` | velocity (one pass) | acceleration (two passes) | gain at 1 kHz / ideal |
-//! |---|---|---|---|
-//! | 2 | -3.4e-6 | -6.8e-6 | 0.93 |
-//! | 4 | -6.7e-5 | -1.3e-4 | 0.31 |
-//! | **5 (default)** | **-1.6e-4** | **-3.2e-4** | 0.005 |
-//! | 8 | -9.8e-4 | -2.0e-3 | 0.025 |
-//!
-//! The default meets the target (< 1e-3) for both velocity and acceleration. Noise above the
-//! band is already removed by the low-pass, so a short window is chosen for accuracy; the
-//! default has, in addition, a near-zero of its response at 1 kHz.
-//!
-//! ## Edges
-//! Within `M` samples of either end the window is the first (last) `2M + 1` samples and the
-//! fitted polynomial's slope is taken at the sample's own position (P. A. Gorry, "General
-//! least-squares smoothing and differentiation by the convolution (Savitzky-Golay) method",
-//! Analytical Chemistry 62(6), 1990). Those samples are less accurate and are outside
-//! [`super::Conditioned::valid`] (the conditioning trims `2M`, one `M` per pass).
-//!
-//! ## Cost
-//! `M` multiply-adds and `2M` adds per sample, vectorised ([`crate::simd::Simd::derivative`]:
-//! four outputs per vector with AVX2, eight with AVX-512, the same bits); the sum over `k` is
-//! an exclusive range, which the compiler unrolls. In the conditioning chain the two passes
-//! follow the low-pass's backward pass block by block
-//! ([`SavitzkyGolayDerivative::twice_descending`]), while their input is in cache.
+//! Gain error table, window choice and literature:
+//! docs/manual/conditioning.md#step-6-velocity-and-acceleration.
 
 use super::all_finite;
 use crate::estimator::qr::{inverse_gram_from_upper, Triangle};

@@ -1,17 +1,13 @@
 //! Step 7 of Zhou et al. (2004), section 3.1, with their eq. 2 (section 2.2): the oil-film
-//! force from the housing's equation of motion.
+//! force from the housing's equation of motion, in our frame (`F` = film force **on the
+//! journal**, crate convention),
 //!
-//! The housing (mass `m`) carries the exciter forces `f1`, `f2` along their axes at angles
-//! `a1`, `a2` from `+x` (paper: 45 and 135 degrees), the bellows' pull `f3` along `+y`,
-//! gravity `-m g e_y`, and the film's reaction `-F` (`F` = film force **on the journal**,
-//! crate convention). Newton for the housing, `m X'' = F_exc + (f3 - m g) e_y - F`, gives
+//! `F = f1 (cos a1, sin a1) + f2 (cos a2, sin a2) + (f3 - m g) e_y - m X''`.
 //!
-//! `F = f1 (cos a1, sin a1) + f2 (cos a2, sin a2) + (f3 - m g) e_y - m X''`,
+//! The **static part** is the mean over the record's valid scans
+//! ([`super::Conditioned::static_force_n`]), the **dynamic part** the rest.
 //!
-//! which is the paper's eq. 2 in our frame (`f_X = f1 cos45 - f2 cos45 - m X''`,
-//! `f_Y = f1 sin45 + f2 sin45 + f3 - m g - m Y''`). The **static part** is the mean over the
-//! record's valid scans ([`super::Conditioned::static_force_n`]), the **dynamic part** (the
-//! paper's film-force increment) the rest.
+//! Derivation: docs/manual/conditioning.md#step-7-the-film-force-eq-2.
 
 use super::Mechanics;
 

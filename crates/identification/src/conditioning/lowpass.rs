@@ -1,56 +1,15 @@
-//! Step 1 of Zhou et al. (2004), section 3.1: "feed the raw data to a low pass filter to
-//! eliminate high frequency noise". Here: a **zero-phase** Butterworth low-pass, run forward
-//! then backward (`filtfilt`), so that no channel is shifted in time by the filter.
+//! Step 1 of Zhou et al. (2004), section 3.1: a **zero-phase** Butterworth low-pass, run
+//! forward then backward (`filtfilt`), so that no channel is shifted in time by the filter.
+//! Bilinear transform with the cutoff pre-warped, a cascade of second-order sections in
+//! direct form I.
 //!
-//! ## Design
-//! Order-`N` Butterworth (maximally flat, no passband ripple) by the bilinear transform with
-//! the cutoff pre-warped, `K = tan(pi f_c / f_s)`, as a cascade of second-order sections
-//! (one first-order section when `N` is odd), each in direct form I. The section of the
-//! analog pole pair with damping `zeta_k = sin((2k + 1) pi / (2N))` is
+//! Edges as MATLAB's `filtfilt`: odd reflection at each end, every section started in its DC
+//! steady state; the settling length is also trimmed from [`super::Conditioned::valid`].
+//! Eight columns run in lock-step as the lanes of frames, and the forward output stays in
+//! frames until the backward pass hands it on while it is in cache (ADR 0016).
 //!
-//! `H_k(z) = K^2 (1 + z^-1)^2 / [(1 + 2 zeta K + K^2) + 2 (K^2 - 1) z^-1 + (1 - 2 zeta K + K^2) z^-2]`.
-//!
-//! Run forward and backward, the magnitude is squared and the phase cancels exactly:
-//!
-//! `|H_ff(f)| = 1 / (1 + (tan(pi f / f_s) / K)^(2N))`,  `arg H_ff = 0`.
-//!
-//! Default (`f_c = 200 Hz`, `N = 4`, `f_s = 5 kHz`, [`Butterworth::gain`]):
-//!
-//! | frequency | forward-backward gain |
-//! |---|---|
-//! | 0-80 Hz | 1 down to 0.999367 (monotonic droop, 6.3e-4 = 5.5 mdB at 80 Hz; no ripple) |
-//! | 200 Hz | 0.5 (-6 dB, the cutoff of the squared response) |
-//! | 1 kHz | 8.4e-7 (-122 dB) |
-//!
-//! Every channel that enters eq. 1 and eq. 2 goes through the *same* filter, so this droop
-//! is common to displacement, velocity, acceleration and force and cancels in the
-//! least-squares fit (a common LTI filter applied to both sides of a linear relation
-//! preserves it); only the *differences* between channels (deskew, differentiator) bias
-//! the coefficients.
-//!
-//! ## Edges (Gustafsson 1996)
-//! A forward-backward filter started from rest rings at both ends. F. Gustafsson,
-//! "Determining the initial states in forward-backward filtering", IEEE Trans. Signal
-//! Processing 44(4), 1996, shows how to choose the initial states so that forward-backward
-//! and backward-forward runs agree (SciPy's `filtfilt(method="gust")`). We use the simpler,
-//! widely used scheme of MATLAB's `filtfilt` and SciPy's default: the signal is extended at
-//! each end by its **odd reflection** about the end sample (value and slope continuous),
-//! and every section starts in its **DC steady state** for its first input, forward and
-//! then backward. The extension is as long as the filter's settling time
-//! ([`Butterworth::settling_samples`], where the slowest pole has decayed to 1e-7), and the
-//! conditioned record still excludes that many samples at each end from
-//! [`super::Conditioned::valid`], because the reflection is only a guess of the signal
-//! beyond the record.
-//!
-//! ## Cost
-//! Eight columns run in lock-step as the lanes of frames (`[f64; 8]` per sample), two
-//! sections per pass, so sixteen independent recursions overlap and each sample is read and
-//! written once per direction and pair of sections. Each section is arranged so that only
-//! one multiply and one subtract are on the recursion's loop-carried path ([`Lanes`]). The
-//! forward pass's output stays in frames until the backward pass has made it final, which
-//! hands it on chunk by chunk while it is in cache ([`Consume8`]); the input comes in the
-//! same way ([`Produce8`]), so the conditioning's front end feeds the filter tile by tile
-//! (ADR 0016).
+//! Design, gains, and why these edges rather than Gustafsson's (1996):
+//! docs/manual/conditioning.md#step-1-low-pass.
 
 use super::all_finite;
 use crate::simd::{self, Isa, Kernel, Simd};

@@ -2,62 +2,19 @@
 //!
 //! Zhou et al. (2004), section 3.1, process each record in nine steps; this module does
 //! steps 1-7 and hands the kinematics `r, r', r''` and the film force `F` of eq. 2 to the
-//! least-squares estimator (steps 8-9, [`crate::estimator`]).
+//! least-squares estimator (steps 8-9, [`crate::estimator`]). One submodule per stage holds
+//! its design and kernels: [`range_check`] (step 2), [`deskew`] (4), [`lowpass`] (1),
+//! [`kinematics`] (5), [`differentiate`] (6), [`film_force`] (7).
 //!
-//! | paper step | stage | here |
-//! |---|---|---|
-//! | 3 volts -> physical value | `si = (volts - offset) / sensitivity` | first, per channel (by the reciprocal sensitivity) |
-//! | 2 linear-range check | [`range_check`] | on the raw samples, before any filter |
-//! | 4 "inner-insert filter" (multiplex phase) | [`deskew`] | Lagrange fractional delay per channel |
-//! | 1 low-pass | [`lowpass`] | zero-phase Butterworth, forward-backward, same on every channel |
-//! | 5 relative / absolute displacement | [`kinematics`] | `r` = mean of ends A, B; tilt = A - B; `X` = frame probes |
-//! | 6 velocity, acceleration | [`differentiate`] | Savitzky-Golay FIR, applied twice |
-//! | 7 eq. 2, static / dynamic | [`film_force`] | `F = F_exc + (f3 - m g) e_y - m X''`; static = mean over `valid` |
+//! The range check reads the raw samples, before any filter, and every channel of eq. 1 and
+//! eq. 2 passes through the same low-pass, so that its droop cancels in the fit. The stages
+//! treat a record's ends apart from its interior: only [`Conditioned::valid`] is to be used.
 //!
-//! ## Order of the stages
-//! Deskew, low-pass, kinematics and differentiation are all linear and time-invariant, so
-//! their order does not change the result away from the record's ends; what matters is
-//! that (a) the range check sees the **raw** samples (a filter would smear a clipped
-//! plateau below the threshold), and (b) every channel that enters eq. 1 and eq. 2 passes
-//! through the **same** low-pass, so its passband droop is common to both sides of the
-//! linear relation and cancels in the fit. Channels then differ only by the deskew residual
-//! and the differentiator's gain error, which are the budgeted numbers below.
+//! [`Chain`] designs the stages once and runs them fused; a record ([`condition`]), a window
+//! of one ([`condition_window_into`]), a stream of scans ([`stream::ZeroPhaseStream`]) and the
+//! causal chain for live use ([`causal::CausalChain`]) are drivers over it (ADR 0022).
 //!
-//! ## Error budget at the top of the excitation band (80 Hz, 5 kHz, defaults)
-//!
-//! | stage | error at 80 Hz | literature |
-//! |---|---|---|
-//! | deskew, 4-tap Lagrange, offsets 0..90 us | amplitude <= 2.4e-6, phase <= 3.6e-8 rad | Laakso et al., "Splitting the unit delay", IEEE SP Magazine 1996 |
-//! | low-pass, Butterworth N = 4, 200 Hz, forward-backward | gain 0.999367 (-6.3e-4), phase exactly 0; 1 kHz at -122 dB | Gustafsson, IEEE Trans. SP 44(4) 1996 (edge states) |
-//! | differentiator, Savitzky-Golay degree 4, M = 5 | gain -1.6e-4 (velocity), -3.2e-4 (acceleration), phase exact | Savitzky & Golay, Anal. Chem. 1964; Gorry, Anal. Chem. 1990 (edges) |
-//!
-//! The tests in `tests/conditioning.rs` measure each of these on synthetic sines.
-//!
-//! ## The valid range
-//! Every stage treats the record's ends differently from its interior (shifted Lagrange
-//! stencils, reflected extension, one-sided Savitzky-Golay windows). [`Conditioned::valid`]
-//! excludes, at each end, the deskew stencil's reach (2 samples for 4 taps) + the low-pass
-//! settling time (slowest pole down to 1e-7: 169 samples for the defaults) + `2 M` (two
-//! differentiator passes, 10 samples): 181 samples, 36 ms, for the defaults. The estimator
-//! must use only `valid`; the static force is the mean over `valid`.
-//!
-//! ## Inputs that are refused
-//! Non-finite samples (`BadInput` naming channel and sample index), columns of unequal
-//! length, a channel missing or given twice, a non-positive sample rate, a cutoff at or
-//! above Nyquist, a record shorter than the edge trims. A probe out of its linear range is
-//! *not* an error of [`condition`]: the record is conditioned and carries the violation
-//! ([`Conditioned::range_violations`]), and [`Conditioned::require_in_range`] is what a
-//! consumer calls to refuse it, as the paper's step 2 demands.
-//!
-//! ## One prepared chain
-//! [`Chain`] designs the stages once from the calibration, the rig's mechanics and this
-//! configuration and runs them fused, tile by tile, on the widest vector instructions the
-//! CPU has ([`crate::simd`]; the bits do not depend on which). A record ([`condition`]), a
-//! window of one ([`condition_window_into`], buffers reused), a stream of scans
-//! ([`stream::ZeroPhaseStream`]) and the causal chain for live use ([`causal::CausalChain`])
-//! are drivers over it (ADR 0022). The stage modules above hold the designs and the kernels;
-//! `tests/chain.rs` writes the stages out plainly, one after the other, and compares the
-//! chain with them bit for bit.
+//! Design, order of the stages, error budget and refusals: docs/manual/conditioning.md.
 
 pub mod causal;
 mod chain;

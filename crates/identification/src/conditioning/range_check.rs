@@ -1,24 +1,13 @@
 //! Step 2 of Zhou et al. (2004), section 3.1: "all of the data in this file are considered
 //! invalid if an eddy current sensor's output is out of its own linear range".
 //!
-//! The test is exactly [`Calibration::within_linear_range`]: a reading is in range when it
-//! lies strictly inside the calibrated linear range (in volts) by more than half an LSB, so
-//! a sensor clipped at an edge (which reads within half an LSB of it after quantisation)
-//! counts as out of range. Records given in SI are mapped back to volts with the channel's
-//! calibration (`volts = offset + sensitivity * si`) and tested the same way.
+//! The test is exactly [`Calibration::within_linear_range`]; records given in SI are mapped
+//! back to volts and tested the same way. It runs on the **raw** samples, before any filter,
+//! because a filter would smear a clipped plateau below the threshold. It never acts
+//! silently: [`check`] reports, and [`super::condition`] carries every violation so that
+//! the estimator refuses the record ([`super::Conditioned::require_in_range`]).
 //!
-//! ## Where in the chain
-//! The paper lists its low-pass (step 1) before this check; we check the **raw** samples,
-//! before any filter: a clipped plateau or a single out-of-range spike is what the sensor
-//! said, and a filter would smear it below the threshold. The check is never skipped and is
-//! never silently acted on: [`check`] reports, for a channel, the first offending sample
-//! (index and value), how many samples offend, and the range; [`super::condition`] carries
-//! every violation in [`super::Conditioned::range_violations`] so the estimator refuses the
-//! record ([`super::Conditioned::require_in_range`]).
-//!
-//! All calibrated channels are checked, not only the six eddy-current probes: a clipped
-//! force sensor corrupts eq. 2 just as surely. Each violation names its channel, so a
-//! consumer may decide, for instance, that an out-of-range temperature is only a warning.
+//! Design: docs/manual/conditioning.md#step-2-linear-range-check.
 
 use oilfilm_physics::daq::{Calibration, ChannelId};
 

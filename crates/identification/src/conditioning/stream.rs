@@ -1,23 +1,15 @@
-//! The zero-phase chain as a stream (ADR 0019): the front end (steps 3, 4, the mean and tilt
-//! of step 5, eq. 2's applied part) and the low-pass's forward pass run once per scan, their
-//! state carried from call to call; each block's backward pass, derivatives and eq. 2's
-//! inertial part run over the block and the low-pass's settling past it.
+//! The zero-phase chain as a stream (ADR 0019): the front end and the low-pass's forward
+//! pass run once per scan, their state carried from call to call; each block's backward
+//! pass, derivatives and eq. 2's inertial part run over the block and the low-pass's
+//! settling past it, the backward pass starting in its DC steady state where a record's
+//! reflection would stand. Outputs are bit for bit independent of how the scans are cut
+//! into calls.
 //!
-//! Conditioning a block as a window ([`super::Chain::condition_window_into`]) would put
-//! `2 edge` more scans through the front end and both passes per block (at the launch files'
-//! 55.5 Hz and 1 000-scan blocks, 2 234 scans for 1 000). Here a scan goes through the front
-//! end and the forward pass once, and the backward pass of a block starts in its DC steady
-//! state on the forward output `settling` scans past the block (plus the differentiators'
-//! reach), where the reflection stood: the same filter, its start transient decayed to 1e-7
-//! by the block either way. The forward pass starts once, in its steady state, at the
-//! stream's first scan whose de-skew stencils are complete. Outputs are bit for bit
-//! independent of how the scans are cut into calls.
+//! A block whose window holds a reading the front end cannot turn into a finite value is
+//! not conditioned here ([`ZeroPhaseStream::block`] returns `None`; the caller conditions
+//! that window as a record, which names the reading).
 //!
-//! A block whose window (the block and `edge` scans on either side) holds a reading the
-//! front end cannot turn into a finite value is not conditioned here ([`ZeroPhaseStream::block`]
-//! returns `None`; the caller conditions that window as a record, which names the reading),
-//! and the forward pass starts again in steady state after such a reading. The range check
-//! (step 2) is the windowed one, on the block's window of raw readings.
+//! Design: docs/manual/conditioning.md#the-zero-phase-stream.
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
