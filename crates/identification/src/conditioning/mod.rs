@@ -11,7 +11,7 @@
 //! treat a record's ends apart from its interior: only [`Conditioned::valid`] is to be used.
 //!
 //! [`Chain`] designs the stages once and runs them fused; a record ([`condition`]), a window
-//! of one ([`condition_window_into`]), a stream of scans ([`stream::ZeroPhaseStream`]) and the
+//! of one ([`Chain::condition_window_into`]), a stream of scans ([`stream::ZeroPhaseStream`]) and the
 //! causal chain for live use ([`causal::CausalChain`]) are drivers over it (ADR 0022).
 //!
 //! Design, order of the stages, error budget and refusals: docs/manual/conditioning.md.
