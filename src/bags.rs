@@ -139,7 +139,7 @@ pub fn print_shortfalls(name: &str, shortfalls: &[Shortfall]) {
 /// status states: what the batch identification (`oilfilm identify BAG`) reads, as it reads
 /// an ASCII record.
 pub struct BagRecord {
-    pub raw: oilfilm_identification::conditioning::RawRecord,
+    pub raw: oilfilm_identification::record::RawRecord,
     /// Conversion offset of each of `raw`'s channels after its scan start (s).
     pub offsets_s: Vec<f64>,
     /// The first non-zero shaft speed of the rig status messages (rpm).
@@ -164,7 +164,7 @@ pub struct BagRead {
 /// gap is an error naming the frame) and share one channel layout, units and rate. What
 /// `oilfilm identify BAG` and `oilfilm diagnose BAG` both analyse.
 pub fn record_of_bag(dir: &std::path::Path, options: ReadOptions) -> Result<BagRecord> {
-    use oilfilm_identification::conditioning::{RawRecord, RawUnits};
+    use oilfilm_identification::record::{RawRecord, RawUnits};
     use oilfilm_physics::daq::ChannelId;
     let name = dir.display().to_string();
     let (frames, status, shortfalls) = read_bag_inputs_with(dir, reader_threads(), options)?;

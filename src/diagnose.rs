@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use oilfilm_diagnosis::{diagnose, diagnose_prepared, evidence, show, Diagnosis, DiagnosisOptions, ShowConfig};
-use oilfilm_identification::conditioning::RawRecord;
 use oilfilm_identification::pipeline::{self, SpeedSource};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_identification::simulate;
 use oilfilm_physics::config::RigConfig;
 

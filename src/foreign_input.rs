@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use oilfilm_foreign::{Block, ChannelMap, ForeignRecord, RecordSpeed};
 use oilfilm_graph::daq::DaqParams;
 use oilfilm_graph::foreign::ForeignSource;
-use oilfilm_identification::conditioning::{RawRecord, RawUnits};
 use oilfilm_identification::pipeline::{self, SpeedSource};
+use oilfilm_identification::record::{RawRecord, RawUnits};
 use oilfilm_msgs::{Header, RigStatus};
 use oilfilm_physics::config::RigConfig;
 

@@ -10,9 +10,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use oilfilm_diagnosis::{diagnose_prepared, evidence, show, DiagnosisOptions, ShowConfig};
-use oilfilm_identification::conditioning::RawRecord;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, SpeedSource};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_identification::simulate::{self, simulate, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::Calibration;

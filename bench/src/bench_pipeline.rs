@@ -197,7 +197,7 @@ fn run_python(
     python: &PathBuf,
     rec: &SimulatedRecord,
     rig: &RigConfig,
-    raw: &conditioning::RawRecord,
+    raw: &oilfilm_identification::record::RawRecord,
     ccfg: &conditioning::ConditioningConfig,
     (trim, window): (usize, usize),
     scans: usize,

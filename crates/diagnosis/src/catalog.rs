@@ -32,7 +32,7 @@ use std::rc::Rc;
 
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::lowpass::Butterworth;
-use oilfilm_identification::conditioning::RawUnits;
+use oilfilm_identification::record::RawUnits;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;
 use oilfilm_physics::film::Running;

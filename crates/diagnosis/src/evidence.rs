@@ -37,8 +37,9 @@ use std::ops::Range;
 
 use nalgebra::{DMatrix, DVector};
 use oilfilm_identification::conditioning::lowpass::Butterworth;
-use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord};
+use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics};
 use oilfilm_identification::pipeline::{self, Identification, PipelineConfig, SpeedSource};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::Calibration;
 

@@ -35,8 +35,8 @@
 use std::collections::BTreeMap;
 
 use nalgebra::Matrix2;
-use oilfilm_identification::conditioning::RawRecord;
 use oilfilm_identification::pipeline::{SpeedSource, FRAME};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::Calibration;
 use serde::{Deserialize, Serialize};

@@ -9,9 +9,9 @@
 use oilfilm_diagnosis::evidence::{self, PrepareOptions};
 use oilfilm_diagnosis::show::{TrendVariable, COEFFICIENT_NAMES};
 use oilfilm_diagnosis::{DiagnosisError, Show, ShowConfig};
-use oilfilm_identification::conditioning::RawRecord;
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline::{self, SpeedSource};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_identification::simulate::{self, SimulateOptions};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::Calibration;

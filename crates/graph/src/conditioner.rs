@@ -40,8 +40,9 @@
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
 use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
-use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
+use oilfilm_identification::conditioning::{self, Conditioned, ConditioningConfig, Mechanics};
 use oilfilm_identification::pipeline::{calibration_for, mechanics_of};
+use oilfilm_identification::record::{RawRecord, RawUnits};
 use oilfilm_msgs::{ConditionedFrame, DaqFrame, Header, BEARING_FRAME_ID};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::ChannelId;

@@ -15,7 +15,8 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use oilfilm_identification::conditioning::causal::{CausalChain, CausalOutput};
-use oilfilm_identification::conditioning::{condition, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits};
+use oilfilm_identification::conditioning::{condition, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics};
+use oilfilm_identification::record::{RawRecord, RawUnits};
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;
 

@@ -47,12 +47,12 @@ use oilfilm_physics::film::{FilmModelConfig, Running};
 use oilfilm_physics::operating_point::{self, EquilibriumOptions, OperatingPoint};
 use serde::{Deserialize, Serialize};
 
-use crate::conditioning::RawRecord;
 use crate::error::IdentificationError;
 use crate::estimator::qr;
 use crate::estimator::svd::SmallSvd;
 use crate::excitation::ExcitationPlan;
 use crate::pipeline::{self, PipelineConfig, SpeedSource, WindowReport};
+use crate::record::RawRecord;
 use crate::simulate::{self, SimulateOptions};
 
 /// Zhou's normalisation and the frame, stated in every output.

@@ -29,6 +29,7 @@ pub mod estimator;
 pub mod excitation;
 pub mod fft;
 pub mod pipeline;
+pub mod record;
 pub mod simd;
 pub mod simulate;
 

@@ -17,9 +17,10 @@ use oilfilm_physics::dimensionless::{self, DimensionlessCoefficients};
 use oilfilm_physics::film::Running;
 use serde::{Deserialize, Serialize};
 
-use crate::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RangeViolation, RawRecord};
+use crate::conditioning::{self, Conditioned, ConditioningConfig, Mechanics, RangeViolation};
 use crate::error::IdentificationError;
 use crate::estimator::{self, Coefficients, EstimatorConfig, FrequencyEstimate, Signals, WindowEstimate};
+use crate::record::RawRecord;
 
 /// The frame and sign convention every output states.
 pub const FRAME: &str = "x horizontal, y vertical up, journal turning from +x to +y; r = journal centre relative to bearing centre; \

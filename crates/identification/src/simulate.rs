@@ -10,9 +10,9 @@ use oilfilm_physics::rig::{RigInput, RigSample};
 use oilfilm_physics::simulation::SimulatedRig;
 
 use crate::ascii::{self, Header, Record, Units};
-use crate::conditioning::{RawRecord, RawUnits};
 use crate::error::IdentificationError;
 use crate::excitation::{ExcitationPlan, Limits};
+use crate::record::{RawRecord, RawUnits};
 
 /// A simulated acquisition.
 #[derive(Debug, Clone)]

@@ -10,10 +10,11 @@ use simulated_rig::*;
 
 use nalgebra::Matrix2;
 use oilfilm_identification::conditioning::causal::{self, CausalChain, CausalOutput};
-use oilfilm_identification::conditioning::{self, ConditioningConfig, RawUnits};
+use oilfilm_identification::conditioning::{self, ConditioningConfig};
 use oilfilm_identification::estimator::{self, EstimatorConfig, Signals, WindowEstimate};
 use oilfilm_identification::excitation::ExcitationPlan;
 use oilfilm_identification::pipeline;
+use oilfilm_identification::record::RawUnits;
 use oilfilm_identification::simulate::{self, SimulateOptions, SimulatedRecord};
 use oilfilm_physics::config::RigConfig;
 use oilfilm_physics::daq::{ChannelId, CHANNEL_COUNT};

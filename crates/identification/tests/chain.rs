@@ -5,7 +5,8 @@
 
 use crate::{reference, volts_record};
 
-use oilfilm_identification::conditioning::{condition, deskew, differentiate, lowpass, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord};
+use oilfilm_identification::conditioning::{condition, deskew, differentiate, lowpass, Chain, Conditioned, ConditioningConfig, Mechanics};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_identification::simd::Isa;
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{ChannelId, DaqConfig};
@@ -82,7 +83,7 @@ fn fused_chain_equals_the_stages_bit_for_bit() {
                 for (&ch, column) in raw.channels.iter().zip(raw.columns.iter_mut()) {
                     *column = reference::to_si(ch, column, &calibration);
                 }
-                raw.units = oilfilm_identification::conditioning::RawUnits::Si;
+                raw.units = oilfilm_identification::record::RawUnits::Si;
             }
             let chain = Chain::new(&calibration, &mechanics, &config, raw.sample_rate_hz).unwrap();
             let by_isa: Vec<(Isa, Conditioned)> = Isa::available().into_iter().map(|isa| (isa, chain.clone().with_isa(isa).condition(&raw).unwrap())).collect();

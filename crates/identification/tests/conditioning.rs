@@ -6,9 +6,8 @@ use std::f64::consts::PI;
 
 use crate::reference;
 use nalgebra::{DMatrix, DVector};
-use oilfilm_identification::conditioning::{
-    condition, deskew, differentiate, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
-};
+use oilfilm_identification::conditioning::{condition, deskew, differentiate, lowpass, range_check, Chain, Conditioned, ConditioningConfig, Mechanics};
+use oilfilm_identification::record::{RawRecord, RawUnits};
 use oilfilm_identification::IdentificationError;
 use oilfilm_physics::daq::{Calibration, ChannelId, Daq, DaqConfig, DaqScan, PhysicalSignals};
 use oilfilm_physics::effects::Effects;

@@ -5,7 +5,8 @@
 use crate::volts_record;
 
 use oilfilm_identification::conditioning::stream::{Block, ZeroPhaseStream};
-use oilfilm_identification::conditioning::{condition, Chain, Conditioned, ConditioningConfig, Mechanics, RawRecord};
+use oilfilm_identification::conditioning::{condition, Chain, Conditioned, ConditioningConfig, Mechanics};
+use oilfilm_identification::record::RawRecord;
 use oilfilm_identification::simd::Isa;
 use oilfilm_physics::daq::DaqConfig;
 use volts_record::volts_record;

@@ -19,7 +19,8 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{Chain, ConditioningConfig, Mechanics, RangeViolation, RawUnits};
+use super::{Chain, ConditioningConfig, Mechanics, RangeViolation};
+use crate::record::RawUnits;
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
 

@@ -20,10 +20,8 @@ use super::deskew::{stencil_any, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::Applied;
 use super::lowpass::{Butterworth, Consume8, Produce8, MAX_ORDER};
-use super::{
-    all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, RawRecord, RawUnits,
-    COLUMNS,
-};
+use super::{all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, COLUMNS};
+use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
 

@@ -11,7 +11,8 @@
 
 use oilfilm_physics::daq::{Calibration, ChannelId};
 
-use super::{first_non_finite, non_finite_error, RangeViolation, RawUnits};
+use super::{first_non_finite, non_finite_error, RangeViolation};
+use crate::record::RawUnits;
 use crate::IdentificationError;
 
 /// Checks one column of `channel` (in `units`) against its calibrated linear range.

@@ -15,7 +15,8 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, Derivatives, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation, RawRecord, RawUnits};
+use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation};
+use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
 

@@ -1,6 +1,6 @@
 //! A volts record of the rig's ten channels for the conditioning's tests.
 
-use oilfilm_identification::conditioning::{RawRecord, RawUnits};
+use oilfilm_identification::record::{RawRecord, RawUnits};
 use oilfilm_physics::daq::{Calibration, ChannelId};
 
 /// A volts record of smooth motion plus noise, every reading inside its probe's linear
