@@ -20,7 +20,7 @@ use super::deskew::{stencil_any, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::Applied;
 use super::lowpass::{Butterworth, Consume8, Produce8, MAX_ORDER};
-use super::{all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, COLUMNS};
+use super::{all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, Work};
 use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
@@ -151,11 +151,15 @@ impl Chain {
     /// bits) is the one a record of only those scans, starting `window.start` scans later,
     /// gives. On error `out` is left empty.
     pub fn condition_window_into(&self, raw: &RawRecord, window: Range<usize>, out: &mut Conditioned) -> Result<(), IdentificationError> {
-        let mut pool = out.take_columns();
-        let mut work = std::mem::take(&mut out.work);
-        let mut violations = std::mem::take(&mut out.range_violations);
-        violations.clear();
-        *out = Conditioned::default();
+        let result = self.fill(raw, window, out);
+        if result.is_err() {
+            *out = Conditioned { work: std::mem::take(&mut out.work), ..Conditioned::default() };
+        }
+        result
+    }
+
+    /// [`Chain::condition_window_into`], each column written in its own buffer.
+    fn fill(&self, raw: &RawRecord, window: Range<usize>, out: &mut Conditioned) -> Result<(), IdentificationError> {
         raw.validate_shape()?;
         if window.end > raw.len() || window.start > window.end {
             return Err(IdentificationError::BadInput { what: "window".into(), reason: format!("scans {window:?} of a record of {} scans", raw.len()) });
@@ -181,60 +185,65 @@ impl Chain {
             return Err(too_short(n, self.edge));
         }
         let valid = self.edge..n - self.edge;
-
-        // Seventeen column buffers from the previous result, resized to `n` (their contents
-        // are overwritten by every stage), and the housing's y velocity from the work.
-        let mut used = 0;
-        let mut next = || -> Vec<f64> {
-            let mut v = pool.get_mut(used).map(std::mem::take).unwrap_or_default();
-            used += 1;
-            if v.capacity() < n {
-                // Fresh zeroed memory straight from the allocator (no separate fill pass).
-                return vec![0.0; n];
-            }
-            v.truncate(n);
-            v.resize(n, 0.0);
-            v
-        };
-        let mut front: [Vec<f64>; CHANNEL_COUNT] = std::array::from_fn(|_| next());
-        // `t_s` holds the housing's x velocity until the times are written, last.
-        let [vx, ax, vy, ay, t_s, hax, hay] = std::array::from_fn(|_| next());
-        debug_assert_eq!(used, COLUMNS);
-        let mut hvy = std::mem::take(&mut work.velocity);
-        hvy.clear();
-        hvy.resize(n, 0.0);
-        let mut derived = [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]];
-        let mut scratch = std::mem::take(&mut work.scratch);
-        let t0 = raw.start_time_s + window.start as f64 / self.sample_rate_hz;
         let mut tiles = FrontTiles::new(self, raw, &window, &col_of)?;
-        tiles.s.load = std::mem::take(&mut front[8]);
-        tiles.s.temp = std::mem::take(&mut front[9]);
-        let filtered = self.filter(&mut tiles, dynamic(&mut front), &mut derived, &mut scratch, valid.clone(), t0);
-        front[8] = std::mem::take(&mut tiles.s.load);
-        front[9] = std::mem::take(&mut tiles.s.temp);
+        #[rustfmt::skip]
+        let Conditioned {
+            t_s, x_m, y_m, tilt_x_m, tilt_y_m, vx_m_s, vy_m_s, ax_m_s2, ay_m_s2, housing_x_m, housing_y_m, housing_ax_m_s2, housing_ay_m_s2,
+            fx_n, fy_n, temperature_c, static_load_n, range_violations, work: Work { velocity: [hvx, hvy], scratch }, ..
+        } = &mut *out;
+        #[rustfmt::skip]
+        let columns = [
+            &mut *t_s, &mut *x_m, &mut *y_m, &mut *tilt_x_m, &mut *tilt_y_m, &mut *vx_m_s, &mut *vy_m_s, &mut *ax_m_s2, &mut *ay_m_s2,
+            &mut *housing_x_m, &mut *housing_y_m, &mut *housing_ax_m_s2, &mut *housing_ay_m_s2, &mut *fx_n, &mut *fy_n, &mut *temperature_c,
+            &mut *static_load_n, &mut *hvx, &mut *hvy,
+        ];
+        for v in columns {
+            // Every value is overwritten: a buffer long enough is only cut, a short one
+            // replaced by zeroed memory straight from the allocator (no fill pass).
+            if v.capacity() < n {
+                *v = vec![0.0; n];
+            }
+            v.resize(n, 0.0);
+        }
+        range_violations.clear();
+        // The record's load and temperature columns are the front end's while it runs.
+        std::mem::swap(&mut tiles.s.load, static_load_n);
+        std::mem::swap(&mut tiles.s.temp, temperature_c);
+        let filter = Filter {
+            chain: self,
+            producer: &mut tiles,
+            dynamic: [x_m, y_m, tilt_x_m, tilt_y_m, housing_x_m, housing_y_m, fx_n, fy_n].map(|c| &mut c[..]),
+            derived: [[vx_m_s, ax_m_s2], [vy_m_s, ay_m_s2], [hvx, housing_ax_m_s2], [hvy, housing_ay_m_s2]].map(|p| p.map(|c| &mut c[..])),
+            times: t_s,
+            scratch,
+            valid: valid.clone(),
+            t0: raw.start_time_s + window.start as f64 / self.sample_rate_hz,
+        };
+        let filtered = simd::dispatch(self.isa, filter);
+        std::mem::swap(&mut tiles.s.load, &mut out.static_load_n);
+        std::mem::swap(&mut tiles.s.temp, &mut out.temperature_c);
         let mut outcome = filtered?.ok_or_else(|| IdentificationError::invalid("conditioning", "the derivatives did not cover the record"))?;
         if tiles.bad > 0 || raw.units == RawUnits::Si {
             // The front end counted what it could not use (or does not check an SI record's
             // range): name it.
-            self.explain(&tiles.chans, raw.units, &mut violations)?;
-            outcome.finite &= all_finite(&front[9]);
+            self.explain(&tiles.chans, raw.units, &mut out.range_violations)?;
+            outcome.finite &= all_finite(&out.temperature_c);
         }
-        let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
         // Finite inputs can still overflow in the filters (|x| near f64::MAX): never hand a
         // non-finite number on. The stages checked their final outputs as they wrote them;
         // only if one of them saw a non-finite value are the columns searched, to name it.
-        let [x_m, y_m, tilt_x_m, tilt_y_m, housing_x_m, housing_y_m, fx_n, fy_n, static_load_n, temperature_c] = front;
         if !outcome.finite {
+            let o = &*out;
             for (name, col) in [
-                ("x_m", &x_m),
-                ("y_m", &y_m),
-                ("tilt_x_m", &tilt_x_m),
-                ("tilt_y_m", &tilt_y_m),
-                ("ax_m_s2", &ax),
-                ("ay_m_s2", &ay),
-                ("fx_n", &fx_n),
-                ("fy_n", &fy_n),
-                ("temperature_c", &temperature_c),
+                ("x_m", &o.x_m),
+                ("y_m", &o.y_m),
+                ("tilt_x_m", &o.tilt_x_m),
+                ("tilt_y_m", &o.tilt_y_m),
+                ("ax_m_s2", &o.ax_m_s2),
+                ("ay_m_s2", &o.ay_m_s2),
+                ("fx_n", &o.fx_n),
+                ("fy_n", &o.fy_n),
+                ("temperature_c", &o.temperature_c),
             ] {
                 if let Some(i) = first_non_finite(col) {
                     return Err(IdentificationError::BadInput {
@@ -244,47 +253,9 @@ impl Chain {
                 }
             }
         }
-        work.velocity = hvy;
-        work.scratch = scratch;
-        *out = Conditioned {
-            t_s,
-            x_m,
-            y_m,
-            tilt_x_m,
-            tilt_y_m,
-            vx_m_s: vx,
-            vy_m_s: vy,
-            ax_m_s2: ax,
-            ay_m_s2: ay,
-            housing_x_m,
-            housing_y_m,
-            housing_ax_m_s2: hax,
-            housing_ay_m_s2: hay,
-            fx_n,
-            fy_n,
-            static_force_n: outcome.static_force_n,
-            temperature_c,
-            static_load_n,
-            valid,
-            range_violations: violations,
-            work,
-        };
+        out.static_force_n = outcome.static_force_n;
+        out.valid = valid;
         Ok(())
-    }
-
-    /// The low-pass, both derivatives and eq. 2 over the window `producer` writes, on this
-    /// chain's instruction set; `derived` are `[first, second]` derivative of x, y, X, Y.
-    fn filter<P: Produce8<Error = IdentificationError>>(
-        &self,
-        producer: &mut P,
-        dynamic: [&mut [f64]; 8],
-        derived: &mut [[Vec<f64>; 2]; 4],
-        scratch: &mut Vec<f64>,
-        valid: Range<usize>,
-        t0: f64,
-    ) -> Result<Option<Outcome>, IdentificationError> {
-        let derived = derived.each_mut().map(|p| p.each_mut().map(|c| &mut c[..]));
-        simd::dispatch(self.isa, Filter { chain: self, producer, dynamic, derived, scratch, valid, t0 })
     }
 
     /// Names what the front end could not use, from its channels `chans` (in [`ChannelId::ALL`]
@@ -312,13 +283,6 @@ impl Chain {
     }
 }
 
-/// The eight columns of `[x, y, tilt_x, tilt_y, X, Y, fx, fy, f3, temperature]` the
-/// low-pass filters.
-fn dynamic(front: &mut [Vec<f64>; CHANNEL_COUNT]) -> [&mut [f64]; 8] {
-    let [x, y, tx, ty, hx, hy, fx, fy, _, _] = front;
-    [x, y, tx, ty, hx, hy, fx, fy].map(|c| &mut c[..])
-}
-
 /// What the filter pass tells the record driver: whether every final output is finite, and
 /// eq. 2's static part.
 #[derive(Clone, Copy, Default)]
@@ -332,8 +296,9 @@ struct Filter<'a, P> {
     chain: &'a Chain,
     producer: &'a mut P,
     dynamic: [&'a mut [f64]; 8],
-    /// `[first, second]` derivative of x, y, X, Y (the first of X in the times' column).
+    /// `[first, second]` derivative of x, y, X, Y.
     derived: [[&'a mut [f64]; 2]; 4],
+    times: &'a mut [f64],
     scratch: &'a mut Vec<f64>,
     valid: Range<usize>,
     t0: f64,
@@ -345,16 +310,15 @@ impl<P: Produce8<Error = IdentificationError>> Kernel for Filter<'_, P> {
 
     #[inline(always)]
     fn run<S: Simd>(self, simd: S) -> Self::Output {
-        let Filter { chain, producer, mut dynamic, derived, scratch, valid, t0 } = self;
-        let [[vx, ax], [vy, ay], [t_s, hax], [hvy, hay]] = derived;
-        let mut d = Derivatives::new(simd, chain, [[vx, ax], [vy, ay], [&mut t_s[..], hax], [hvy, hay]]);
+        let Filter { chain, producer, mut dynamic, derived, times, scratch, valid, t0 } = self;
+        let mut d = Derivatives::new(simd, chain, derived);
         let filtered = chain.lowpass.filtfilt8_fed(simd, dynamic.each_mut().map(|c| &mut **c), scratch, TILE, producer, &mut d)?;
         if !d.complete() {
             return Ok(None);
         }
         let finite = filtered && d.finite();
         let [.., fx, fy] = &dynamic;
-        Ok(Some(Outcome { finite, static_force_n: static_part_and_times(fx, fy, valid, t0, chain.sample_rate_hz, t_s) }))
+        Ok(Some(Outcome { finite, static_force_n: static_part_and_times(fx, fy, valid, t0, chain.sample_rate_hz, times) }))
     }
 }
 

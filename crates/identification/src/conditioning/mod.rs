@@ -175,13 +175,13 @@ pub struct Conditioned {
 /// compare equal, and it prints as nothing, so a `Conditioned` compares and prints as its
 /// data.
 #[derive(Clone, Default)]
-struct Work {
-    /// The housing's y velocity (not an output) when the derivatives follow the low-pass.
-    velocity: Vec<f64>,
+pub(super) struct Work {
+    /// The housing's x and y velocity (not outputs).
+    pub(super) velocity: [Vec<f64>; 2],
     /// The low-pass's scratch: its reflections and its forward pass's output (eight values
     /// per scan, `lowpass::Butterworth::filtfilt8_fed`). Kept between
     /// [`Chain::condition_into`] calls, not returned by [`condition`].
-    scratch: Vec<f64>,
+    pub(super) scratch: Vec<f64>,
 }
 
 impl PartialEq for Work {
@@ -274,35 +274,6 @@ pub(crate) fn non_finite_error(channel: ChannelId, index: usize, value: f64, uni
 /// once does the same for many records.)
 pub fn condition(raw: &RawRecord, calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig) -> Result<Conditioned, IdentificationError> {
     Chain::new(calibration, mechanics, config, raw.sample_rate_hz)?.condition(raw)
-}
-
-/// Number of column buffers of a [`Conditioned`].
-const COLUMNS: usize = 17;
-
-impl Conditioned {
-    /// Moves the column buffers out (leaving empty columns), for reuse.
-    fn take_columns(&mut self) -> [Vec<f64>; COLUMNS] {
-        use std::mem::take;
-        [
-            take(&mut self.t_s),
-            take(&mut self.x_m),
-            take(&mut self.y_m),
-            take(&mut self.tilt_x_m),
-            take(&mut self.tilt_y_m),
-            take(&mut self.vx_m_s),
-            take(&mut self.vy_m_s),
-            take(&mut self.ax_m_s2),
-            take(&mut self.ay_m_s2),
-            take(&mut self.housing_x_m),
-            take(&mut self.housing_y_m),
-            take(&mut self.housing_ax_m_s2),
-            take(&mut self.housing_ay_m_s2),
-            take(&mut self.fx_n),
-            take(&mut self.fy_n),
-            take(&mut self.temperature_c),
-            take(&mut self.static_load_n),
-        ]
-    }
 }
 
 #[cfg(test)]
