@@ -184,6 +184,34 @@ pub(crate) fn mean(c: &[f64]) -> f64 {
     shift + s / c.len() as f64
 }
 
+/// Whether every value of `x` is finite, branch-free: `v - v` is 0 for a finite `v` and NaN
+/// for an infinite or NaN one, and a NaN stays in a sum. Sixteen partial sums (four AVX2
+/// vectors), so that the adds' latency is hidden.
+#[inline(always)]
+#[allow(clippy::eq_op)] // `v - v` is the point: 0 or NaN, never folded for floats.
+pub(crate) fn all_finite(x: &[f64]) -> bool {
+    let (chunks, rest) = x.as_chunks::<16>();
+    let mut acc = [0.0f64; 16];
+    for c in chunks {
+        for l in 0..16 {
+            acc[l] += c[l] - c[l];
+        }
+    }
+    let mut sum = acc.iter().sum::<f64>();
+    for v in rest {
+        sum += v - v;
+    }
+    sum == 0.0
+}
+
+/// Index of the first value of `x` that is NaN or infinite: blocks of finite values are
+/// passed over by [`all_finite`], and only the block holding one is searched.
+pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
+    const BLOCK: usize = 256;
+    let (k, block) = x.chunks(BLOCK).enumerate().find(|(_, b)| !all_finite(b))?;
+    block.iter().position(|v| !v.is_finite()).map(|i| k * BLOCK + i)
+}
+
 /// One output of [`Simd::derivative`], centred on `x[i]`.
 #[inline(always)]
 pub(crate) fn derivative_point<const M: usize>(c: &[f64; M], x: &[f64], i: usize) -> f64 {
@@ -544,6 +572,28 @@ mod tests {
             }
         }
         println!("sets compared with the scalar kernels: {:?}", Isa::available());
+    }
+
+    /// `all_finite` and `first_non_finite` against the definition, on lengths that cut the
+    /// chunks of sixteen and the blocks of 256, with the extremes that `v - v` must still take
+    /// to 0 (the largest finite, subnormals, -0) and each kind of non-finite value at each
+    /// position; of two, the first counts.
+    #[test]
+    fn finiteness_agrees_with_the_definition() {
+        for n in [0, 1, 7, 8, 9, 15, 16, 17, 33, 40, 255, 256, 257, 700] {
+            let clean: Vec<f64> = (0..n).map(|i| [f64::MAX, -f64::MAX, 5e-324, -0.0, 1.5, -2.5e-300, f64::MIN_POSITIVE][i % 7]).collect();
+            assert!(all_finite(&clean) && first_non_finite(&clean).is_none(), "{n} finite values");
+            for at in (0..n).filter(|at| n < 64 || at % 37 == 0 || at % 256 == 255 || at % 256 == 0) {
+                for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN, -f64::NAN] {
+                    let mut x = clean.clone();
+                    x[at] = bad;
+                    assert!(!all_finite(&x), "{bad} at {at} of {n}");
+                    assert_eq!(first_non_finite(&x), Some(at), "{bad} at {at} of {n}");
+                    x[n - 1] = f64::NAN;
+                    assert_eq!(first_non_finite(&x), Some(at), "then NaN last, {bad} at {at} of {n}");
+                }
+            }
+        }
     }
 
     #[test]

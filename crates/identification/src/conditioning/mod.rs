@@ -223,28 +223,6 @@ impl Conditioned {
     }
 }
 
-/// Whether every value of `x` is finite, branch-free: `v - v` is 0 for a finite `v` and NaN
-/// for an infinite or NaN one, and a NaN stays in a sum. Two adds per vector of values; the
-/// compare-and-mask form (`ok & v.is_finite()`) took five instructions, packing each mask to
-/// a byte, and was a few percent of the conditioning. Sixteen partial sums (four AVX2
-/// vectors), so that the adds' latency is hidden.
-#[inline(always)]
-#[allow(clippy::eq_op)] // `v - v` is the point: 0 or NaN, never folded for floats.
-pub(crate) fn all_finite(x: &[f64]) -> bool {
-    let (chunks, rest) = x.as_chunks::<16>();
-    let mut acc = [0.0f64; 16];
-    for c in chunks {
-        for l in 0..16 {
-            acc[l] += c[l] - c[l];
-        }
-    }
-    let mut sum = acc.iter().sum::<f64>();
-    for v in rest {
-        sum += v - v;
-    }
-    sum == 0.0
-}
-
 /// The refusal of a record of `n` scans that has no valid scan once the filters' `edge` is
 /// trimmed at each end (`n <= 2 edge`).
 pub(super) fn too_short(n: usize, edge: usize) -> IdentificationError {
@@ -254,15 +232,7 @@ pub(super) fn too_short(n: usize, edge: usize) -> IdentificationError {
     }
 }
 
-/// Index of the first non-finite value, by a branch-free scan ([`all_finite`]) and, only
-/// when one exists, a second search for its position.
-pub(crate) fn first_non_finite(x: &[f64]) -> Option<usize> {
-    if all_finite(x) {
-        None
-    } else {
-        x.iter().position(|v| !v.is_finite())
-    }
-}
+pub(crate) use crate::simd::{all_finite, first_non_finite};
 
 /// The `BadInput` for a non-finite sample.
 pub(crate) fn non_finite_error(channel: ChannelId, index: usize, value: f64, unit: &str) -> IdentificationError {
@@ -311,24 +281,5 @@ mod tests {
             }
         }
         assert!(checked >= 30, "{checked} cases");
-    }
-
-    /// `all_finite` against the definition, on lengths that cut its chunks of sixteen, with the
-    /// extremes that `v - v` must still take to 0 (the largest finite, subnormals, -0) and each
-    /// kind of non-finite value at each position.
-    #[test]
-    fn all_finite_agrees_with_the_definition() {
-        for n in [0, 1, 7, 8, 9, 15, 16, 17, 33, 40] {
-            let clean: Vec<f64> = (0..n).map(|i| [f64::MAX, -f64::MAX, 5e-324, -0.0, 1.5, -2.5e-300, f64::MIN_POSITIVE][i % 7]).collect();
-            assert!(all_finite(&clean), "{n} finite values");
-            for at in 0..n {
-                for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN, -f64::NAN] {
-                    let mut x = clean.clone();
-                    x[at] = bad;
-                    assert!(!all_finite(&x), "{bad} at {at} of {n}");
-                    assert_eq!(first_non_finite(&x), Some(at));
-                }
-            }
-        }
     }
 }

@@ -14,6 +14,7 @@
 use super::spectrum::LineSearch;
 use super::window::{BlockSummary, SummaryBuilder};
 use super::{se_decimation, EstimatorConfig, ModelOrder, Signals};
+use crate::simd::first_non_finite;
 
 /// The analysis of one window, fed as its samples arrive.
 #[derive(Debug, Clone)]
@@ -109,54 +110,5 @@ impl WindowFeed {
             q: self.q,
             first_bad: self.first_bad,
         })
-    }
-}
-
-/// Index of the first sample of `c` that is NaN or infinite: `c.iter().position(|v|
-/// !v.is_finite())`, with whole blocks of finite samples passed over by a vectorised test.
-fn first_non_finite(c: &[f64]) -> Option<usize> {
-    const BLOCK: usize = 256;
-    for (k, block) in c.chunks(BLOCK).enumerate() {
-        if !all_finite(block) {
-            return block.iter().position(|v| !v.is_finite()).map(|i| k * BLOCK + i);
-        }
-    }
-    None
-}
-
-/// True when every value is finite: `v * 0` is (signed) zero for a finite value and NaN
-/// otherwise, and a sum of zeros stays zero while a NaN stays NaN.
-fn all_finite(c: &[f64]) -> bool {
-    let mut acc = [0.0f64; 8];
-    let mut chunks = c.chunks_exact(8);
-    for ch in &mut chunks {
-        for l in 0..8 {
-            acc[l] += ch[l] * 0.0;
-        }
-    }
-    let tail = chunks.remainder().iter().fold(0.0, |a, v| a + v * 0.0);
-    acc.iter().sum::<f64>() + tail == 0.0
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn first_non_finite_is_the_first_nan_or_infinity() {
-        let mut c: Vec<f64> = (0..1_000).map(|k| (k as f64 * 0.3).sin() * 1e300).collect();
-        assert_eq!(first_non_finite(&c), None);
-        assert_eq!(first_non_finite(&[]), None);
-        for (at, bad) in [(999, f64::NAN), (0, f64::INFINITY), (517, f64::NEG_INFINITY), (255, f64::NAN), (256, f64::MAX)] {
-            let old = c[at];
-            c[at] = bad;
-            let want = c.iter().position(|v| !v.is_finite());
-            assert_eq!(first_non_finite(&c), want, "{bad} at {at}");
-            c[at] = old;
-        }
-        // Two bad samples: the first counts.
-        c[700] = f64::NAN;
-        c[300] = f64::INFINITY;
-        assert_eq!(first_non_finite(&c), Some(300));
     }
 }
