@@ -10,6 +10,8 @@
 //! Gain error table, window choice and literature:
 //! docs/manual/conditioning.md#step-6-velocity-and-acceleration.
 
+use std::ops::Range;
+
 use super::all_finite;
 use crate::estimator::qr::{inverse_gram_from_upper, Triangle};
 use crate::simd::Simd;
@@ -91,18 +93,16 @@ impl SavitzkyGolayDerivative {
         let mut w = vec![0.0; width];
         ls_derivative_weights(m as f64, &mut w)?;
         let interior = (1..=m).map(|k| 0.5 * (w[m + k] - w[m - k]) * sample_rate_hz).collect();
-        let mut left = vec![0.0; m * width];
-        let mut right = vec![0.0; m * width];
-        for r in 0..m {
-            ls_derivative_weights(r as f64, &mut w)?;
-            for (dst, &src) in left[r * width..(r + 1) * width].iter_mut().zip(&w) {
-                *dst = src * sample_rate_hz;
+        // `M` rows of weights per second, the slope taken at window positions `first ..`.
+        let edge = |first: usize| -> Result<Vec<f64>, IdentificationError> {
+            let mut rows = vec![0.0; m * width];
+            for (r, row) in rows.chunks_exact_mut(width).enumerate() {
+                ls_derivative_weights((first + r) as f64, row)?;
+                row.iter_mut().for_each(|v| *v *= sample_rate_hz);
             }
-            ls_derivative_weights((m + 1 + r) as f64, &mut w)?;
-            for (dst, &src) in right[r * width..(r + 1) * width].iter_mut().zip(&w) {
-                *dst = src * sample_rate_hz;
-            }
-        }
+            Ok(rows)
+        };
+        let (left, right) = (edge(0)?, edge(m + 1)?);
         Ok(Self { half_length: m, sample_rate_hz, interior, left, right })
     }
 
@@ -135,66 +135,55 @@ impl SavitzkyGolayDerivative {
         [&self.left, &self.right]
     }
 
-    /// Interior outputs `range` (inside `M..len - M`), `M` known at compile time for the
-    /// usual half-lengths ([`Simd::derivative`]), else `M` passes over the block; every
-    /// output summed in the order of [`crate::simd::derivative_point`].
-    #[inline(always)]
-    fn interior<S: Simd>(&self, simd: S, input: &[f64], out: &mut [f64], range: std::ops::Range<usize>) {
-        let m = self.half_length;
-        self.interior_slices(simd, &input[range.start - m..range.end + m], &mut out[range]);
-    }
-
     /// The interior outputs `dst` centred on `x[M..]`: `x` reaches `M` past `dst` on each side.
+    /// Every output is summed in the order of [`crate::simd::derivative_point`], `M` known at
+    /// compile time for the usual half-lengths.
     #[inline(always)]
     pub(crate) fn interior_slices<S: Simd>(&self, simd: S, x: &[f64], dst: &mut [f64]) {
-        let m = self.half_length;
+        let (m, c) = (self.half_length, &self.interior);
         let x = &x[..dst.len() + 2 * m];
         match m {
-            4 => simd.derivative::<4>(&self.interior[..].try_into().unwrap_or([0.0; 4]), x, dst),
-            5 => simd.derivative::<5>(&self.interior[..].try_into().unwrap_or([0.0; 5]), x, dst),
-            6 => simd.derivative::<6>(&self.interior[..].try_into().unwrap_or([0.0; 6]), x, dst),
+            4 => simd.derivative::<4>(&c[..].try_into().unwrap_or([0.0; 4]), x, dst),
+            5 => simd.derivative::<5>(&c[..].try_into().unwrap_or([0.0; 5]), x, dst),
+            6 => simd.derivative::<6>(&c[..].try_into().unwrap_or([0.0; 6]), x, dst),
             _ => {
-                let c1 = self.interior[0];
-                for (o, (&a, &b)) in dst.iter_mut().zip(x[m + 1..].iter().zip(&x[m - 1..])) {
-                    *o = c1 * (a - b);
-                }
-                for (k, &c) in self.interior.iter().enumerate().skip(1) {
-                    let k = k + 1;
-                    for (o, (&a, &b)) in dst.iter_mut().zip(x[m + k..].iter().zip(&x[m - k..])) {
-                        *o += c * (a - b);
-                    }
+                for (o, w) in dst.iter_mut().zip(x.windows(2 * m + 1)) {
+                    *o = (2..=m).fold(c[0] * (w[m + 1] - w[m - 1]), |acc, k| acc + c[k - 1] * (w[m + k] - w[m - k]));
                 }
             }
         }
     }
 
-    /// The first `M` outputs, on `input[..2M + 1]`; `len >= 2M + 1`.
-    fn edge_left(&self, input: &[f64], out: &mut [f64]) {
-        let width = 2 * self.half_length + 1;
-        for (o, lw) in out[..self.half_length].iter_mut().zip(self.left.chunks_exact(width)) {
-            *o = lw.iter().zip(&input[..width]).map(|(a, b)| a * b).sum();
-        }
-    }
-
-    /// The last `M` outputs, on the last `2M + 1` inputs; `len >= 2M + 1`.
-    fn edge_right(&self, input: &[f64], out: &mut [f64]) {
+    /// Outputs `range` of the derivative of `input` (at least `2M + 1` samples) into `out`:
+    /// an edge row within `M` of either end, the interior sum in between.
+    #[inline(always)]
+    fn outputs<S: Simd>(&self, simd: S, input: &[f64], out: &mut [f64], range: Range<usize>) {
         let (len, m) = (input.len(), self.half_length);
         let width = 2 * m + 1;
-        let tail = &input[len - width..];
-        for r in 0..m {
-            out[len - m + r] = self.right[r * width..(r + 1) * width].iter().zip(tail).map(|(a, b)| a * b).sum();
+        let part = |a: usize, b: usize| range.start.clamp(a, b)..range.end.clamp(a, b);
+        let (left, middle, right) = (part(0, m), part(m, len - m), part(len - m, len));
+        // Rows `first ..` of `weights` on `inputs`, into `dst`.
+        let rows = |weights: &[f64], first: usize, inputs: &[f64], dst: &mut [f64]| {
+            for (o, w) in dst.iter_mut().zip(weights.chunks_exact(width).skip(first)) {
+                *o = w.iter().zip(inputs).map(|(a, b)| a * b).sum();
+            }
+        };
+        rows(&self.left, left.start, &input[..width], &mut out[left]);
+        if !middle.is_empty() {
+            self.interior_slices(simd, &input[middle.start - m..middle.end + m], &mut out[middle]);
         }
+        rows(&self.right, right.start + m - len, &input[len - width..], &mut out[right]);
     }
 
     /// Both derivatives fed from the end of the record towards its start, as a backward pass
     /// makes `input` final: `input[from..]` is final, `from` decreasing from call to call and
     /// 0 in the last. Computes every output of `first` and `second` whose inputs are final and
     /// that is not computed yet. Returns whether the outputs of `second` computed in this call
-    /// are finite, and their range: one range (possibly empty), just below the previous
-    /// call's, so that the ranges cover the column once when `from` has reached 0. Each output
-    /// is the centred sum of [`crate::simd::derivative_point`] or an edge row's, so the bits do not depend on the cutting.
-    /// The three columns must have the same length, at least `2M + 1`; else nothing is
-    /// computed and `None` returned.
+    /// are finite, and their range: just below the previous call's (possibly empty), so that
+    /// the ranges cover the column once when `from` has reached 0. Each output is an edge
+    /// row's sum or the centred sum of [`crate::simd::derivative_point`], so the bits do not
+    /// depend on the cutting. The three columns must have the same length, at least `2M + 1`;
+    /// else nothing is computed and `None` returned.
     #[inline(always)]
     pub(crate) fn twice_descending<S: Simd>(
         &self,
@@ -204,66 +193,29 @@ impl SavitzkyGolayDerivative {
         input: &[f64],
         first: &mut [f64],
         second: &mut [f64],
-    ) -> Option<(bool, std::ops::Range<usize>)> {
+    ) -> Option<(bool, Range<usize>)> {
         let len = input.len();
         let m = self.half_length;
         let width = 2 * m + 1;
         if first.len() != len || second.len() != len || len < width {
             return None;
         }
-        let st = state.at_length(len, m);
-        let from = from.min(len);
-        // First derivative: output i reads input[i - M ..= i + M].
-        if !st.first_right && from <= len - width {
-            self.edge_right(input, first);
-            st.first_right = true;
+        if state.shape != Some((len, m)) {
+            *state = TwiceDescending { shape: Some((len, m)), first: len, second: len };
         }
-        if st.first_right {
-            let lo = (from + m).clamp(m, st.first_lo);
-            if lo < st.first_lo {
-                self.interior(simd, input, first, lo..st.first_lo);
-                st.first_lo = lo;
-            }
-            if from == 0 && !st.first_left {
-                self.edge_left(input, first);
-                st.first_left = true;
-            }
-        }
-        // first[ready..] is computed.
-        let ready = match (st.first_right, st.first_left) {
-            (false, _) => len,
-            (true, true) if st.first_lo <= m => 0,
-            (true, _) => st.first_lo,
+        // Outputs `computable(from)..` read only `x[from..]`: an interior output `i` reads
+        // `x[i - M ..= i + M]`, an edge row the `2M + 1` inputs at its end of the column.
+        let computable = |from: usize| match from {
+            0 => 0,
+            _ if from <= len - width => from + m,
+            _ => len,
         };
-        // Second derivative, from `first` in the same way: the right edge, the interior below
-        // what is done, the left edge, each only once its inputs are. second[done..] was
-        // handed on by earlier calls.
-        let done = if st.second_left {
-            0
-        } else if st.second_right {
-            st.second_lo
-        } else {
-            len
-        };
-        let mut made = done..done;
-        if !st.second_right && ready <= len - width {
-            self.edge_right(first, second);
-            made.start = len - m;
-            st.second_right = true;
-        }
-        if ready < len {
-            let lo = (ready + m).clamp(m, st.second_lo);
-            if lo < st.second_lo {
-                self.interior(simd, first, second, lo..st.second_lo);
-                made.start = lo;
-                st.second_lo = lo;
-            }
-        }
-        if ready == 0 && !st.second_left {
-            self.edge_left(first, second);
-            made.start = 0;
-            st.second_left = true;
-        }
+        let first_lo = computable(from).min(state.first);
+        self.outputs(simd, input, first, first_lo..state.first);
+        state.first = first_lo;
+        let made = computable(first_lo).min(state.second)..state.second;
+        self.outputs(simd, first, second, made.clone());
+        state.second = made.start;
         Some((all_finite(&second[made.clone()]), made))
     }
 }
@@ -273,24 +225,9 @@ impl SavitzkyGolayDerivative {
 pub(crate) struct TwiceDescending {
     /// The column length and `M` the rest refers to (`None`: not started).
     shape: Option<(usize, usize)>,
-    /// Interior outputs `first_lo .. len - M` of the first derivative are computed, and the
-    /// `M` at its right (left) end when `first_right` (`first_left`); likewise the second.
-    first_lo: usize,
-    first_right: bool,
-    first_left: bool,
-    second_lo: usize,
-    second_right: bool,
-    second_left: bool,
-}
-
-impl TwiceDescending {
-    /// The state, started afresh if it was for another shape.
-    fn at_length(&mut self, len: usize, m: usize) -> &mut Self {
-        if self.shape != Some((len, m)) {
-            *self = Self { shape: Some((len, m)), first_lo: len - m, second_lo: len - m, ..Self::default() };
-        }
-        self
-    }
+    /// `first[first..]` and `second[second..]` are computed.
+    first: usize,
+    second: usize,
 }
 
 #[cfg(test)]

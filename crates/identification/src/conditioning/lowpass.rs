@@ -48,37 +48,36 @@ impl Section {
     }
 }
 
-/// One section's state for `L` lanes, direct form I rearranged so that the loop-carried
-/// path is one multiply and one subtract:
+/// One section's state for the eight lanes of a frame, direct form I rearranged so that the
+/// loop-carried path is one multiply and one subtract:
 ///
 /// `y[n] = (b0 x[n] + q[n]) - a1 y[n-1]`, with `q[n] = b1 x[n-1] + b2 x[n-2] - a2 y[n-2]`,
 ///
 /// where `q[n+1]` is computed at step `n` from `x[n]`, `x[n-1]`, `y[n-1]`: values known
 /// before `y[n]` is, so it runs in parallel with the recursion.
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub(crate) struct Lanes<const L: usize> {
+#[derive(Copy, Clone, Debug)]
+struct Lanes {
     /// `x[n-1]`, `y[n-1]`, `q[n]` before step `n`.
-    pub(crate) x1: [f64; L],
-    pub(crate) y1: [f64; L],
-    pub(crate) q: [f64; L],
+    x1: [f64; 8],
+    y1: [f64; 8],
+    q: [f64; 8],
 }
 
-impl<const L: usize> Lanes<L> {
+impl Lanes {
     /// Steady state for the constant input `v`: `x = v`, `y = g v` at every past sample.
-    fn steady(s: &Section, v: [f64; L]) -> Self {
+    fn steady(s: &Section, v: [f64; 8]) -> Self {
         let g = s.dc_gain();
         let y = v.map(|x| g * x);
         let q = std::array::from_fn(|l| s.b[1] * v[l] + s.b[2] * v[l] - s.a[1] * y[l]);
         Self { x1: v, y1: y, q }
     }
 
-    /// One sample.
     #[inline(always)]
-    fn step(&mut self, s: &Section, x: [f64; L]) -> [f64; L] {
+    fn step(&mut self, s: &Section, x: [f64; 8]) -> [f64; 8] {
         let [b0, b1, b2] = s.b;
         let [a1, a2] = s.a;
-        let mut out = [0.0; L];
-        for l in 0..L {
+        let mut out = [0.0; 8];
+        for l in 0..8 {
             let y = (b0 * x[l] + self.q[l]) - a1 * self.y1[l];
             self.q[l] = b1 * x[l] + b2 * self.x1[l] - a2 * self.y1[l];
             self.x1[l] = x[l];
@@ -89,72 +88,71 @@ impl<const L: usize> Lanes<L> {
     }
 }
 
-/// Sections run together in one pass over the data.
+/// Each of `sections` in the DC steady state for its own first input: `x0` for the first,
+/// the previous section's first output for the others.
+fn steady_cascade(sections: &[Section], x0: [f64; 8]) -> Vec<Lanes> {
+    let mut v = x0;
+    let mut lanes = Vec::with_capacity(sections.len());
+    for s in sections {
+        let mut st = Lanes::steady(s, v);
+        lanes.push(st);
+        v = st.step(s, v);
+    }
+    lanes
+}
+
+/// Sections run together in one pass over the data. Each section's recursion is independent
+/// of the others' (only its input comes from the previous section), so a pair in one pass is
+/// sixteen chains the CPU overlaps, and the data is read and written once instead of twice.
 const FUSED: usize = 2;
 
-/// `S` cascaded sections for `L` lanes: one step feeds each section's output to the next.
-/// Each section's recursion is independent of the others' (only its input comes from the
-/// previous section), so `S` sections in one pass are `S * L` chains the CPU overlaps, and
-/// the data is read and written once instead of `S` times.
-#[derive(Copy, Clone)]
-pub(crate) struct Cascade<'a, const L: usize, const S: usize> {
-    pub(crate) sections: &'a [Section; S],
-    pub(crate) lanes: [Lanes<L>; S],
-}
-
-impl<'a, const L: usize, const S: usize> Cascade<'a, L, S> {
-    #[inline(always)]
-    fn step(&mut self, x: [f64; L]) -> [f64; L] {
-        let mut v = x;
-        for (st, s) in self.lanes.iter_mut().zip(self.sections) {
-            v = st.step(s, v);
-        }
-        v
-    }
-
-    /// The cascade over `frames` in place, forward or (`reverse`) backward, on a local copy
-    /// of the state (behind a reference the compiler kept it in memory: a load and a store
-    /// per lane and sample).
-    #[inline(always)]
-    pub(crate) fn run(&mut self, frames: &mut [[f64; L]], reverse: bool) {
-        let mut local = *self;
-        if reverse {
-            for f in frames.iter_mut().rev() {
-                *f = local.step(*f);
-            }
-        } else {
-            for f in frames.iter_mut() {
-                *f = local.step(*f);
-            }
-        }
-        *self = local;
-    }
-}
-
-/// A group of sections (a pair, or the lone last section of an odd order) over frames of
-/// eight lanes, compiled for the caller's instruction set. (An AVX2 kernel that kept the
-/// pair's state in registers by volatile accesses, ADR 0016 amendment 4, measured within
-/// noise of this loop and went: ADR 0022.)
+/// A group of sections (a pair, or the lone last section of an odd order) over `frames` in
+/// place, forward or (`reverse`) backward, its state carried in `lanes`.
 #[inline(always)]
-fn run_group(sections: &[Section], lanes: &mut [Lanes<8>], frames: &mut [[f64; 8]], reverse: bool) {
-    if let (Ok(pair), Ok(l)) = (<&[Section; 2]>::try_from(sections), <&mut [Lanes<8>; 2]>::try_from(&mut *lanes)) {
-        let mut c = Cascade { sections: pair, lanes: *l };
-        c.run(frames, reverse);
-        *l = c.lanes;
-        return;
+fn run_group(sections: &[Section], lanes: &mut [Lanes], frames: &mut [[f64; 8]], reverse: bool) {
+    if sections.len() == FUSED {
+        run_fused::<FUSED>(sections, lanes, frames, reverse);
+    } else {
+        run_fused::<1>(sections, lanes, frames, reverse);
     }
-    if let (Ok(one), Ok(l)) = (<&[Section; 1]>::try_from(sections), <&mut [Lanes<8>; 1]>::try_from(lanes)) {
-        let mut c = Cascade { sections: one, lanes: *l };
-        c.run(frames, reverse);
-        *l = c.lanes;
+}
+
+/// [`run_group`] for `S` sections, known at compile time so that the loop over them unrolls.
+/// It runs on local copies of the sections and their state: behind a reference the compiler
+/// kept the state in memory, a load and a store per lane and sample. (Why no hand-written
+/// kernel: ADR 0022.)
+#[inline(always)]
+fn run_fused<const S: usize>(sections: &[Section], lanes: &mut [Lanes], frames: &mut [[f64; 8]], reverse: bool) {
+    let sections: [Section; S] = std::array::from_fn(|i| sections[i]);
+    let mut state: [Lanes; S] = std::array::from_fn(|i| lanes[i]);
+    if reverse {
+        for f in frames.iter_mut().rev() {
+            *f = cascade_step(&sections, &mut state, *f);
+        }
+    } else {
+        for f in frames.iter_mut() {
+            *f = cascade_step(&sections, &mut state, *f);
+        }
     }
+    lanes.copy_from_slice(&state);
+}
+
+/// One frame through `sections` in turn. Always inlined: a call per frame would also be
+/// compiled apart from the caller's instruction set.
+#[inline(always)]
+fn cascade_step(sections: &[Section], state: &mut [Lanes], x: [f64; 8]) -> [f64; 8] {
+    let mut v = x;
+    for (st, s) in state.iter_mut().zip(sections) {
+        v = st.step(s, v);
+    }
+    v
 }
 
 /// The state of a forward pass over a stream of eight lanes ([`Butterworth::forward_steady`],
-/// [`Butterworth::forward_run`]): each group's sections.
+/// [`Butterworth::forward_run`]): each section's.
 #[derive(Clone, Debug)]
 pub(crate) struct ForwardStream {
-    lanes: Vec<Lanes<8>>,
+    lanes: Vec<Lanes>,
 }
 
 /// What [`Butterworth::filtfilt8_fed`] filters: `produce(a, b, cols)` writes samples `a..b`
@@ -205,7 +203,7 @@ impl Consume8 for Keep {
 /// Samples per range [`Filtfilt`] copies in from its columns (eight of them: 128 kB).
 const RANGE: usize = 2048;
 
-/// [`Butterworth::filtfilt_columns`] as a [`Kernel`].
+/// Eight columns through [`Butterworth::filtfilt8_fed`] as a [`Kernel`].
 struct Filtfilt<'a> {
     lp: &'a Butterworth,
     inputs: [&'a [f64]; 8],
@@ -301,8 +299,9 @@ impl Butterworth {
 
     /// Zero-phase filtering of one column (at least 2 samples), allocating the output.
     pub fn filtfilt(&self, input: &[f64]) -> Result<Vec<f64>, IdentificationError> {
-        let mut out = vec![0.0; input.len()];
-        self.filtfilt_columns(&[input], &mut [&mut out], &mut Vec::new())?;
+        let mut column = [input.to_vec()];
+        self.filtfilt_many_in_place(&mut column, &mut Vec::new())?;
+        let [out] = column;
         Ok(out)
     }
 
@@ -313,32 +312,21 @@ impl Butterworth {
         if let Some((k, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != n) {
             return Err(IdentificationError::BadInput { what: format!("low-pass column {k}"), reason: format!("{} samples, column 0 has {n}", c.len()) });
         }
-        for group in columns.chunks_mut(8) {
-            let inputs: Vec<Vec<f64>> = group.to_vec();
-            let inputs: Vec<&[f64]> = inputs.iter().map(Vec::as_slice).collect();
-            let mut outputs: Vec<&mut [f64]> = group.iter_mut().map(Vec::as_mut_slice).collect();
-            self.filtfilt_columns(&inputs, &mut outputs, scratch)?;
-        }
-        Ok(())
-    }
-
-    /// Up to eight columns of one length through [`Butterworth::filtfilt8_fed`] (the missing
-    /// lanes filter zeros); whether every output is finite.
-    fn filtfilt_columns(&self, inputs: &[&[f64]], outputs: &mut [&mut [f64]], scratch: &mut Vec<f64>) -> Result<bool, IdentificationError> {
-        let n = inputs.first().map_or(0, |c| c.len());
         if n < 2 {
             return Err(IdentificationError::BadInput { what: "low-pass input".into(), reason: format!("{n} samples, need at least 2") });
         }
+        // The lanes a group of fewer than eight columns leaves over filter zeros.
         let zeros = vec![0.0; n];
-        let mut spare: Vec<Vec<f64>> = (outputs.len()..8).map(|_| vec![0.0; n]).collect();
-        let mut spare = spare.iter_mut();
-        let mut outs = outputs.iter_mut();
-        let outputs: [&mut [f64]; 8] = std::array::from_fn(|_| match outs.next() {
-            Some(o) => &mut o[..],
-            None => spare.next().map(Vec::as_mut_slice).unwrap_or_default(),
-        });
-        let inputs = std::array::from_fn(|l| inputs.get(l).copied().unwrap_or(&zeros[..]));
-        simd::dispatch(Isa::current(), Filtfilt { lp: self, inputs, outputs, scratch })
+        let mut filtered: [Vec<f64>; 8] = std::array::from_fn(|_| vec![0.0; n]);
+        for group in columns.chunks_mut(8) {
+            let inputs = std::array::from_fn(|l| group.get(l).map_or(&zeros[..], Vec::as_slice));
+            let outputs = filtered.each_mut().map(|c| &mut c[..]);
+            simd::dispatch(Isa::current(), Filtfilt { lp: self, inputs, outputs, scratch })?;
+            for (c, f) in group.iter_mut().zip(&filtered) {
+                c.copy_from_slice(f);
+            }
+        }
+        Ok(())
     }
 
     /// The zero-phase filter on eight columns of `n >= 2` samples that `producer` writes as
@@ -365,7 +353,6 @@ impl Butterworth {
         producer: &mut P,
         consumer: &mut C,
     ) -> Result<bool, P::Error> {
-        const L: usize = 8;
         let n = cols.iter().map(|c| c.len()).min().unwrap_or(0);
         let mut cols = cols.map(|c| &mut c[..n]);
         if n < 2 {
@@ -376,67 +363,53 @@ impl Butterworth {
         }
         let step = step.max(1);
         let pad = self.settling.min(n - 1);
-        // The first range reaches sample `pad`, which the left reflection needs unfiltered.
-        let mut produced = (pad + 1).max(step).min(n);
+        // The range `a..b` being filtered. The first reaches sample `pad`, which the left
+        // reflection needs unfiltered, and is the longest.
+        let mut a = 0;
+        let mut b = (pad + 1).max(step).min(n);
         // Every value of the scratch is written before it is read, so it is grown when too
-        // short and never cleared (a record's worth of zeros written for nothing was 5 % of
-        // the conditioning).
-        let cap = produced.max(step.min(n));
-        let needed = (2 * pad + n) * L + cap * L;
+        // short and never cleared (that would write a record's worth of zeros for nothing):
+        // the frames, then a range buffer per lane.
+        let frame_values = (2 * pad + n) * 8;
+        let needed = frame_values + 8 * b;
         if scratch.len() < needed {
             scratch.resize(needed, 0.0);
         }
-        let (frame_part, range_part) = scratch[..needed].split_at_mut((2 * pad + n) * L);
-        let (frames, _) = frame_part.as_chunks_mut::<L>();
-        let (left, rest) = frames.split_at_mut(pad);
+        let (frames, ranges) = scratch[..needed].split_at_mut(frame_values);
+        let (left, rest) = frames.as_chunks_mut::<8>().0.split_at_mut(pad);
         let (right, store) = rest.split_at_mut(pad);
-        let mut range_cols: [&mut [f64]; L] = {
-            // `range_part` is `L` chunks of `cap >= 1` values, so each `next` has one.
-            let mut parts = range_part.chunks_exact_mut(cap);
-            std::array::from_fn(|_| parts.next().unwrap_or_default())
-        };
-        let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced]);
-        producer.produce(0, produced, &mut fresh)?;
+        let mut ranges = ranges.chunks_exact_mut(b);
+        // `ranges` is eight chunks of `b >= 1` values, so each `next` has one.
+        let mut range_cols: [&mut [f64]; 8] = std::array::from_fn(|_| ranges.next().unwrap_or_default());
+        let mut fresh = range_cols.each_mut().map(|c| &mut c[..b]);
+        producer.produce(0, b, &mut fresh)?;
+        simd.transpose8(&mut fresh, 0, &mut store[..b], true);
         // ext[-i] = 2 x[0] - x[i], stored at left[pad - i].
         for i in 1..=pad {
-            for l in 0..L {
-                left[pad - i][l] = 2.0 * fresh[l][0] - fresh[l][i];
-            }
+            left[pad - i] = std::array::from_fn(|l| 2.0 * store[0][l] - store[i][l]);
         }
-        // Each group of sections in steady state for its first input (the previous group's
-        // first output of the left reflection), run over the left reflection.
         let mut st = self.forward_steady(left[0]);
         self.forward_run(&mut st, left);
-        // Forward over each produced range: first copy aside what the right reflection needs
-        // (samples n-1-pad .. n-1, unfiltered), then move the range into frames and filter it.
-        let mut last_sample = [0.0; L];
-        let mut a = 0;
-        loop {
-            let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced - a]);
-            for j in (n - 1 - pad).max(a)..(n - 1).min(produced) {
-                for l in 0..L {
-                    right[n - 2 - j][l] = fresh[l][j - a];
-                }
+        // Forward over each range in turn, after copying aside the unfiltered samples the right
+        // reflection needs: x[n - 1 - i] to right[i - 1] for i in 1..=pad, and x[n - 1].
+        let last = loop {
+            for j in (n - 1 - pad).max(a)..(n - 1).min(b) {
+                right[n - 2 - j] = store[j];
             }
-            if produced == n {
-                last_sample = std::array::from_fn(|l| fresh[l][n - 1 - a]);
+            let last = store[b - 1];
+            self.forward_run(&mut st, &mut store[a..b]);
+            if b == n {
+                break last;
             }
-            let range = &mut store[a..produced];
-            simd.transpose8(&mut fresh, 0, range, true);
-            self.forward_run(&mut st, range);
-            if produced == n {
-                break;
-            }
-            a = produced;
-            produced = (a + step).min(n);
-            let mut fresh = range_cols.each_mut().map(|c| &mut c[..produced - a]);
-            producer.produce(a, produced, &mut fresh)?;
-        }
-        // right[i - 1] held x[n - 1 - i]; the reflection is 2 x[n - 1] - x[n - 1 - i].
+            a = b;
+            b = (a + step).min(n);
+            let mut fresh = range_cols.each_mut().map(|c| &mut c[..b - a]);
+            producer.produce(a, b, &mut fresh)?;
+            simd.transpose8(&mut fresh, 0, &mut store[a..b], true);
+        };
+        // The right reflection, 2 x[n - 1] - x[n - 1 - i].
         for f in right.iter_mut() {
-            for l in 0..L {
-                f[l] = 2.0 * last_sample[l] - f[l];
-            }
+            *f = std::array::from_fn(|l| 2.0 * last[l] - f[l]);
         }
         self.forward_run(&mut st, right);
         self.backward_consumed(simd, &mut cols, store, right, consumer)
@@ -445,14 +418,7 @@ impl Butterworth {
     /// The forward pass of a stream in the state it has before its first input `x0`: each
     /// section in the DC steady state for its own first input.
     pub(crate) fn forward_steady(&self, x0: [f64; 8]) -> ForwardStream {
-        let mut v = x0;
-        let mut lanes = Vec::with_capacity(self.sections.len());
-        for s in &self.sections {
-            let mut st = Lanes::steady(s, v);
-            lanes.push(st);
-            v = st.step(s, v);
-        }
-        ForwardStream { lanes }
+        ForwardStream { lanes: steady_cascade(&self.sections, x0) }
     }
 
     /// The forward pass over `frames` (in place, in time order), its state carried in `st`:
@@ -478,44 +444,25 @@ impl Butterworth {
         right: &mut [[f64; 8]],
         consumer: &mut C,
     ) -> Result<bool, C::Error> {
-        let groups: Vec<&[Section]> = self.sections.chunks(FUSED).collect();
-        let Some((last, first)) = groups.split_last() else {
-            // No section: the output is the input.
-            simd.transpose8(cols, 0, store, false);
-            consumer.consume(0, cols)?;
-            return Ok(true);
-        };
-        let mut lanes = [Lanes { x1: [0.0; 8], y1: [0.0; 8], q: [0.0; 8] }; FUSED];
-        let start = |g: &[Section], right: &mut [[f64; 8]], store: &[[f64; 8]], lanes: &mut [Lanes<8>]| {
-            let x0 = right.last().or(store.last()).copied().unwrap_or([0.0; 8]);
-            let mut v = x0;
-            for (s, l) in g.iter().zip(lanes.iter_mut()) {
-                *l = Lanes::steady(s, v);
-                v = { *l }.step(s, v);
-            }
-            for f in right.iter_mut().rev() {
-                for (s, l) in g.iter().zip(lanes.iter_mut()) {
-                    *f = l.step(s, *f);
-                }
-            }
-        };
-        for g in first {
-            let lanes = &mut lanes[..g.len()];
-            start(g, right, store, lanes);
-            run_group(g, lanes, store, true);
-        }
-        let lanes = &mut lanes[..last.len()];
-        start(last, right, store, lanes);
         let mut finite = true;
-        let mut end = store.len();
-        while end > 0 {
-            let from = end.saturating_sub(CONSUME_CHUNK);
-            let chunk = &mut store[from..end];
-            run_group(last, lanes, chunk, true);
-            finite &= all_finite(chunk.as_flattened());
-            simd.transpose8(cols, from, chunk, false);
-            consumer.consume(from, cols)?;
-            end = from;
+        let mut groups = self.sections.chunks(FUSED).peekable();
+        while let Some(g) = groups.next() {
+            let x0 = right.last().or(store.last()).copied().unwrap_or([0.0; 8]);
+            let mut lanes = steady_cascade(g, x0);
+            run_group(g, &mut lanes, right, true);
+            if groups.peek().is_some() {
+                run_group(g, &mut lanes, store, true);
+                continue;
+            }
+            let mut end = store.len();
+            for chunk in store.rchunks_mut(CONSUME_CHUNK) {
+                let from = end - chunk.len();
+                run_group(g, &mut lanes, chunk, true);
+                finite &= all_finite(chunk.as_flattened());
+                simd.transpose8(cols, from, chunk, false);
+                consumer.consume(from, cols)?;
+                end = from;
+            }
         }
         Ok(finite)
     }
