@@ -259,9 +259,9 @@ impl Chain {
     }
 
     /// Names what the front end could not use, from its channels `chans` (in [`ChannelId::ALL`]
-    /// order, their readings in `units`): a reading that is not finite, or that does not convert to a finite value, is an
-    /// error naming its channel and sample; readings out of the linear range (step 2) are
-    /// reported in `violations`.
+    /// order, their readings in `units`): a reading that is not finite, or that does not
+    /// convert to a finite value, is an error naming its channel and sample; readings out of
+    /// the linear range (step 2) are reported in `violations`.
     fn explain(&self, chans: &[FrontChannel<'_>], units: RawUnits, violations: &mut Vec<super::RangeViolation>) -> Result<(), IdentificationError> {
         for (ch, c) in ChannelId::ALL.into_iter().zip(chans) {
             let column = c.readings;
@@ -335,7 +335,7 @@ pub(super) struct Derivatives<'a, S> {
     out: [[&'a mut [f64]; 2]; 4],
     state: [TwiceDescending; 4],
     /// r'' (x, y) and the forces all finite so far.
-    finite: [bool; 3],
+    finite: bool,
     /// Every column had the length of the filtered ones.
     fits: bool,
     /// The last call had `from == 0`.
@@ -350,7 +350,7 @@ impl<'a, S: Simd> Derivatives<'a, S> {
             mass_kg: chain.mechanics.housing_mass_kg,
             out,
             state: Default::default(),
-            finite: [true; 3],
+            finite: true,
             fits: true,
             at_start: false,
         }
@@ -362,7 +362,7 @@ impl<'a, S: Simd> Derivatives<'a, S> {
     }
 
     pub(super) fn finite(&self) -> bool {
-        self.finite.iter().all(|&ok| ok)
+        self.finite
     }
 }
 
@@ -389,9 +389,7 @@ impl<S: Simd> Consume8 for Derivatives<'_, S> {
             }
         }
         self.fits &= results.iter().all(Option::is_some);
-        self.finite[0] &= results[0].as_ref().is_some_and(|r| r.0);
-        self.finite[1] &= results[1].as_ref().is_some_and(|r| r.0);
-        self.finite[2] &= force_finite;
+        self.finite &= force_finite && results[..2].iter().all(|r| r.as_ref().is_some_and(|r| r.0));
         self.at_start = from == 0;
         Ok(())
     }
@@ -549,6 +547,12 @@ pub(super) struct FrontOut {
 }
 
 impl Chain {
+    /// Channel `ch`'s part of a front-end call on `readings`.
+    fn front_channel<'a>(&'a self, ch: ChannelId, readings: &'a [f64], k: Constants) -> FrontChannel<'a> {
+        let delay = &self.delays[ch.index()];
+        FrontChannel { readings, k, delay, interior: delay.interior(readings.len()) }
+    }
+
     /// The front end over the output scans `out` of a stream whose raw readings of channel
     /// `k` are `cols[k]` from scan `first` on (they must hold every reading the stencils of
     /// `out` reach), appended to `into`. How many readings it found unusable.
@@ -578,8 +582,7 @@ impl Chain {
                     what: format!("column `{ch}`"),
                     reason: format!("scans {}..{} of the stream missing", w0 + first, w1 + first),
                 })?;
-                let delay = &self.delays[ch.index()];
-                chans.push(FrontChannel { readings, k: constants[ch.index()], delay, interior: delay.interior(w1 - w0) });
+                chans.push(self.front_channel(ch, readings, constants[ch.index()]));
             }
             let o = back..back + (q - p);
             s.load.resize(o.end, 0.0);
@@ -614,12 +617,11 @@ impl<'a> FrontTiles<'a> {
         let constants = Constants::all(raw.units, &chain.calibration)?;
         let mut chans = Vec::with_capacity(CHANNEL_COUNT);
         for ch in ChannelId::ALL {
-            let delay = &chain.delays[ch.index()];
             let readings = &raw.columns[col_of[ch.index()]][window.clone()];
-            if len < delay.taps() {
+            if len < chain.delays[ch.index()].taps() {
                 return Err(too_short(len, chain.edge));
             }
-            chans.push(FrontChannel { readings, k: constants[ch.index()], delay, interior: delay.interior(len) });
+            chans.push(chain.front_channel(ch, readings, constants[ch.index()]));
         }
         Ok(Self { chans, applied: chain.applied, len, s: FrontScratch::default(), bad: 0 })
     }
