@@ -19,6 +19,7 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
+use super::range_check::LinearRange;
 use super::{Chain, ConditioningConfig, Mechanics, RangeViolation};
 use crate::record::RawUnits;
 use crate::simd::{self, Kernel, Simd};
@@ -71,13 +72,9 @@ pub fn delays(calibration: &Calibration, config: &ConditioningConfig, sample_rat
 /// One channel's front end.
 #[derive(Clone, Debug)]
 struct Front {
-    channel: ChannelId,
     /// Column of the channel in a scan row.
     column: usize,
-    /// The channel's constants for readings in volts, and its sensitivity (V per SI unit).
-    volts: Constants,
-    sensitivity: f64,
-    range_si: [f64; 2],
+    range: LinearRange,
     /// The last in-range reading (in the stream's units), fed to the filters in place of an
     /// out-of-range one.
     last_good: f64,
@@ -141,40 +138,29 @@ impl CausalOutput {
 
 /// What one call leaves for the next (the last scans the de-skew stencils reach back to, the
 /// last `2 M` low-passed samples and velocities the differentiators reach back to), and
-/// scratch columns reused from call to call.
+/// scratch columns reused from call to call. Every column ends with the last sample of its
+/// stage so far, so a stage takes the tail of its input.
 #[derive(Clone, Debug, Default)]
 struct Buffers {
-    /// Readings (in range, or held) by channel index, scans `raw_first ..`.
+    /// Readings (in range, or held) by channel index.
     raw: [Vec<f64>; CHANNEL_COUNT],
-    raw_first: u64,
     /// This call's front-end output, its frames low-passed in place.
     front: FrontOut,
     /// Low-passed `x, y, tilt_x, tilt_y, X, Y, F_x, F_y`, then the unfiltered `f3` and
-    /// temperature, low-pass indices `filtered_first ..`.
+    /// temperature.
     filtered: [Vec<f64>; 10],
-    filtered_first: u64,
-    /// `x', y', X', Y'`, indices `velocity_first ..`.
+    /// `x', y', X', Y'`.
     velocity: [Vec<f64>; 4],
-    velocity_first: u64,
     /// This call's `x'', y'', X'', Y''`.
     acceleration: [Vec<f64>; 4],
     /// Scans of this call with an out-of-range reading, ascending.
     hits: Vec<u64>,
-    /// Whether this call's outputs are finite.
-    finite: Vec<bool>,
 }
 
-impl Buffers {
-    /// Forgets all but the last `keep` entries of `cols` (whose first entry has index
-    /// `*first`).
-    fn keep_last<const N: usize>(cols: &mut [Vec<f64>; N], first: &mut u64, keep: usize) {
-        let len = cols[0].len();
-        if len > keep {
-            for c in cols.iter_mut() {
-                c.drain(..len - keep);
-            }
-            *first += (len - keep) as u64;
-        }
+/// Forgets all but the last `keep` entries of each column.
+fn keep_last(cols: &mut [Vec<f64>], keep: usize) {
+    for c in cols {
+        c.drain(..c.len().saturating_sub(keep));
     }
 }
 
@@ -190,17 +176,15 @@ pub struct CausalChain {
     chain: Chain,
     /// The front end's constants for the stream's units, by channel index.
     constants: [Constants; CHANNEL_COUNT],
-    units: RawUnits,
     width: usize,
+    /// By channel index.
     fronts: Vec<Front>,
     delays: CausalDelays,
     forward: Option<ForwardStream>,
     /// Scans pushed.
     scans: u64,
-    /// Samples through the low-pass.
-    lowpassed: u64,
-    /// Outputs with a time index `<=` this are invalid (a violation reaches them).
-    invalid_through: Option<u64>,
+    /// Outputs with a time index below this are reached by a violation met already.
+    invalid_until: u64,
     /// History carried between calls, and scratch.
     buf: Buffers,
     front: FrontScratch,
@@ -220,7 +204,7 @@ impl CausalChain {
     ) -> Result<Self, IdentificationError> {
         let chain = Chain::causal(calibration, mechanics, config, sample_rate_hz)?;
         let mut fronts = Vec::with_capacity(CHANNEL_COUNT);
-        for &ch in &ChannelId::ALL {
+        for ch in ChannelId::ALL {
             let column = columns[ch.index()];
             if column >= width {
                 return Err(IdentificationError::BadInput { what: format!("channel `{ch}`"), reason: format!("column {column} of a {width}-column scan") });
@@ -228,30 +212,28 @@ impl CausalChain {
             if let Some(other) = ChannelId::ALL.iter().find(|o| **o != ch && columns[o.index()] == column) {
                 return Err(IdentificationError::BadInput { what: format!("channel `{ch}`"), reason: format!("column {column} is also `{other}`'s") });
             }
-            let volts = Constants::of(ch, RawUnits::Volts, calibration)?;
-            let c = calibration.channel(ch)?;
-            let (offset_v, sensitivity) = (c.offset_v, c.sensitivity_v_per_unit);
-            let [a, b] = c.linear_range_v.map(|v| (v - offset_v) / sensitivity);
-            // Mid-range: what the filters see until the first in-range reading.
-            let mid = match units {
-                RawUnits::Volts => 0.5 * (c.linear_range_v[0] + c.linear_range_v[1]),
-                RawUnits::Si => 0.5 * (a + b),
+            // The range test maps readings in SI to volts: whatever the units, a calibration
+            // that cannot convert volts is refused.
+            Constants::of(ch, RawUnits::Volts, calibration)?;
+            let range = LinearRange::of(ch, units, calibration)?;
+            // Mid-range, in the stream's units: what the filters see until the first in-range
+            // reading (a non-finite value would stay in the low-pass's state).
+            let [lo, hi] = match units {
+                RawUnits::Volts => calibration.channel(ch)?.linear_range_v,
+                RawUnits::Si => range.range_si,
             };
-            let last_good = if mid.is_finite() { mid } else { 0.0 };
-            fronts.push(Front { channel: ch, column, volts, sensitivity, range_si: [a.min(b), a.max(b)], last_good });
+            let mid = 0.5 * (lo + hi);
+            fronts.push(Front { column, range, last_good: if mid.is_finite() { mid } else { 0.0 } });
         }
-        let constants = Constants::all(units, calibration)?;
         Ok(Self {
             delays: CausalDelays::of(&chain),
-            constants,
+            constants: Constants::all(units, calibration)?,
             chain,
-            units,
             width,
             fronts,
             forward: None,
             scans: 0,
-            lowpassed: 0,
-            invalid_through: None,
+            invalid_until: 0,
             buf: Buffers::default(),
             front: FrontScratch::default(),
         })
@@ -268,10 +250,17 @@ impl CausalChain {
 
     /// The time indices of the outputs a violation can reach (see the module notes).
     pub fn influence(&self, v: &RangeViolation) -> Range<u64> {
-        let d = self.delays;
         let first = v.index as u64;
         let last = first + v.count.max(1) as u64 - 1;
-        first.saturating_sub((d.lookahead + d.derivative) as u64)..last + (d.lookback + d.settling + d.derivative) as u64 + 1
+        self.reached_by(first).start..self.reached_by(last).end
+    }
+
+    /// The time indices an out-of-range reading at scan `n` reaches: from the output that scan
+    /// completes to the last whose stencils, low-pass settling and differentiators reach back
+    /// to it.
+    fn reached_by(&self, n: u64) -> Range<u64> {
+        let d = self.delays;
+        n.saturating_sub(d.delay_scans() as u64)..n + (d.lookback + d.settling + d.derivative) as u64 + 1
     }
 
     /// Pushes the scans of `values` (rows of `width` readings, scan order) and appends the
@@ -302,218 +291,202 @@ struct Push<'a> {
 impl Kernel for Push<'_> {
     type Output = ();
 
-    /// The whole call stage by stage: calibrate every scan into channel columns, de-skew the
-    /// columns, the kinematics and applied force into frames, the low-pass over the frames,
-    /// the differentiators over the columns, eq. 2. `values` holds whole scans, at least one.
+    /// The call's readings, the filters, and what the next call needs kept. `values` holds
+    /// whole scans, at least one.
     #[inline(always)]
     fn run<S: Simd>(self, simd: S) {
         let Push { c, values, out } = self;
-        let width = c.width;
-        let scans = values.len() / width;
         let n0 = c.scans;
-        c.scans += scans as u64;
+        c.read_scans(values, out);
+        c.filter(simd, n0, out);
+        if let Some(&n) = c.buf.hits.last() {
+            // The last violation reaches furthest.
+            c.invalid_until = c.reached_by(n).end;
+        }
         let d = c.delays;
-        let (ahead, back, two_m) = (d.lookahead as u64, d.lookback as u64, d.derivative as u64);
-        let half = two_m / 2;
-        let buf = &mut c.buf;
-
-        // The readings into the raw columns, range-checked. The raw columns hold the scans
-        // since `raw_first`, so scan `n0` goes at their current end.
-        let e0 = (n0 - buf.raw_first) as usize;
-        for col in buf.raw.iter_mut() {
-            col.resize(e0 + scans, 0.0);
-        }
-        {
-            // The readings into the channel columns, row after row.
-            let dst = buf.raw.each_mut().map(|c| &mut c[e0..e0 + scans]);
-            let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| c.fronts[k].column);
-            for (i, row) in values.chunks_exact(width).enumerate() {
-                for k in 0..CHANNEL_COUNT {
-                    dst[k][i] = row[columns[k]];
-                }
-            }
-        }
-        let mut in_range = true;
-        for (f, col) in c.fronts.iter().zip(&buf.raw) {
-            in_range &= f.in_range(c.units, &col[e0..]);
-        }
-        buf.hits.clear();
-        if in_range {
-            for (f, col) in c.fronts.iter_mut().zip(&buf.raw) {
-                f.last_good = col[e0 + scans - 1];
-            }
-        } else {
-            // A reading out of range somewhere: again, scan by scan, holding the last good
-            // value and recording the violations in the order met.
-            for (i, row) in values.chunks_exact(width).enumerate() {
-                let n = n0 + i as u64;
-                for (f, col) in c.fronts.iter_mut().zip(buf.raw.iter_mut()) {
-                    let (value, ok) = f.read(c.units, row[f.column]);
-                    if ok {
-                        f.last_good = row[f.column];
-                    } else {
-                        if buf.hits.last() != Some(&n) {
-                            buf.hits.push(n);
-                        }
-                        match out.violations.iter_mut().rev().find(|v| v.channel == f.channel) {
-                            Some(v) if v.index as u64 + v.count as u64 == n => v.count += 1,
-                            _ => out.violations.push(RangeViolation { channel: f.channel, index: n as usize, value_si: value, range_si: f.range_si, count: 1 }),
-                        }
-                    }
-                    col[e0 + i] = f.last_good;
-                }
-            }
-        }
-
-        // The front end (calibration, de-skew, kinematics, applied force): scan `n` gives
-        // time index `m = n - L`, once the stencils' reach back is in.
-        let (first_n, end_n) = (n0.max(ahead + back), n0 + scans as u64);
-        if first_n < end_n {
-            let count = (end_n - first_n) as usize;
-            let m0 = (first_n - ahead) as usize;
-            let front = &mut buf.front;
-            front.frames.clear();
-            front.load.clear();
-            front.temp.clear();
-            let cols = buf.raw.each_ref().map(Vec::as_slice);
-            // The raw columns keep the last `L + lookback` scans, every reading the stencils
-            // of `m0..` reach: this cannot fail.
-            let _ = c.chain.front_frames(&c.constants, cols, buf.raw_first as usize, m0..m0 + count, &mut c.front, front);
-            let FrontOut { frames, load: f3, temp: temperature } = front;
-
-            // Low-pass: index `p = m - lookback`, started in the steady state of its first input.
-            let p0 = c.lowpassed;
-            c.lowpassed += count as u64;
-            let st = c.forward.get_or_insert_with(|| c.chain.lowpass.forward_steady(frames[0]));
-            c.chain.lowpass.forward_run(st, frames);
-            let fe = (p0 - buf.filtered_first) as usize;
-            for col in buf.filtered.iter_mut() {
-                col.resize(fe + count, 0.0);
-            }
-            let [l0, l1, l2, l3, l4, l5, l6, l7, o_f3, o_t] = &mut buf.filtered;
-            simd.transpose8(&mut [l0, l1, l2, l3, l4, l5, l6, l7].map(|c| &mut c[..]), fe, frames, false);
-            o_f3[fe..].copy_from_slice(&f3[..count]);
-            o_t[fe..].copy_from_slice(&temperature[..count]);
-
-            // Velocity at `q = p - M` for every `p >= 2M`.
-            let p_end = p0 + count as u64;
-            let pv = p0.max(two_m);
-            if pv < p_end {
-                let nv = (p_end - pv) as usize;
-                let q0 = pv - half;
-                // The velocity columns end just before `q0` (or are empty and start there).
-                buf.velocity_first = q0 - buf.velocity[0].len() as u64;
-                let ve = buf.velocity[0].len();
-                let from = (q0 - half - buf.filtered_first) as usize;
-                for (v, &lane) in buf.velocity.iter_mut().zip(&DIFFERENTIATED) {
-                    v.resize(ve + nv, 0.0);
-                    c.chain.derivative.interior_slices(simd, &buf.filtered[lane][from..], &mut v[ve..]);
-                }
-                // Acceleration and every output at `r = p - 2M`, once the low-pass has settled.
-                let r0 = (pv - two_m).max(d.settling as u64 + two_m);
-                let r_end = p_end - two_m;
-                if r0 < r_end {
-                    let no = (r_end - r0) as usize;
-                    let from = (r0 - half - buf.velocity_first) as usize;
-                    for (a, v) in buf.acceleration.iter_mut().zip(&buf.velocity) {
-                        a.resize(no, 0.0);
-                        c.chain.derivative.interior_slices(simd, &v[from..], a);
-                    }
-                    c.emit(r0, no, out);
-                }
-            }
-        }
-        let buf = &mut c.buf;
-        let reach = back + (d.settling as u64) + two_m;
-        if let Some(&n) = buf.hits.last() {
-            // `n + reach` grows with `n`: the last violation reaches furthest.
-            c.invalid_through = Some(c.invalid_through.map_or(n + reach, |t| t.max(n + reach)));
-        }
-        Buffers::keep_last(&mut buf.raw, &mut buf.raw_first, (ahead + back) as usize);
-        Buffers::keep_last(&mut buf.filtered, &mut buf.filtered_first, two_m as usize);
-        Buffers::keep_last(&mut buf.velocity, &mut buf.velocity_first, two_m as usize);
+        keep_last(&mut c.buf.raw, d.lookahead + d.lookback);
+        keep_last(&mut c.buf.filtered, d.derivative);
+        keep_last(&mut c.buf.velocity, d.derivative);
     }
 }
 
 impl CausalChain {
-    /// Appends the `count` outputs from index `r0` of the low-pass (time index `r0 +
-    /// lookback`): this call's accelerations are in the acceleration columns.
+    /// The readings of the scans of `values` into the raw columns, an out-of-range one
+    /// replaced by the last good one of its channel, and recorded: in `out`'s violations, its
+    /// scan in `hits`.
     #[inline(always)]
-    fn emit(&mut self, r0: u64, count: usize, out: &mut CausalOutput) {
-        let buf = &self.buf;
+    fn read_scans(&mut self, values: &[f64], out: &mut CausalOutput) {
+        let n0 = self.scans;
+        self.scans += (values.len() / self.width) as u64;
+        let buf = &mut self.buf;
+        // Row after row, one pass over the scans, into the columns' new ends taken as slices,
+        // the channels' columns in a local array: the loop then keeps them in registers.
+        let first_new = buf.raw[0].len();
+        for col in &mut buf.raw {
+            col.resize(first_new + values.len() / self.width, 0.0);
+        }
+        let columns: [usize; CHANNEL_COUNT] = std::array::from_fn(|k| self.fronts[k].column);
+        let dst = buf.raw.each_mut().map(|col| &mut col[first_new..]);
+        for (i, row) in values.chunks_exact(self.width).enumerate() {
+            for k in 0..CHANNEL_COUNT {
+                dst[k][i] = row[columns[k]];
+            }
+        }
+        // Scan by scan, so that the violations are in the order met. A block in range, the
+        // usual case, is told by a count over each column (it vectorises); only its last scan
+        // is then gone over, for `last_good`.
+        let in_range = self.fronts.iter().zip(&self.constants).zip(&buf.raw).all(|((f, k), col)| f.in_range(k, &col[first_new..]));
+        let len = buf.raw[0].len();
+        buf.hits.clear();
+        let from = if in_range { len - 1 } else { first_new };
+        for i in from..len {
+            let n = n0 + (i - first_new) as u64;
+            for ((f, k), col) in self.fronts.iter_mut().zip(&self.constants).zip(&mut buf.raw) {
+                let (value, ok) = f.read(k, col[i]);
+                if ok {
+                    f.last_good = col[i];
+                } else {
+                    col[i] = f.last_good;
+                    if buf.hits.last() != Some(&n) {
+                        buf.hits.push(n);
+                    }
+                    let (channel, range_si) = (f.range.channel, f.range.range_si);
+                    match out.violations.iter_mut().rev().find(|v| v.channel == channel) {
+                        Some(v) if v.index as u64 + v.count as u64 == n => v.count += 1,
+                        _ => out.violations.push(RangeViolation { channel, index: n as usize, value_si: value, range_si, count: 1 }),
+                    }
+                }
+            }
+        }
+    }
+
+    /// This call's scans `n0..` (in the raw columns) through the front end (calibration,
+    /// de-skew, kinematics, applied force), the low-pass and the differentiators, and the
+    /// outputs they complete into `out`.
+    #[inline(always)]
+    fn filter<S: Simd>(&mut self, simd: S, n0: u64, out: &mut CausalOutput) {
         let d = self.delays;
-        let (fo, vo) = ((r0 - buf.filtered_first) as usize, (r0 - buf.velocity_first) as usize);
-        let time0 = r0 + d.lookback as u64;
+        let two_m = d.derivative;
+        // How many samples this call's scans complete of a stage whose first sample scan `k`
+        // completes. Scan `n` completes time index `m = n - L` once the stencils' reach back
+        // is in (low-pass index `p = m - lookback`), the velocity at `p - M`, and the
+        // acceleration and every output at `p - 2M` once the low-pass has settled.
+        let new = |k: usize| (self.scans.saturating_sub(k as u64) - n0.saturating_sub(k as u64)) as usize;
+        let lowpassed = new(d.lookahead + d.lookback);
+        let velocities = new(d.lookahead + d.lookback + two_m);
+        let outputs = new(d.first_index() + d.delay_scans());
+        if lowpassed == 0 {
+            return;
+        }
+        let buf = &mut self.buf;
+        let front = &mut buf.front;
+        front.frames.clear();
+        front.load.clear();
+        front.temp.clear();
+        let m_end = self.scans as usize - d.lookahead;
+        let raw_first = self.scans as usize - buf.raw[0].len();
+        // The raw columns keep the last `L + lookback` scans, every reading the stencils reach:
+        // this cannot fail.
+        let _ = self.chain.front_frames(&self.constants, buf.raw.each_ref().map(Vec::as_slice), raw_first, m_end - lowpassed..m_end, &mut self.front, front);
+        let FrontOut { frames, load, temp } = front;
+
+        // The low-pass, started in the steady state of its first input.
+        let lowpass = &self.chain.lowpass;
+        let state = self.forward.get_or_insert_with(|| lowpass.forward_steady(frames[0]));
+        lowpass.forward_run(state, frames);
+        let start = buf.filtered[0].len();
+        let [l0, l1, l2, l3, l4, l5, l6, l7, f3, temperature] = &mut buf.filtered;
+        let mut lanes = [l0, l1, l2, l3, l4, l5, l6, l7];
+        for l in &mut lanes {
+            l.resize(start + lowpassed, 0.0);
+        }
+        simd.transpose8(&mut lanes.map(|l| &mut l[..]), start, frames, false);
+        f3.extend_from_slice(load);
+        temperature.extend_from_slice(temp);
+
+        // Each derivative reaches `M` past its outputs on either side.
+        if velocities == 0 {
+            return;
+        }
+        for (v, &lane) in buf.velocity.iter_mut().zip(&DIFFERENTIATED) {
+            let x = &buf.filtered[lane];
+            let start = v.len();
+            v.resize(start + velocities, 0.0);
+            self.chain.derivative.interior_slices(simd, &x[x.len() - velocities - two_m..], &mut v[start..]);
+        }
+        if outputs == 0 {
+            return;
+        }
+        for (a, v) in buf.acceleration.iter_mut().zip(&buf.velocity) {
+            a.resize(outputs, 0.0);
+            self.chain.derivative.interior_slices(simd, &v[v.len() - outputs - two_m..], a);
+        }
+        self.emit(outputs, out);
+    }
+
+    /// Appends the last `count` outputs: this call's accelerations, the velocities `M` and the
+    /// low-passed samples `2M` before the end of their columns.
+    #[inline(always)]
+    fn emit(&self, count: usize, out: &mut CausalOutput) {
+        let d = self.delays;
+        let buf = &self.buf;
+        // The last output is completed by the last scan.
+        let time0 = self.scans - (d.delay_scans() + count) as u64;
         if out.is_empty() {
             out.first_index = time0;
         }
         let start = out.len();
-        let [x, y, _, _, _, _, fx, fy, f3, temperature] = &buf.filtered;
+        let tail = |col: &Vec<f64>, past: usize| col.len() - past - count..col.len() - past;
+        let [x, y, _, _, _, _, fx, fy, f3, temperature] = buf.filtered.each_ref().map(|c| &c[tail(c, d.derivative)]);
+        let [vx, vy, _, _] = buf.velocity.each_ref().map(|c| &c[tail(c, d.derivative / 2)]);
         let [ax, ay, hx, hy] = &buf.acceleration;
-        out.x_m.extend_from_slice(&x[fo..fo + count]);
-        out.y_m.extend_from_slice(&y[fo..fo + count]);
-        out.vx_m_s.extend_from_slice(&buf.velocity[0][vo..vo + count]);
-        out.vy_m_s.extend_from_slice(&buf.velocity[1][vo..vo + count]);
-        out.ax_m_s2.extend_from_slice(&ax[..count]);
-        out.ay_m_s2.extend_from_slice(&ay[..count]);
+        out.x_m.extend_from_slice(x);
+        out.y_m.extend_from_slice(y);
+        out.vx_m_s.extend_from_slice(vx);
+        out.vy_m_s.extend_from_slice(vy);
+        out.ax_m_s2.extend_from_slice(ax);
+        out.ay_m_s2.extend_from_slice(ay);
         let m = self.chain.mechanics().housing_mass_kg;
-        out.fx_n.extend(fx[fo..fo + count].iter().zip(&hx[..count]).map(|(f, a)| f - m * a));
-        out.fy_n.extend(fy[fo..fo + count].iter().zip(&hy[..count]).map(|(f, a)| f - m * a));
-        out.static_load_n.extend_from_slice(&f3[fo..fo + count]);
-        out.temperature_c.extend_from_slice(&temperature[fo..fo + count]);
-        // Valid: finite, and no violation met by the scan that completed the sample
-        // (`time + L + 2M`) reaches it.
-        let cols = [&out.x_m, &out.y_m, &out.vx_m_s, &out.vy_m_s, &out.ax_m_s2, &out.ay_m_s2, &out.fx_n, &out.fy_n].map(|c| &c[start..start + count]);
-        let mut finite = std::mem::take(&mut self.buf.finite);
-        finite.clear();
-        finite.resize(count, true);
-        for c in cols {
-            for (f, v) in finite.iter_mut().zip(c) {
-                *f &= v.is_finite();
+        out.fx_n.extend(fx.iter().zip(hx).map(|(f, a)| f - m * a));
+        out.fy_n.extend(fy.iter().zip(hy).map(|(f, a)| f - m * a));
+        out.static_load_n.extend_from_slice(f3);
+        out.temperature_c.extend_from_slice(temperature);
+        // Valid: finite, and out of the reach of every out-of-range reading (the earlier calls'
+        // end at `invalid_until`). The reaches are in order, so no sample is cleared twice.
+        out.valid.resize(start + count, true);
+        let valid = &mut out.valid[start..];
+        for col in [&out.x_m, &out.y_m, &out.vx_m_s, &out.vy_m_s, &out.ax_m_s2, &out.ay_m_s2, &out.fx_n, &out.fy_n] {
+            for (ok, v) in valid.iter_mut().zip(&col[start..]) {
+                *ok &= v.is_finite();
             }
         }
-        let reach = (d.lookback + d.settling + d.derivative) as u64;
-        let delay = d.delay_scans() as u64;
-        let mut through = self.invalid_through;
-        let mut hits = self.buf.hits.iter().peekable();
-        let mut i = 0;
-        out.valid.reserve(count);
-        while i < count {
-            // The violations met up to the scan completing sample `i`; `through` then holds
-            // until the scan of the next violation.
-            let scan = time0 + i as u64 + delay;
-            while let Some(&&n) = hits.peek() {
-                if n > scan {
-                    break;
-                }
-                through = Some(through.map_or(n + reach, |t| t.max(n + reach)));
-                hits.next();
+        let (end, mut cleared) = (time0 + count as u64, time0);
+        for reached in std::iter::once(0..self.invalid_until).chain(buf.hits.iter().map(|&n| self.reached_by(n))) {
+            let (from, to) = (reached.start.max(cleared), reached.end.min(end));
+            if from < to {
+                valid[(from - time0) as usize..(to - time0) as usize].fill(false);
+                cleared = to;
             }
-            let end = hits.peek().map_or(count, |&&n| ((n - delay - time0) as usize).min(count));
-            out.valid.extend(finite[i..end].iter().zip(time0 + i as u64..).map(|(&f, time)| f && through.is_none_or(|t| time > t)));
-            i = end;
         }
-        self.buf.finite = finite;
     }
 }
 
 impl Front {
-    /// A reading's SI value and whether it is in range (finite, inside the linear range).
+    /// A reading's SI value, by the chain's own conversion (`k`), and whether it is in range:
+    /// inside the linear range and converting to a finite value.
     #[inline(always)]
-    fn read(&self, units: RawUnits, r: f64) -> (f64, bool) {
-        let k = &self.volts;
-        let (volts, value) = match units {
-            RawUnits::Volts => (r, k.si(r)),
-            RawUnits::Si => (k.offset + self.sensitivity * r, r),
+    fn read(&self, k: &Constants, r: f64) -> (f64, bool) {
+        let value = match self.range.units {
+            RawUnits::Volts => k.si(r),
+            RawUnits::Si => r,
         };
-        (value, (volts > k.lo) & (volts < k.hi) & value.is_finite())
+        (value, self.range.contains(r) & value.is_finite())
     }
 
-    /// Whether every reading of `col` is in range (the caller then redoes the block holding
-    /// values if one is not).
+    /// Whether every reading of `col` is in range.
     #[inline(always)]
-    fn in_range(&self, units: RawUnits, col: &[f64]) -> bool {
+    fn in_range(&self, k: &Constants, col: &[f64]) -> bool {
         // A count rather than a short-circuit `all`, so that the loop vectorises.
-        col.iter().map(|&r| u64::from(!self.read(units, r).1)).sum::<u64>() == 0
+        col.iter().filter(|&&r| !self.read(k, r).1).count() == 0
     }
 }
