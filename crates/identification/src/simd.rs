@@ -283,8 +283,8 @@ mod x86 {
     impl Simd for Avx512 {
         #[inline(always)]
         fn transpose8(self, cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
-            // SAFETY: an `Avx512` token exists only on a CPU with AVX-512F.
-            unsafe { transpose8_avx512(cols, start, frames, to_frames) }
+            // SAFETY: an `Avx512` token exists only on a CPU with AVX-512F, which implies AVX2.
+            unsafe { transpose8_avx2(cols, start, frames, to_frames) }
         }
 
         #[inline(always)]
@@ -335,56 +335,6 @@ mod x86 {
                         for (j, v) in tr(r).into_iter().enumerate() {
                             _mm256_storeu_pd(c[l0 + j].as_mut_ptr().add(i), v);
                         }
-                    }
-                }
-            }
-        }
-        tail(&mut c, f, body, t, to_frames);
-    }
-
-    /// [`Simd::transpose8`] by 8 x 8 register transposes (its own inverse, so one shuffle
-    /// network serves both directions): eight loads, 24 shuffles, eight stores per eight
-    /// samples of the eight columns.
-    #[target_feature(enable = "avx512f")]
-    fn transpose8_avx512(cols: &mut [&mut [f64]; 8], start: usize, frames: &mut [[f64; 8]], to_frames: bool) {
-        #[inline]
-        #[target_feature(enable = "avx512f")]
-        fn pick(v: [__m512d; 4]) -> [__m512d; 4] {
-            let e0 = _mm512_shuffle_f64x2::<0x88>(v[0], v[1]);
-            let e1 = _mm512_shuffle_f64x2::<0xDD>(v[0], v[1]);
-            let f0 = _mm512_shuffle_f64x2::<0x88>(v[2], v[3]);
-            let f1 = _mm512_shuffle_f64x2::<0xDD>(v[2], v[3]);
-            [
-                _mm512_shuffle_f64x2::<0x88>(e0, f0),
-                _mm512_shuffle_f64x2::<0x88>(e1, f1),
-                _mm512_shuffle_f64x2::<0xDD>(e0, f0),
-                _mm512_shuffle_f64x2::<0xDD>(e1, f1),
-            ]
-        }
-        #[inline]
-        #[target_feature(enable = "avx512f")]
-        fn tr(r: [__m512d; 8]) -> [__m512d; 8] {
-            // 128-bit lane k of lo[j] holds rows 2j, 2j + 1 at value 2k; of hi[j], at 2k + 1.
-            let even = pick(std::array::from_fn(|j| _mm512_unpacklo_pd(r[2 * j], r[2 * j + 1])));
-            let odd = pick(std::array::from_fn(|j| _mm512_unpackhi_pd(r[2 * j], r[2 * j + 1])));
-            [even[0], odd[0], even[1], odd[1], even[2], odd[2], even[3], odd[3]]
-        }
-        let t = frames.len();
-        let mut c: [&mut [f64]; 8] = cols.each_mut().map(|c| &mut c[start..start + t]);
-        let body = t / 8 * 8;
-        let f = frames.as_flattened_mut();
-        for i in (0..body).step_by(8) {
-            // SAFETY: i + 8 <= t: the accesses are c[j][i .. i + 8] and f[8 (i + k) ..][..8].
-            unsafe {
-                if to_frames {
-                    let r = std::array::from_fn(|j| _mm512_loadu_pd(c[j].as_ptr().add(i)));
-                    for (k, v) in tr(r).into_iter().enumerate() {
-                        _mm512_storeu_pd(f.as_mut_ptr().add(8 * (i + k)), v);
-                    }
-                } else {
-                    let r = std::array::from_fn(|k| _mm512_loadu_pd(f.as_ptr().add(8 * (i + k))));
-                    for (j, v) in tr(r).into_iter().enumerate() {
-                        _mm512_storeu_pd(c[j].as_mut_ptr().add(i), v);
                     }
                 }
             }

@@ -642,22 +642,6 @@ impl Produce8 for FrontTiles<'_> {
     }
 }
 
-/// Asks the CPU to bring `x[range]` (clamped to `x`) into its caches ahead of use: a hint
-/// that changes no value.
-#[inline(always)]
-fn prefetch(x: &[f64], range: Range<usize>) {
-    let end = range.end.min(x.len());
-    let r = &x[range.start.min(end)..end];
-    #[cfg(target_arch = "x86_64")]
-    for line in r.chunks(8) {
-        // SAFETY: SSE is part of every x86_64 CPU; a prefetch of an address inside `x` never
-        // faults and reads nothing into Rust.
-        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(line.as_ptr().cast()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = r;
-}
-
 /// Calibration (step 3), range count (step 2), de-skew (step 4) and the linear combinations
 /// of steps 5 and 7 for the scans `o.start..o.end` (at most [`TILE`]) of a window of `len`
 /// scans whose dynamic columns start at scan `base`: `dynamic` = `[x, y, tilt_x, tilt_y,
@@ -680,7 +664,6 @@ fn front_tile(
     let (o0, o1) = (o.start, o.end);
     let mut bad = 0;
     for (k, (c, t)) in chans.iter().zip(tile.iter_mut()).enumerate() {
-        prefetch(c.readings, o1..o1 + (o1 - o0));
         // The frame probes, the bellows' load and the temperature are not combined with
         // other channels: de-skewed straight into their columns.
         let t: &mut [f64] = match k {
