@@ -142,27 +142,9 @@ pub(crate) trait Simd: Copy {
     /// `k = 1..=M` summed in that order (`x` reaches `M` past `dst` on each side).
     #[inline(always)]
     fn derivative<const M: usize>(self, c: &[f64; M], x: &[f64], dst: &mut [f64]) {
-        derivative_lanes::<M, 4>(c, x, dst);
-    }
-}
-
-/// [`Simd::derivative`] `W` outputs at a time as arrays, left to the compiler to vectorise.
-#[inline(always)]
-fn derivative_lanes<const M: usize, const W: usize>(c: &[f64; M], x: &[f64], dst: &mut [f64]) {
-    let body = dst.len() / W * W;
-    for (q, o) in dst[..body].chunks_exact_mut(W).enumerate() {
-        let i = W * q + M;
-        let d = |k: usize, l: usize| x[i + l + k] - x[i + l - k];
-        let mut acc: [f64; W] = std::array::from_fn(|l| c[0] * d(1, l));
-        for k in 2..M + 1 {
-            for (l, a) in acc.iter_mut().enumerate() {
-                *a += c[k - 1] * d(k, l);
-            }
+        for (j, o) in dst.iter_mut().enumerate() {
+            *o = derivative_point(c, x, j + M);
         }
-        o.copy_from_slice(&acc);
-    }
-    for (j, o) in dst.iter_mut().enumerate().skip(body) {
-        *o = derivative_point(c, x, j + M);
     }
 }
 
