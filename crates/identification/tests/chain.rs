@@ -62,7 +62,8 @@ fn a_record_at_another_rate_is_refused() {
 /// readings: the same bits, at record lengths that cut the tiles and the reflections
 /// differently (the shortest has fewer samples than the low-pass's reflection beyond the
 /// edges it trims), in volts and in SI, with a reading out of range, and at half-lengths of
-/// the differentiator with and without a compiled kernel.
+/// the differentiator with and without a compiled kernel; the times and eq. 2's static part
+/// too.
 #[test]
 fn fused_chain_equals_the_stages_bit_for_bit() {
     let calibration = DaqConfig::zhou2004().calibration();
@@ -77,6 +78,7 @@ fn fused_chain_equals_the_stages_bit_for_bit() {
     ] {
         for si_units in [false, true] {
             let mut raw = volts_record(n, &calibration, n as u64);
+            raw.start_time_s = 12.345_678_9;
             // A reading out of its range (and finite): reported, and conditioned as it is.
             raw.columns[1][n / 2] = 1.0e3;
             if si_units {
@@ -131,7 +133,13 @@ fn fused_chain_equals_the_stages_bit_for_bit() {
                 *f -= m * a;
             }
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+            // The scans' times, and eq. 2's static part as the plain mean over `valid`.
+            let times: Vec<f64> = (0..n).map(|i| raw.start_time_s + i as f64 / raw.sample_rate_hz).collect();
+            let valid = c.valid.clone();
+            let static_part = [6, 7].map(|k| dynamic[k][valid.clone()].iter().sum::<f64>() / valid.len() as f64);
             for (isa, c) in &by_isa {
+                assert!(bits(&c.t_s) == bits(&times), "t_s differs (n = {n}, {config:?}, SI {si_units}, {isa:?})");
+                assert_eq!(c.static_force_n.map(f64::to_bits), static_part.map(f64::to_bits), "static part (n = {n}, {config:?}, {isa:?})");
                 for (name, fused, staged) in [
                     ("vx_m_s", &c.vx_m_s, &vx),
                     ("ax_m_s2", &c.ax_m_s2, &ax),

@@ -16,11 +16,11 @@ use std::ops::Range;
 
 use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
-use super::deskew::{stencil_any, FractionalDelay, MAX_TAPS};
+use super::deskew::{stencil, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::Applied;
 use super::lowpass::{Butterworth, Consume8, Produce8, MAX_ORDER};
-use super::{all_finite, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, Work};
+use super::{all_finite, columns_of, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, Work};
 use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Isa, Kernel, Simd};
 use crate::IdentificationError;
@@ -170,16 +170,7 @@ impl Chain {
                 format!("the record has {} Hz, the chain was designed for {} Hz", raw.sample_rate_hz, self.sample_rate_hz),
             ));
         }
-        let mut col_of = [usize::MAX; CHANNEL_COUNT];
-        for (k, &c) in raw.channels.iter().enumerate() {
-            col_of[c.index()] = k;
-        }
-        if let Some(missing) = ChannelId::ALL.iter().find(|c| col_of[c.index()] == usize::MAX) {
-            return Err(IdentificationError::BadInput {
-                what: format!("channel `{missing}`"),
-                reason: "missing from the record; conditioning needs all ten channels".into(),
-            });
-        }
+        let col_of = columns_of(&raw.channels, "record")?;
         let n = window.len();
         if n <= 2 * self.edge {
             return Err(too_short(n, self.edge));
@@ -413,9 +404,9 @@ fn subtract_inertia(force: &mut [f64], acc: &[f64], mass_kg: f64) -> bool {
 /// order, bound by an add's latency per sample, and the times' divisions, four at a time, run
 /// beside them in the pipes the chains leave idle. The same operations in the same order as
 /// two plain sums (from -0.0, as `Iterator::sum`) and a plain loop over the times, so the same
-/// bits.
+/// bits (`tests/chain.rs` checks them).
 #[inline(always)]
-pub(super) fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
+fn static_part_and_times(fx: &[f64], fy: &[f64], valid: Range<usize>, t0: f64, fs: f64, t: &mut [f64]) -> [f64; 2] {
     #[inline(always)]
     fn times(t: &mut [f64], from: usize, t0: f64, fs: f64) {
         for (i, t) in t.iter_mut().enumerate() {
@@ -703,7 +694,7 @@ fn front_tile(
                     *x = si(v);
                 }
             }
-            stencil_any(w, x, &mut t[a - o0..b - o0]);
+            stencil(w, x, &mut t[a - o0..b - o0]);
         }
         for n in (o0..a).chain(b..o1) {
             t[n - o0] = c.delay.edge_value(n, len, |i| si(c.readings[i]));

@@ -133,25 +133,16 @@ impl FractionalDelay {
 }
 
 /// The de-skew stencil over a tile: `dst[i] = w[0] x[i] + w[1] x[i + 1] + ...`, summed in
-/// that order, with `T` taps known at compile time so
-/// each output is summed in registers and stored once.
+/// that order. The default four taps are summed in registers and each output stored once;
+/// other lengths take a pass over the tile per tap, the same sums.
 #[inline(always)]
-pub(crate) fn stencil<const T: usize>(w: &[f64], x: &[f64], dst: &mut [f64]) {
-    let Ok(w) = <&[f64; T]>::try_from(w) else {
-        return stencil_passes(w, x, dst);
-    };
-    for (o, xs) in dst.iter_mut().zip(x.windows(T)) {
-        let mut acc = w[0] * xs[0];
-        for j in 1..T {
-            acc += w[j] * xs[j];
+pub(crate) fn stencil(w: &[f64], x: &[f64], dst: &mut [f64]) {
+    if let Ok(w) = <&[f64; 4]>::try_from(w) {
+        for (o, xs) in dst.iter_mut().zip(x.windows(4)) {
+            *o = w[0] * xs[0] + w[1] * xs[1] + w[2] * xs[2] + w[3] * xs[3];
         }
-        *o = acc;
+        return;
     }
-}
-
-/// [`stencil`] for any number of taps: a pass over the tile per tap, the same sums.
-#[inline(always)]
-fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
     let m = dst.len();
     for (o, &x) in dst.iter_mut().zip(&x[..m]) {
         *o = w[0] * x;
@@ -160,19 +151,5 @@ fn stencil_passes(w: &[f64], x: &[f64], dst: &mut [f64]) {
         for (o, &x) in dst.iter_mut().zip(&x[j..j + m]) {
             *o += wj * x;
         }
-    }
-}
-
-/// [`stencil`] for the usual numbers of taps, the passes for the others.
-#[inline(always)]
-pub(crate) fn stencil_any(w: &[f64], x: &[f64], dst: &mut [f64]) {
-    match w.len() {
-        2 => stencil::<2>(w, x, dst),
-        3 => stencil::<3>(w, x, dst),
-        4 => stencil::<4>(w, x, dst),
-        5 => stencil::<5>(w, x, dst),
-        6 => stencil::<6>(w, x, dst),
-        8 => stencil::<8>(w, x, dst),
-        _ => stencil_passes(w, x, dst),
     }
 }

@@ -30,7 +30,7 @@ use std::ops::Range;
 
 pub use chain::Chain;
 
-use oilfilm_physics::daq::{Calibration, ChannelId};
+use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 use serde::{Deserialize, Serialize};
 
 use crate::record::RawRecord;
@@ -234,6 +234,22 @@ pub(super) fn too_short(n: usize, edge: usize) -> IdentificationError {
 
 pub(crate) use crate::simd::{all_finite, first_non_finite};
 
+/// The column holding each channel, by channel index, of a record or stream (`what`) whose
+/// columns are `channels`: an error names a channel that is missing.
+pub(super) fn columns_of(channels: &[ChannelId], what: &str) -> Result<[usize; CHANNEL_COUNT], IdentificationError> {
+    let mut col_of = [usize::MAX; CHANNEL_COUNT];
+    for (k, c) in channels.iter().enumerate() {
+        col_of[c.index()] = k;
+    }
+    match ChannelId::ALL.iter().find(|c| col_of[c.index()] == usize::MAX) {
+        Some(missing) => Err(IdentificationError::BadInput {
+            what: format!("channel `{missing}`"),
+            reason: format!("missing from the {what}; conditioning needs all ten channels"),
+        }),
+        None => Ok(col_of),
+    }
+}
+
 /// The `BadInput` for a non-finite sample.
 pub(crate) fn non_finite_error(channel: ChannelId, index: usize, value: f64, unit: &str) -> IdentificationError {
     IdentificationError::BadInput { what: format!("channel `{channel}`, sample {index}"), reason: format!("{value} is not a finite reading ({unit})") }
@@ -244,42 +260,4 @@ pub(crate) fn non_finite_error(channel: ChannelId, index: usize, value: f64, uni
 /// once does the same for many records.)
 pub fn condition(raw: &RawRecord, calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig) -> Result<Conditioned, IdentificationError> {
     Chain::new(calibration, mechanics, config, raw.sample_rate_hz)?.condition(raw)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The fused static part and times against the plain loops (each mean a sum in index order
-    /// from -0.0, as `Iterator::sum`), bit for bit, on lengths and windows that cut its chunks
-    /// of four anywhere.
-    #[test]
-    fn static_part_and_times_equals_the_two_loops() {
-        let mut state = 7u64;
-        let mut uniform = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let (t0, fs) = (12.345_678_9, 5000.0);
-        let mut checked = 0;
-        for n in [1, 2, 5, 8, 9, 31, 1000] {
-            let fx: Vec<f64> = (0..n).map(|_| 1e3 * uniform()).collect();
-            let fy: Vec<f64> = (0..n).map(|_| 8e3 + 1e2 * uniform()).collect();
-            for (a, b) in [(0, n), (0, 1), (n - 1, n), (n / 3, n - n / 4), (1.min(n - 1), n)] {
-                if a >= b {
-                    continue;
-                }
-                let mut t = vec![f64::NAN; n];
-                let fused = chain::static_part_and_times(&fx, &fy, a..b, t0, fs, &mut t);
-                let mean = |f: &[f64]| f[a..b].iter().sum::<f64>() / (b - a) as f64;
-                let reference = [mean(&fx), mean(&fy)];
-                assert_eq!(fused.map(f64::to_bits), reference.map(f64::to_bits), "n {n}, {a}..{b}");
-                for (i, &ti) in t.iter().enumerate() {
-                    assert_eq!(ti.to_bits(), (t0 + i as f64 / fs).to_bits(), "n {n}, {a}..{b}, time {i}");
-                }
-                checked += 1;
-            }
-        }
-        assert!(checked >= 30, "{checked} cases");
-    }
 }

@@ -15,7 +15,7 @@ use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, Derivatives, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{range_check, Chain, ConditioningConfig, Mechanics, RangeViolation};
+use super::{columns_of, range_check, Chain, ConditioningConfig, Mechanics, RangeViolation};
 use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
@@ -75,16 +75,7 @@ impl ZeroPhaseStream {
         config: &ConditioningConfig,
     ) -> Result<Self, IdentificationError> {
         let chain = Chain::new(calibration, mechanics, config, sample_rate_hz)?;
-        let mut col_of = [usize::MAX; CHANNEL_COUNT];
-        for (k, c) in channels.iter().enumerate() {
-            col_of[c.index()] = k;
-        }
-        if let Some(missing) = ChannelId::ALL.iter().find(|c| col_of[c.index()] == usize::MAX) {
-            return Err(IdentificationError::BadInput {
-                what: format!("channel `{missing}`"),
-                reason: "missing from the stream; conditioning needs all ten channels".into(),
-            });
-        }
+        let col_of = columns_of(channels, "stream")?;
         let constants = Constants::all(units, chain.calibration())?;
         let back = chain.reach().0;
         Ok(Self {
