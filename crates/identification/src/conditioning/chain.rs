@@ -20,9 +20,9 @@ use super::deskew::{stencil, FractionalDelay, MAX_TAPS};
 use super::differentiate::{SavitzkyGolayDerivative, TwiceDescending};
 use super::film_force::Applied;
 use super::lowpass::{Butterworth, Consume8, Produce8, MAX_ORDER};
-use super::{all_finite, columns_of, first_non_finite, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, Work};
+use super::{columns_of, kinematics, non_finite_error, range_check, too_short, Conditioned, ConditioningConfig, Mechanics, Work};
 use crate::record::{RawRecord, RawUnits};
-use crate::simd::{self, Isa, Kernel, Simd};
+use crate::simd::{self, all_finite, first_non_finite, Isa, Kernel, Simd};
 use crate::IdentificationError;
 
 /// Scans per tile of the front end (ten channels of 256 samples: 20 kB, L1-resident).
@@ -53,16 +53,11 @@ impl Chain {
     /// Designs the causal chain ([`super::causal`]): its low-pass runs once, forward, so it
     /// has twice `lowpass_order` to fall as fast as the zero-phase `|H|^2`.
     pub fn causal(calibration: &Calibration, mechanics: &Mechanics, config: &ConditioningConfig, sample_rate_hz: f64) -> Result<Self, IdentificationError> {
-        let order = 2 * config.lowpass_order;
+        let order = super::causal::causal_order(config);
         if order > MAX_ORDER {
-            return Err(IdentificationError::invalid(
-                "conditioning.lowpass_order",
-                format!(
-                    "the causal chain runs order 2 x lowpass_order, at most {MAX_ORDER}: lowpass_order must be <= {}, got {}",
-                    MAX_ORDER / 2,
-                    config.lowpass_order
-                ),
-            ));
+            let (most, got) = (MAX_ORDER / 2, config.lowpass_order);
+            let reason = format!("the causal chain runs order 2 x lowpass_order, at most {MAX_ORDER}: lowpass_order must be <= {most}, got {got}");
+            return Err(IdentificationError::invalid("conditioning.lowpass_order", reason));
         }
         Self::with_order(calibration, mechanics, config, sample_rate_hz, order)
     }
@@ -102,10 +97,6 @@ impl Chain {
 
     pub fn isa(&self) -> Isa {
         self.isa
-    }
-
-    pub fn sample_rate_hz(&self) -> f64 {
-        self.sample_rate_hz
     }
 
     pub fn calibration(&self) -> &Calibration {

@@ -70,11 +70,6 @@ impl FractionalDelay {
         Self::new(offset_s * sample_rate_hz, taps)
     }
 
-    /// The delay, in samples.
-    pub fn delay_samples(&self) -> f64 {
-        self.delay_samples
-    }
-
     /// Number of taps.
     pub fn taps(&self) -> usize {
         self.weights.len()

@@ -12,9 +12,8 @@
 
 use std::ops::Range;
 
-use super::all_finite;
 use crate::estimator::qr::{inverse_gram_from_upper, Triangle};
-use crate::simd::Simd;
+use crate::simd::{all_finite, Simd};
 use crate::IdentificationError;
 
 /// Degree of the least-squares polynomial.
@@ -108,11 +107,6 @@ impl SavitzkyGolayDerivative {
 
     pub fn half_length(&self) -> usize {
         self.half_length
-    }
-
-    /// The sample rate the weights were designed for (Hz).
-    pub fn sample_rate_hz(&self) -> f64 {
-        self.sample_rate_hz
     }
 
     /// `c_1 .. c_M` in 1/s: `out[n] = sum_k c_k (x[n+k] - x[n-k])`.

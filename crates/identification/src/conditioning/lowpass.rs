@@ -11,8 +11,7 @@
 //! Design, gains, and why these edges rather than Gustafsson's (1996):
 //! docs/manual/conditioning.md#step-1-low-pass.
 
-use super::all_finite;
-use crate::simd::{self, Isa, Kernel, Simd};
+use crate::simd::{self, all_finite, Isa, Kernel, Simd};
 use crate::IdentificationError;
 
 /// Highest order accepted (the default is 4; beyond 12 nothing useful is gained and the
@@ -269,14 +268,6 @@ impl Butterworth {
         }
         let settling = (SETTLE_TOL.ln() / r.ln()).ceil().max(1.0) as usize;
         Ok(Self { order, cutoff_hz, sample_rate_hz, sections, settling })
-    }
-
-    pub fn order(&self) -> usize {
-        self.order
-    }
-
-    pub fn cutoff_hz(&self) -> f64 {
-        self.cutoff_hz
     }
 
     pub fn sections(&self) -> &[Section] {

@@ -54,10 +54,8 @@ impl Mechanics {
         if !(self.housing_mass_kg.is_finite() && self.housing_mass_kg > 0.0) {
             return Err(IdentificationError::invalid("mechanics.housing_mass_kg", format!("must be finite and > 0, got {}", self.housing_mass_kg)));
         }
-        for (i, a) in self.exciter_angles_deg.iter().enumerate() {
-            if !a.is_finite() {
-                return Err(IdentificationError::invalid(format!("mechanics.exciter_angles_deg[{i}]"), format!("must be finite, got {a}")));
-            }
+        if let Some((i, a)) = self.exciter_angles_deg.iter().enumerate().find(|(_, a)| !a.is_finite()) {
+            return Err(IdentificationError::invalid(format!("mechanics.exciter_angles_deg[{i}]"), format!("must be finite, got {a}")));
         }
         if !self.gravity_m_s2.is_finite() {
             return Err(IdentificationError::invalid("mechanics.gravity_m_s2", format!("must be finite, got {}", self.gravity_m_s2)));
@@ -212,12 +210,9 @@ impl Conditioned {
         if self.range_violations.is_empty() {
             return Ok(());
         }
+        let channels: Vec<&str> = self.range_violations.iter().map(|v| v.channel.name()).collect();
         Err(IdentificationError::BadInput {
-            what: format!(
-                "record ({} channel(s) out of linear range: {})",
-                self.range_violations.len(),
-                self.range_violations.iter().map(|v| v.channel.name()).collect::<Vec<_>>().join(", ")
-            ),
+            what: format!("record ({} channel(s) out of linear range: {})", channels.len(), channels.join(", ")),
             reason: self.range_violations.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "),
         })
     }
@@ -231,8 +226,6 @@ pub(super) fn too_short(n: usize, edge: usize) -> IdentificationError {
         reason: format!("{n} scans; the filters' edge effects need {edge} at each end, so at least {} scans", 2 * edge + 1),
     }
 }
-
-pub(crate) use crate::simd::{all_finite, first_non_finite};
 
 /// The column holding each channel, by channel index, of a record or stream (`what`) whose
 /// columns are `channels`: an error names a channel that is missing.

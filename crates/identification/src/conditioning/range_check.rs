@@ -11,8 +11,9 @@
 
 use oilfilm_physics::daq::{Calibration, ChannelId};
 
-use super::{first_non_finite, non_finite_error, RangeViolation};
+use super::{non_finite_error, RangeViolation};
 use crate::record::RawUnits;
+use crate::simd::first_non_finite;
 use crate::IdentificationError;
 
 /// Checks one column of `channel` (in `units`) against its calibrated linear range.

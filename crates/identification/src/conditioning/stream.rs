@@ -22,7 +22,7 @@ use crate::IdentificationError;
 
 /// A conditioned block ([`ZeroPhaseStream::block`]): the columns the estimator reads, one
 /// value per scan of the block, and the step-2 violations in the block's window (indices
-/// from the window's start, as [`super::condition_window_into`] gives them).
+/// from the window's start, as [`Chain::condition_window_into`] gives them).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Block {
     pub x_m: Vec<f64>,
@@ -102,7 +102,7 @@ impl ZeroPhaseStream {
         self
     }
 
-    /// Scans a block needs on either side: [`super::edge_samples`].
+    /// Scans a block needs on either side: [`Chain::edge`].
     pub fn edge(&self) -> usize {
         self.chain.edge()
     }
@@ -124,7 +124,7 @@ impl ZeroPhaseStream {
     /// over its window (`start + len + edge` scans in); `raw` as for
     /// [`ZeroPhaseStream::advance`], holding the window. `Ok(None)`: the front end could not
     /// make every reading of the window finite (or the scans are not there yet); condition
-    /// the window as a record instead ([`super::condition_window_into`]).
+    /// the window as a record instead ([`Chain::condition_window_into`]).
     pub fn block(&mut self, start: usize, len: usize, raw: &RawRecord, offset: usize) -> Result<Option<Block>, IdentificationError> {
         let edge = self.edge();
         let m = self.chain.derivative.half_length();
