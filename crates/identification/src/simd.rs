@@ -484,13 +484,14 @@ mod tests {
                 }
                 bits.extend(dst.iter().map(|v| v.to_bits()));
             }
+            bits.extend([&self.x[..], &self.x[3..], &self.x[..5]].map(|c| simd.mean(c).to_bits()));
             bits
         }
     }
 
     /// Each instruction set this CPU has gives the portable kernels' bits (transposes both
-    /// ways at odd offsets, the differentiator at every compiled half-length, lengths that
-    /// leave tails). The whole chain's drivers are compared the same way in their own tests.
+    /// ways at odd offsets, the differentiator at every compiled half-length, the mean,
+    /// lengths that leave tails). The whole chain's drivers are compared the same way in their own tests.
     #[test]
     fn every_instruction_set_gives_the_scalar_bits() {
         for n in [4, 5, 37, 1029] {
