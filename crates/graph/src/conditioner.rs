@@ -193,8 +193,8 @@ struct Stream {
     origin_stamp: Stamp,
     /// The scans received and still needed, one column per channel in the stream's order
     /// (channels and units fixed for the stream): read by the zero-phase stream, and by the
-    /// windowed conditioning of a block the stream leaves to it (`window`, in place). Scans no block needs any more
-    /// are dropped in batches (see [`ConditionerCore::condition_block`]).
+    /// windowed conditioning of a block the stream leaves to it (`window`, in place). Scans no
+    /// block needs any more are dropped in batches (see [`ConditionerCore::condition_block`]).
     raw: RawRecord,
     /// Next scan to publish.
     next_out: u64,
@@ -428,8 +428,8 @@ impl ConditionerCore {
             Chain::ZeroPhase => {
                 // A stream that cannot be set up (a channel missing, say) leaves every block
                 // to the windowed conditioning, which names what is wrong in each block.
-                zero_phase = ZeroPhaseStream::new(&channels, units, frame.sample_rate_hz, &calibration, &self.mechanics, &self.config).ok().map(Box::new);
                 let chain = conditioning::Chain::new(&calibration, &self.mechanics, &self.config, frame.sample_rate_hz)?;
+                zero_phase = ZeroPhaseStream::new(chain.clone(), &channels, units).ok().map(Box::new);
                 let edge = chain.edge();
                 window = Some(chain);
                 (edge, None)

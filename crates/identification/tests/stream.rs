@@ -25,7 +25,8 @@ fn config() -> ConditioningConfig {
 /// from `edge` on as soon as its window is in; the blocks and their starts.
 fn blocks_on(isa: Isa, raw: &RawRecord, cut: usize, len: usize) -> Vec<(usize, Option<Block>)> {
     let calibration = DaqConfig::zhou2004().calibration();
-    let mut zp = ZeroPhaseStream::new(&raw.channels, raw.units, raw.sample_rate_hz, &calibration, &mechanics(), &config()).unwrap().with_isa(isa);
+    let mut zp =
+        ZeroPhaseStream::new(Chain::new(&calibration, &mechanics(), &config(), raw.sample_rate_hz).unwrap().with_isa(isa), &raw.channels, raw.units).unwrap();
     let mut fed = RawRecord { columns: vec![Vec::new(); raw.channels.len()], ..raw.clone() };
     let mut next = zp.edge();
     let mut out = Vec::new();

@@ -11,11 +11,11 @@
 //!
 //! Design: docs/manual/conditioning.md#the-zero-phase-stream.
 
-use oilfilm_physics::daq::{Calibration, ChannelId, CHANNEL_COUNT};
+use oilfilm_physics::daq::{ChannelId, CHANNEL_COUNT};
 
 use super::chain::{Constants, Derivatives, FrontOut, FrontScratch};
 use super::lowpass::ForwardStream;
-use super::{columns_of, range_check, Chain, ConditioningConfig, Mechanics, RangeViolation};
+use super::{columns_of, range_check, Chain, RangeViolation};
 use crate::record::{RawRecord, RawUnits};
 use crate::simd::{self, Kernel, Simd};
 use crate::IdentificationError;
@@ -64,17 +64,10 @@ pub struct ZeroPhaseStream {
 }
 
 impl ZeroPhaseStream {
-    /// A stream of records whose columns are `channels` (each of the ten once, any order) in
-    /// `units` at `sample_rate_hz`; an error names a field or calibration the chain cannot use.
-    pub fn new(
-        channels: &[ChannelId],
-        units: RawUnits,
-        sample_rate_hz: f64,
-        calibration: &Calibration,
-        mechanics: &Mechanics,
-        config: &ConditioningConfig,
-    ) -> Result<Self, IdentificationError> {
-        let chain = Chain::new(calibration, mechanics, config, sample_rate_hz)?;
+    /// `chain` over a stream of records whose columns are `channels` (each of the ten once, any
+    /// order) in `units`; an error names a missing channel or a calibration that cannot
+    /// convert the readings.
+    pub fn new(chain: Chain, channels: &[ChannelId], units: RawUnits) -> Result<Self, IdentificationError> {
         let col_of = columns_of(channels, "stream")?;
         let constants = Constants::all(units, chain.calibration())?;
         let back = chain.reach().0;
@@ -93,13 +86,6 @@ impl ZeroPhaseStream {
             columns: Default::default(),
             derived: Default::default(),
         })
-    }
-
-    /// The same stream with its kernels on `isa` (see [`Chain::with_isa`]; the bits do not
-    /// depend on it).
-    pub fn with_isa(mut self, isa: crate::simd::Isa) -> Self {
-        self.chain = self.chain.with_isa(isa);
-        self
     }
 
     /// Scans a block needs on either side: [`Chain::edge`].
