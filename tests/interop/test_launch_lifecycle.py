@@ -82,12 +82,16 @@ def no_estimate(oilfilm):
     check("0 estimate(s) received" in out, "it counts the estimates it received (0)")
     # The least lag is the transport's alone: within 20 ms of the wall clock (a DAQ that
     # took its start before waiting for subscribers lagged ~0.6 s; one run 4x fast, seconds ahead).
-    # Ten frames are enough for that: the DAQ's clock starts only once its exciter is heard,
-    # which on a loaded machine takes seconds of the run.
+    # Ten frames are enough for that: the DAQ's first block waits for its exciter's setpoints,
+    # which on a loaded machine take seconds of the run (discovery), and the frames of that
+    # wait come late until the rig has caught up.
     lags.sort()
-    check(len(lags) >= 10 and abs(lags[0]) < 0.020 and lags[len(lags) // 2] < 0.2,
-          f"at rate_factor 1 a DAQ frame's end stamp is the wall clock's: least lag {1e3 * lags[0]:.1f} ms, median "
-          f"{1e3 * lags[len(lags) // 2]:.1f} ms over {len(lags)} frames" if lags else "no DAQ frame received")
+    on_time = check(len(lags) >= 10 and abs(lags[0]) < 0.020 and lags[len(lags) // 2] < 0.2,
+                    f"at rate_factor 1 a DAQ frame's end stamp is the wall clock's: least lag {1e3 * lags[0]:.1f} ms, median "
+                    f"{1e3 * lags[len(lags) // 2]:.1f} ms over {len(lags)} frames" if lags else "no DAQ frame received")
+    if not on_time:
+        # What the nodes warned of (a DAQ that waited for setpoints says so): the reason.
+        sys.stderr.writelines(line + "\n" for line in out.splitlines() if " WARN " in line)
 
 
 def launcher_killed(oilfilm):

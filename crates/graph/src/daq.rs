@@ -427,6 +427,11 @@ impl SimDaqCore {
 /// published before a subscriber is discovered are lost to it: the topic is volatile).
 pub const READER_WAIT_S: f64 = 10.0;
 
+/// How often a DAQ waiting for the exciter's setpoints says its status again, s. The exciter
+/// answers a status, and one published before its subscription was matched is lost to it
+/// (volatile topic): said once, a lost first status would hold the rig for the whole wait.
+pub const STATUS_REPEAT_S: f64 = 0.25;
+
 /// The DAQ node: the simulated rig driven by the exciter's setpoints, or a line source
 /// (ASCII record, TCP stream), by its `source` parameter.
 // One `Daq` a process, made once and never moved in a loop: the variants' sizes cost nothing.
@@ -480,7 +485,7 @@ impl Node for Daq {
                 params: params.clone(),
                 reader_wait: None,
                 wall_start: None,
-                status_sent: false,
+                status_at: None,
                 waiting_since: None,
             }))
         } else {
@@ -565,7 +570,8 @@ pub struct SimDaq {
     /// The clock when the rig started running (after that wait): block `k` is due
     /// `k` blocks of rig time later, divided by `rate_factor`.
     wall_start: Option<Stamp>,
-    status_sent: bool,
+    /// When the last status went out (the runner's clock).
+    status_at: Option<Stamp>,
     /// Since when the next block has waited for setpoints.
     waiting_since: Option<Stamp>,
 }
@@ -608,9 +614,9 @@ impl SimDaq {
                 *self.wall_start.insert(now)
             }
         };
-        if !self.status_sent {
+        if self.status_at.is_none() {
             ports.status.publish(self.core.status())?;
-            self.status_sent = true;
+            self.status_at = Some(now);
             turn.handled += 1;
         }
         let p = &self.params;
@@ -633,7 +639,14 @@ impl SimDaq {
             // wait `command_timeout_s` for a running exciter.
             let timeout_s = if self.core.now() == epoch { p.command_timeout_s.max(READER_WAIT_S) } else { p.command_timeout_s };
             if now.seconds_since(since) < timeout_s {
-                return Ok(Turn { wake: Some(later(since, timeout_s)), ..turn });
+                let mut said = self.status_at.unwrap_or(now);
+                if now.seconds_since(said) >= STATUS_REPEAT_S {
+                    ports.status.publish(self.core.status())?;
+                    said = now;
+                    self.status_at = Some(now);
+                    turn.handled += 1;
+                }
+                return Ok(Turn { wake: Some(later(since, timeout_s).min(later(said, STATUS_REPEAT_S))), ..turn });
             }
             tracing::warn!(
                 node = "daq",
@@ -646,6 +659,7 @@ impl SimDaq {
         let frame = self.core.produce()?;
         ports.frames.publish(frame)?;
         ports.status.publish(self.core.status())?;
+        self.status_at = Some(now);
         turn.handled += 2;
         Ok(turn)
     }
@@ -702,5 +716,59 @@ mod tests {
         assert_eq!((f.units, f.values.len(), f.counts.len()), (DaqFrame::UNITS_COUNTS, 0, 500));
         assert_eq!(f.volts_per_count, vec![rig.daq.calibration().lsb_v(); 10]);
         f.check_samples().unwrap();
+    }
+
+    /// The exciter answers a status with setpoints, and a status published before its
+    /// subscription is matched is lost to it. An exciter discovered after the DAQ's first
+    /// status must still hear one soon, not when the first block's wait of 10 s has run out.
+    #[test]
+    fn a_rig_waiting_for_setpoints_says_its_status_again() {
+        use crate::ports::memory::Bus;
+        use crate::ports::Receive;
+        let rig = RigConfig::zhou2004().unwrap();
+        let load = |_: &str| Ok(rig.clone());
+        let t0 = Stamp(1_700_000_000_000_000_000);
+        let start = Start { now: t0, rig: &load, namespace: crate::topics::NAMESPACE };
+        let params = DaqParams { block_scans: 500, rate_factor: 1.0, ..DaqParams::default() };
+        let mut daq = Daq::new(&params, &start).unwrap();
+        let (commands, frames, status) = (Bus::<ExciterCommand>::new(), Bus::<DaqFrame>::new(), Bus::<RigStatus>::new());
+        let mut frames_tap = frames.subscriber();
+        let mut ports =
+            DaqPorts { commands: Some(Box::new(commands.subscriber())), frames: Box::new(frames.publisher()), status: Box::new(status.publisher()) };
+
+        // The conditioner is there, the exciter not yet: the first status goes to nobody.
+        let first = daq.turn(t0, &mut ports).unwrap();
+        assert_eq!(first.handled, 1, "the first status is published at once");
+        let mut wake = first.wake.expect("waits for setpoints");
+        let late = later(t0, 0.6);
+        let mut status_tap = status.subscriber();
+        let mut heard = None;
+        let mut now = t0;
+        while heard.is_none() && now < later(t0, READER_WAIT_S) {
+            now = wake.max(late);
+            let turn = daq.turn(now, &mut ports).unwrap();
+            wake = turn.wake.expect("still waiting for setpoints");
+            assert!(wake > now, "wakes later, not in a loop");
+            heard = status_tap.receive().unwrap().map(|s| (now, s));
+        }
+        let (at, said) = heard.expect("a subscriber that came after the first status hears one during the wait");
+        assert!(at.seconds_since(late) <= STATUS_REPEAT_S, "heard {} s after it subscribed", at.seconds_since(late));
+        assert_eq!(Stamp::from_time(&said.header.stamp), t0, "the rig clock has not run: no scan yet");
+        assert!(frames_tap.receive().unwrap().is_none(), "no frame before the setpoints");
+
+        // The exciter answers; the first block runs as soon as it is due.
+        let rate = rig.daq.sample_rate_hz;
+        let cmd = ExciterCommand {
+            header: Header { stamp: t0.to_time(), ..Default::default() },
+            setpoint_rate_hz: rate,
+            force_1_n: vec![10.0; 2600],
+            force_2_n: vec![-10.0; 2600],
+            ..Default::default()
+        };
+        commands.publisher().publish(cmd).unwrap();
+        let turn = daq.turn(now, &mut ports).unwrap();
+        let frame = frames_tap.receive().unwrap().expect("the first block ran once its setpoints came");
+        assert_eq!((frame.first_scan, Stamp::from_time(&frame.header.stamp)), (0, t0));
+        assert_eq!(turn.handled, 3, "the command taken, a frame and a status published");
     }
 }
