@@ -20,6 +20,10 @@ phase() {
 }
 
 mkdir -p target
+# Each failed check's name, listed again above the final count: a log read from its end
+# (a CI page) then says what failed without the whole output.
+failed_names=target/failed-names.txt
+: >"$failed_names"
 # The Python venvs (pip downloads, rosidl's build of oilfilm_msgs) are set up while cargo
 # builds: on a clean clone they are minutes of mostly waiting on the network. Each script is
 # idempotent; the interop scripts below call them again and find them ready.
@@ -40,6 +44,7 @@ if [ "$fmt_status" -eq 0 ]; then
   echo "ok: cargo fmt --all --check"
 else
   failed=$((failed + 1))
+  echo "format: cargo fmt --all --check" >>"$failed_names"
   head -40 target/fmt-output.txt
   echo "FAILED: cargo fmt --all --check (run cargo fmt --all)"
 fi
@@ -80,6 +85,7 @@ if [ -n "$clippy_driver" ] && [ "$lint_count" -eq 0 ] && [ "$build_status" -eq 0
   echo "ok: the workspace builds with no warning from rustc or clippy (cargo clippy --workspace --all-targets -- -D warnings)"
 else
   failed=$((failed + 1))
+  echo "lints: $lint_count warning or error line(s) from rustc or clippy" >>"$failed_names"
   echo "FAILED: lints: $lint_count warning or error line(s) from rustc or clippy above${clippy_driver:-, and clippy is not installed}"
 fi
 phase "build and lints"
@@ -117,6 +123,7 @@ executables=$(wc -l <target/test-executables.txt)
 if [ "$executables" -eq 0 ]; then
   failed=$((failed + 1))
   echo "FAILED: the build listed no test executable (target/build-artifacts.json)"
+  echo "rust: the build listed no test executable" >>"$failed_names"
 fi
 # One lane: every executable of `$1` in turn, output to target/test-output-$1.txt; a binary
 # that exits non-zero without a test report (a crash) is counted in target/test-crashes-$1.
@@ -168,6 +175,7 @@ interop() {
   else
     echo "FAILED: $name ($((SECONDS - t0)) s)"
     echo failed >>"$interop_counts"
+    echo "interop: ${name:0:150}" >>"$failed_names"
   fi
 }
 
@@ -211,6 +219,7 @@ failed=$((failed + $(cat target/interop-*.counts 2>/dev/null | grep -c '^failed$
 if [ ! -e target/interop-files.done ]; then
   failed=$((failed + 1))
   echo "FAILED: the bag and record interop did not run to its end (its log above)"
+  echo "interop: the bag and record interop did not run to its end" >>"$failed_names"
 fi
 
 echo "== Rust tests (their output)"
@@ -226,6 +235,12 @@ failed=$((failed + rf))
 # A crash counts as a failure even if no test reported one.
 failed=$((failed + crashes))
 echo "== time: the Rust tests took $(cat target/test-seconds 2>/dev/null || echo '?') s, beside the interop tests (total $SECONDS s)"
+{ grep -E '^test .* \.\.\. FAILED$' target/test-output.txt | sed -E 's/^test (.*) \.\.\. FAILED$/rust: \1/' || true; } >>"$failed_names"
+{ grep '^CRASHED: ' target/test-output.txt | sed 's/^CRASHED: /rust: crashed: /' || true; } >>"$failed_names"
 echo
+if [ -s "$failed_names" ]; then
+  echo "failed:"
+  sed 's/^/  /' "$failed_names"
+fi
 echo "all: $passed passed, $failed failed, $rs skipped"
 [ "$failed" -eq 0 ]
