@@ -5,10 +5,11 @@
 //! [`oilfilm_graph::topics`] (ros2-client's subscription default is best-effort, keep-last 1);
 //! the parameter services are ours ([`crate::parameters`]: descriptors from the node's specs,
 //! a set applied by the node or refused with the reason); the log goes to `/rosout`
-//! ([`crate::logging`]); and the node re-announces itself on `ros_discovery_info`, with the
-//! raw readers and writers ros2-client does not know of (the recorder's, the player's), so a
-//! graph that missed its first announcement still lists it and every topic shows its node
-//! (ADR 0017).
+//! ([`crate::logging`]); a writer whose readers' acknowledgments a node waits for (the
+//! exciter's last command, the player's messages) is RustDDS's own, made here; and the node
+//! re-announces itself on `ros_discovery_info`, with the readers and writers ros2-client does
+//! not know of (those writers, the recorder's raw readers), so a graph that missed its first
+//! announcement still lists it and every topic shows its node (ADR 0017).
 //!
 //! ros2-client's spinner is not run: it would serve its own parameter services and subscribe
 //! `/clock` as `builtin_interfaces/msg/Time`, a second type on a topic whose type is
@@ -142,8 +143,8 @@ pub struct RosNode {
     announcer: Option<Announcer>,
 }
 
-/// The GIDs of a node's raw readers and writers, which ros2-client's own announcements
-/// leave out.
+/// The GIDs of a node's readers and writers made outside ros2-client's node (the raw and
+/// acknowledged ones), which ros2-client's own announcements leave out.
 #[derive(Default)]
 struct ExtraEntities {
     readers: Vec<ros2_client::Gid>,
@@ -168,12 +169,11 @@ struct ExtraEntities {
 /// graph cache keys by participant GID, so a repeat only restates what the first
 /// announcement said.
 ///
-/// The info sent also lists the node's raw readers and writers ([`ExtraEntities`]: the
-/// recorder's subscriptions, the player's publishers), which ros2-client's own
-/// announcements leave out, so `ros2 topic info -v` shows them with their node instead of
-/// `_NODE_NAME_UNKNOWN_`. It is sent at once whenever one is made ([`Announcer::now`]), and
-/// ros2-client's next announcement (it has none after the node's last entity) would be
-/// corrected by the next repeat.
+/// The info sent also lists the entities made outside ros2-client's node ([`ExtraEntities`]:
+/// the raw and acknowledged writers, the recorder's raw readers), which ros2-client's own announcements leave
+/// out, so `ros2 topic info -v` shows them with their node instead of `_NODE_NAME_UNKNOWN_`.
+/// It is sent at once whenever an entity is made, ros2-client's or ours ([`Announcer::now`]),
+/// so that ros2-client's announcement, which leaves them out, is not the last word.
 struct Announcer {
     wake: std::sync::mpsc::Sender<Wake>,
     thread: std::thread::JoinHandle<()>,
@@ -243,25 +243,54 @@ impl Announcer {
         let thread = std::thread::Builder::new()
             .name("ros-discovery-announcer".into())
             .spawn(move || {
+                use ros2_client::dds::rustdds::{DataWriterStatus, StatusEvented};
+                use std::time::{Duration, Instant};
+                let say = || {
+                    if let Err(e) = writer.write(info(), Some(ros2_client::dds::rustdds::Timestamp::now())) {
+                        tracing::warn!("re-announcing the node on ros_discovery_info failed: {e:?}");
+                    }
+                };
                 let scale = schedule_scale();
-                let mut wait = std::time::Duration::from_millis(500);
+                let mut wait = Duration::from_millis(500);
+                let mut repeat_at = Instant::now() + wait.mul_f64(scale);
+                let mut newcomer_at = None::<Instant>;
                 loop {
-                    match woken.recv_timeout(wait.mul_f64(scale)) {
-                        Ok(Wake::Now) => {}
-                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
-                            wait = if wait >= std::time::Duration::from_secs(8) { std::time::Duration::from_secs(15) } else { wait * 2 };
-                        }
+                    let due = newcomer_at.map_or(repeat_at, |n| n.min(repeat_at));
+                    match woken.recv_timeout(due.saturating_duration_since(Instant::now()).min(Self::POLL)) {
+                        Ok(Wake::Now) => say(),
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
                         // Stopped, or the sender dropped.
                         Ok(Wake::Stop) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
                     }
-                    if let Err(e) = writer.write(info(), None) {
-                        tracing::warn!("re-announcing the node on ros_discovery_info failed: {e:?}");
+                    while let Some(status) = writer.try_recv_status() {
+                        if let DataWriterStatus::PublicationMatched { total, .. } = status {
+                            if total.count_change() > 0 {
+                                newcomer_at = Some(Instant::now() + Self::NEWCOMER);
+                            }
+                        }
+                    }
+                    let now = Instant::now();
+                    if newcomer_at.is_some_and(|n| now >= n) {
+                        newcomer_at = None;
+                        say();
+                    }
+                    if now >= repeat_at {
+                        say();
+                        wait = if wait >= Duration::from_secs(8) { Duration::from_secs(15) } else { wait * 2 };
+                        repeat_at = now + wait.mul_f64(scale);
                     }
                 }
             })
             .map_err(|e| NodeError::Io { what: "ros_discovery_info announcer thread".into(), source: e })?;
         Ok(Self { wake, thread })
     }
+
+    /// How often the announcer looks for new readers of `ros_discovery_info`.
+    const POLL: std::time::Duration = std::time::Duration::from_millis(50);
+    /// How long after a new reader of `ros_discovery_info` matched the node is announced to
+    /// it again: after ros2-client's stored announcement, which leaves out the entities made
+    /// here, has reached it.
+    const NEWCOMER: std::time::Duration = std::time::Duration::from_millis(200);
 
     /// Announces now (a raw entity was made).
     fn now(&self) {
@@ -405,10 +434,35 @@ impl RosNode {
         Ok(DdsPublisher { publisher: p, topic: leak_name(full), readers: Readers::new(&self.context, full) })
     }
 
+    /// A writer on the node's participant, announced as the node's. Not ros2-client's
+    /// `Publisher`, which hides its writer and with it the wait for acknowledgments
+    /// ([`Publish::flush`]); but ros2-client's own announcement leaves it out, so a fresh
+    /// participant that takes that one last names no node for it (ADR 0025). Hence only where
+    /// the wait is needed.
+    fn writer<M, SA: dds_no_key::SerializerAdapter<M>>(
+        &mut self,
+        full: &str,
+        type_name: &str,
+        qos: QosProfile,
+    ) -> Result<dds_no_key::DataWriter<M, SA>, NodeError> {
+        let t = self.topic_named(full, type_name, &qos)?;
+        let publisher = self
+            .context
+            .domain_participant()
+            .create_publisher(&ros2_client::dds::rustdds::QosPolicies::builder().build())
+            .map_err(|e| mw(format!("publisher {full}"), e))?;
+        let writer = publisher.create_datawriter_no_key::<M, SA>(&t, Some((&qos).into())).map_err(|e| mw(format!("publisher {full}"), e))?;
+        self.extra.lock().unwrap_or_else(PoisonError::into_inner).writers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&writer)));
+        self.announce_now();
+        Ok(writer)
+    }
+
     /// A typed subscription on a topic given by full name, type and QoS (`/clock`).
     pub fn subscription_named<M: DeserializeOwned + 'static>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsSubscription<M>, NodeError> {
         let t = self.topic_named(full, type_name, &qos)?;
         let s = self.node.create_subscription::<M>(&t, Some(qos)).map_err(|e| mw(format!("subscription {full}"), e))?;
+        // ros2-client has just announced the node without the writers made here.
+        self.announce_now();
         Ok(DdsSubscription { subscription: s, topic: leak_name(full) })
     }
 
@@ -432,16 +486,8 @@ impl RosNode {
 
     /// A writer that sends serialised CDR as it is given (the player's output).
     pub fn raw_publisher(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<RawPublisher, NodeError> {
-        let t = self.topic_named(full, type_name, &qos)?;
-        let publisher = self
-            .context
-            .domain_participant()
-            .create_publisher(&ros2_client::dds::rustdds::QosPolicies::builder().build())
-            .map_err(|e| mw(format!("publisher {full}"), e))?;
-        let writer = publisher.create_datawriter_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into())).map_err(|e| mw(format!("raw publisher {full}"), e))?;
-        self.extra.lock().unwrap_or_else(PoisonError::into_inner).writers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&writer)));
-        self.announce_now();
-        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, first_ack: false })
+        let writer = self.writer::<RawCdr, RawAdapter>(full, type_name, qos)?;
+        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, acks: Acks::default() })
     }
 
     /// Sends the node's entities on `ros_discovery_info` now.
@@ -463,9 +509,18 @@ impl RosNode {
         Ok(DdsPublisher { publisher: p, topic: topic.name, readers: Readers::new(&self.context, &full) })
     }
 
+    /// A typed publisher whose [`Publish::flush`] waits for its readers' acknowledgments.
+    pub fn acknowledged_publisher<M: Serialize>(&mut self, topic: &Topic) -> Result<AcknowledgedPublisher<M>, NodeError> {
+        let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
+        let writer = self.writer::<M, CDRSerializerAdapter<M>>(&full, topic.type_name, qos_of(topic))?;
+        Ok(AcknowledgedPublisher { writer, topic: topic.name, readers: Readers::new(&self.context, &full), acks: Acks::default() })
+    }
+
     pub fn subscription<M: DeserializeOwned + 'static>(&mut self, topic: &Topic) -> Result<DdsSubscription<M>, NodeError> {
         let t = self.topic(topic)?;
         let s = self.node.create_subscription::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("subscription {}", topic.name), e))?;
+        // ros2-client has just announced the node without the writers made here.
+        self.announce_now();
         Ok(DdsSubscription { subscription: s, topic: topic.name })
     }
 
@@ -517,6 +572,15 @@ pub struct DdsPublisher<M: Serialize> {
     readers: Readers,
 }
 
+/// A typed writer that can wait for its readers' acknowledgments
+/// ([`RosNode::acknowledged_publisher`]).
+pub struct AcknowledgedPublisher<M: Serialize> {
+    writer: dds_no_key::DataWriter<M, CDRSerializerAdapter<M>>,
+    topic: &'static str,
+    readers: Readers,
+    acks: Acks,
+}
+
 /// The readers DDS discovery knows on one topic, looked up at most every
 /// [`Readers::REFRESH`] (a node asks every turn; discovery changes on a scale of seconds).
 struct Readers {
@@ -560,7 +624,7 @@ pub struct RawAdapter;
 #[error("{0}")]
 pub struct RawError(String);
 
-use ros2_client::dds::rustdds::{bytes::Bytes, no_key as dds_no_key, RepresentationIdentifier};
+use ros2_client::dds::rustdds::{bytes::Bytes, no_key as dds_no_key, serialization::CDRSerializerAdapter, RepresentationIdentifier};
 
 impl dds_no_key::DeserializerAdapter<RawCdr> for RawAdapter {
     type Error = RawError;
@@ -629,16 +693,43 @@ pub struct RawPublisher {
     writer: dds_no_key::DataWriter<RawCdr, RawAdapter>,
     topic: String,
     matched: i32,
-    /// Whether the first wait for acknowledgments has had its grace (see `flush`).
-    first_ack: bool,
+    acks: Acks,
 }
 
-/// How long a reliable reader may take to send its first acknowledgment: rustdds counts a
-/// reliable reader in its acknowledgment wait only once that reader has sent its first
-/// ACKNACK (answering a heartbeat); until then the wait returns at once.
-const FIRST_ACK: std::time::Duration = std::time::Duration::from_millis(500);
+/// The wait for acknowledgments behind [`Publish::flush`], for either kind of writer.
+#[derive(Default)]
+struct Acks {
+    /// Whether the first wait has had its grace.
+    graced: bool,
+}
+
+impl Acks {
+    /// How long a reliable reader may take to send its first acknowledgment: rustdds counts
+    /// a reliable reader in its acknowledgment wait only once that reader has sent its first
+    /// ACKNACK (answering a heartbeat); until then the wait returns at once.
+    const FIRST_ACK: std::time::Duration = std::time::Duration::from_millis(500);
+
+    /// Waits (at most `timeout`, after the first call's [`Acks::FIRST_ACK`]) until every
+    /// matched reliable reader acknowledged what `writer` wrote; false on timeout.
+    fn flush<M, SA: dds_no_key::SerializerAdapter<M>>(
+        &mut self,
+        writer: &dds_no_key::DataWriter<M, SA>,
+        topic: &str,
+        timeout: std::time::Duration,
+    ) -> Result<bool, NodeError> {
+        if !std::mem::replace(&mut self.graced, true) {
+            std::thread::sleep(Self::FIRST_ACK);
+        }
+        writer.wait_for_acknowledgments(timeout).map_err(|e| mw(format!("acknowledgments on {topic}"), format!("{e:?}")))
+    }
+}
 
 impl RawPublisher {
+    /// The writer's GID, as the graph (`ros_discovery_info`) lists it.
+    pub fn gid(&self) -> ros2_client::Gid {
+        ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&self.writer))
+    }
+
     /// Readers this writer is matched with now. A reader DDS discovery has seen is not
     /// matched at once, and what is written before it is lost to a volatile reader: the
     /// player waits for this, not for discovery.
@@ -651,12 +742,6 @@ impl RawPublisher {
         }
         self.matched.max(0) as usize
     }
-
-    /// Waits (at most `max`) until every matched reliable reader acknowledged what was
-    /// written; false on timeout.
-    pub fn wait_for_acknowledgments(&self, max: std::time::Duration) -> Result<bool, NodeError> {
-        self.writer.wait_for_acknowledgments(max).map_err(|e| mw(format!("acknowledgments on {}", self.topic), format!("{e:?}")))
-    }
 }
 
 impl Publish<RawCdr> for RawPublisher {
@@ -668,12 +753,8 @@ impl Publish<RawCdr> for RawPublisher {
         Some(self.matched())
     }
 
-    /// The first call gives the readers [`FIRST_ACK`] to send their first acknowledgment.
     fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
-        if !std::mem::replace(&mut self.first_ack, true) {
-            std::thread::sleep(FIRST_ACK);
-        }
-        self.wait_for_acknowledgments(timeout)
+        self.acks.flush(&self.writer, &self.topic, timeout)
     }
 }
 
@@ -684,6 +765,20 @@ impl<M: Serialize> Publish<M> for DdsPublisher<M> {
 
     fn readers(&mut self) -> Option<usize> {
         Some(self.readers.count())
+    }
+}
+
+impl<M: Serialize> Publish<M> for AcknowledgedPublisher<M> {
+    fn publish(&mut self, message: M) -> Result<(), NodeError> {
+        self.writer.write(message, Some(ros2_client::dds::rustdds::Timestamp::now())).map_err(|e| mw(format!("publish on {}", self.topic), e))
+    }
+
+    fn readers(&mut self) -> Option<usize> {
+        Some(self.readers.count())
+    }
+
+    fn flush(&mut self, timeout: std::time::Duration) -> Result<bool, NodeError> {
+        self.acks.flush(&self.writer, self.topic, timeout)
     }
 }
 
@@ -712,6 +807,9 @@ impl Connect for RosNode {
     }
     fn output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError> {
         Ok(Box::new(self.publisher::<M>(topic)?))
+    }
+    fn acknowledged_output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError> {
+        Ok(Box::new(self.acknowledged_publisher::<M>(topic)?))
     }
     fn raw_input(&mut self, topic: &RawTopic) -> Result<Input<'static, RawCdr>, NodeError> {
         Ok(Box::new(self.raw_subscription(&topic.name, &topic.type_name, qos_from_bag(&topic.qos, false))?))

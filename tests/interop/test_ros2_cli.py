@@ -6,7 +6,8 @@ Against `oilfilm launch tests/interop/live/sim_rig.launch.yaml`:
 1. `ros2 node list` lists the four nodes; `ros2 topic list -t` our topics with their types,
    and `/clock` (the DAQ runs at rate_factor 2, so its stamps are not the wall clock's) with
    exactly one type, rosgraph_msgs/msg/Clock;
-2. `ros2 topic info -v` names the estimator as the publisher of `estimates`, volatile;
+2. `ros2 topic info -v` names the estimator as the publisher of `estimates`, volatile, and
+   the exciter as the publisher of `exciter/command` (a writer made outside ros2-client);
 3. `ros2 topic echo --once` prints a RigStatus and a `/clock`; `ros2 topic hz` measures the
    DAQ frames near their rate (10 frames/s of rig time at rate_factor 2: 20/s);
 4. `ros2 param list/describe/get/set`: descriptions, ranges and read-only flags shown, a
@@ -14,7 +15,8 @@ Against `oilfilm launch tests/interop/live/sim_rig.launch.yaml`:
    set still applied; the refusal reaches `/rosout` as a warning of the node's logger;
 5. `ros2 service list` shows each node's six parameter services;
 and during `oilfilm play` of a bag: `/clock` echoes with one type and the played topics'
-publisher is the player node (through the daemon, which keeps the node's re-announcements). No command prints an error or a warning.
+publisher is the player node, through the daemon and to a fresh participant. No command prints
+an error or a warning.
 
 Run through run-ros2-cli.sh.
 """
@@ -98,6 +100,16 @@ def live(oilfilm):
         pubs = out.split("Subscription count")[0]
         check(rc == 0 and "Node name: estimator" in pubs and f"Node namespace: {NS}" in pubs and "VOLATILE" in pubs,
               "ros2 topic info -v: estimates published by /oilfilm/estimator, volatile")
+        # The exciter's writer is made outside ros2-client (it waits for acknowledgments), so
+        # ros2-client's own announcement of the node leaves it out; ours lists it and is sent
+        # again to each newly joined participant. Each try is a fresh participant.
+        names = []
+        for _ in range(3):
+            rc, out, err = ros2("topic", "info", "-v", f"{NS}/exciter/command")
+            names = re.findall(r"Node name: (\S+)", out.split("Subscription count")[0])
+            if names == ["exciter"]:
+                break
+        check(names == ["exciter"], f"ros2 topic info -v: exciter/command published by /oilfilm/exciter ({names})")
         hashes = re.findall(r"Topic type hash: (\S+)", pubs)
         print(f"note: type hash of our estimates writer as ros2 sees it: {hashes} (RustDDS sends none: ADR 0025)")
         check(not noisy(err), f"ros2 topic info -v prints no error or warning {noisy(err)}")
@@ -179,19 +191,20 @@ def playing(oilfilm, bag):
         check(re.search(r"^/clock \[rosgraph_msgs/msg/Clock\]$", out, re.M) is not None, "during oilfilm play: /clock has one type, rosgraph_msgs/msg/Clock")
         rc, out, err = ros2("topic", "echo", "--once", "/clock", timeout=30)
         check(rc == 0 and "clock:" in out and not noisy(err), "during oilfilm play: ros2 topic echo --once /clock")
-        # Through the daemon, which was running before the player started: it keeps the
-        # player's re-announcements, which name its raw writers (a fresh --no-daemon
-        # participant may take ros2-client's own announcement, without them, last: ADR 0025).
+        # The played topics' writers are raw ones, which ros2-client's own announcement of the
+        # node leaves out. The daemon, running before the player started, keeps our
+        # announcements; a fresh participant is sent ours again when it joins (ADR 0017).
         time.sleep(3)
-        pubs = ""
-        for _ in range(5):
-            r = subprocess.run(["ros2", "topic", "info", "-v", f"{NS}/daq/frames"], capture_output=True, text=True, timeout=40)
-            pubs = r.stdout.split("Subscription count")[0]
-            if "Node name: player" in pubs:
-                break
-            time.sleep(2)
-        names = re.findall(r"Node name: (\S+)", pubs)
-        check(names == ["player"], f"during oilfilm play: the played topic's publisher is the player node, through the daemon ({names})")
+        for how, extra in (("through the daemon", []), ("to a fresh participant (--no-daemon)", ["--no-daemon"])):
+            pubs = ""
+            for _ in range(5):
+                r = subprocess.run(["ros2", "topic", "info", "-v", f"{NS}/daq/frames", *extra], capture_output=True, text=True, timeout=40)
+                pubs = r.stdout.split("Subscription count")[0]
+                if "Node name: player" in pubs:
+                    break
+                time.sleep(2)
+            names = re.findall(r"Node name: (\S+)", pubs)
+            check(names == ["player"], f"during oilfilm play: the played topic's publisher is the player node, {how} ({names})")
         rc, out, err = ros2("topic", "echo", "--once", f"{NS}/rig/status", timeout=30)
         check(rc == 0 and "speed_rad_s" in out, "during oilfilm play: ros2 topic echo --once rig/status")
     finally:

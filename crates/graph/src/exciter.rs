@@ -711,6 +711,9 @@ impl ExciterCore {
     }
 }
 
+/// How long the exciter waits, as it stops, for its subscribers to acknowledge the ramp.
+const STOP_ACK: std::time::Duration = std::time::Duration::from_secs(3);
+
 /// The exciter node: requests and the rig clock in, setpoints out.
 pub struct Exciter {
     core: ExciterCore,
@@ -741,7 +744,11 @@ impl Node for Exciter {
     }
 
     fn connect<C: Connect>(&self, c: &mut C) -> Result<ExciterPorts<'static>, NodeError> {
-        Ok(ExciterPorts { requests: c.input(&topics::EXCITER_REQUEST)?, status: c.input(&topics::RIG_STATUS)?, commands: c.output(&topics::EXCITER_COMMAND)? })
+        Ok(ExciterPorts {
+            requests: c.input(&topics::EXCITER_REQUEST)?,
+            status: c.input(&topics::RIG_STATUS)?,
+            commands: c.acknowledged_output(&topics::EXCITER_COMMAND)?,
+        })
     }
 
     /// Requests first (a new plan applies from the next setpoint), then the subscribers of
@@ -803,6 +810,12 @@ impl Node for Exciter {
         if let Some(cmd) = self.core.shutdown() {
             tracing::info!(node = "exciter", "stopping: ramp to zero over {} setpoints", cmd.force_1_n.len());
             ports.commands.publish(cmd)?;
+            // A rig driver that misses the ramp holds the last setpoint: wait until every
+            // subscriber has it (a sending lost in a burst is repaired only on the next
+            // heartbeat) rather than leave DDS after a fixed linger.
+            if !ports.commands.flush(STOP_ACK)? {
+                tracing::warn!(node = "exciter", "not every subscriber of {} acknowledged the ramp to zero within {STOP_ACK:?}", topics::EXCITER_COMMAND.name);
+            }
         }
         Ok(())
     }

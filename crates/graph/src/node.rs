@@ -50,6 +50,13 @@ pub struct RawTopic {
 pub trait Connect {
     fn input<M: Message>(&mut self, topic: &Topic) -> Result<Input<'static, M>, NodeError>;
     fn output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError>;
+    /// An output whose [`Publish::flush`](crate::ports::Publish::flush) waits until every
+    /// reliable reader has what was published: for a last message that must arrive before
+    /// the node leaves (the exciter's ramp to zero). A port kind that delivers at once has
+    /// nothing to wait for and gives its plain output.
+    fn acknowledged_output<M: Message>(&mut self, topic: &Topic) -> Result<Output<'static, M>, NodeError> {
+        self.output(topic)
+    }
     /// Serialised messages as they arrive, any type (what a bag stores).
     fn raw_input(&mut self, topic: &RawTopic) -> Result<Input<'static, RawCdr>, NodeError>;
     /// Serialised messages sent as they are given.
