@@ -170,10 +170,12 @@ struct ExtraEntities {
 /// announcement said.
 ///
 /// The info sent also lists the entities made outside ros2-client's node ([`ExtraEntities`]:
-/// the raw and acknowledged writers, the recorder's raw readers), which ros2-client's own announcements leave
-/// out, so `ros2 topic info -v` shows them with their node instead of `_NODE_NAME_UNKNOWN_`.
-/// It is sent at once whenever an entity is made, ros2-client's or ours ([`Announcer::now`]),
-/// so that ros2-client's announcement, which leaves them out, is not the last word.
+/// the raw and acknowledged writers, the recorder's raw readers), which ros2-client's own
+/// announcements leave out, so `ros2 topic info -v` shows them with their node instead of
+/// `_NODE_NAME_UNKNOWN_`. So that ros2-client's announcement is not the last word, ours is
+/// sent at once whenever an entity is made, ros2-client's or ours ([`Announcer::now`]), and
+/// again [`Announcer::NEWCOMER`] after a new reader matched: a participant that joins late
+/// receives both writers' stored announcements, and took ros2-client's last.
 struct Announcer {
     wake: std::sync::mpsc::Sender<Wake>,
     thread: std::thread::JoinHandle<()>,
@@ -292,7 +294,7 @@ impl Announcer {
     /// here, has reached it.
     const NEWCOMER: std::time::Duration = std::time::Duration::from_millis(200);
 
-    /// Announces now (a raw entity was made).
+    /// Announces now (an entity was made).
     fn now(&self) {
         let _ = self.wake.send(Wake::Now);
     }
@@ -436,9 +438,8 @@ impl RosNode {
 
     /// A writer on the node's participant, announced as the node's. Not ros2-client's
     /// `Publisher`, which hides its writer and with it the wait for acknowledgments
-    /// ([`Publish::flush`]); but ros2-client's own announcement leaves it out, so a fresh
-    /// participant that takes that one last names no node for it (ADR 0025). Hence only where
-    /// the wait is needed.
+    /// ([`Publish::flush`]); but then only our announcer names its node ([`Announcer`]),
+    /// so only where that wait is needed.
     fn writer<M, SA: dds_no_key::SerializerAdapter<M>>(
         &mut self,
         full: &str,
