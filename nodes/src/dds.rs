@@ -433,7 +433,7 @@ impl RosNode {
     pub fn publisher_named<M: Serialize>(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<DdsPublisher<M>, NodeError> {
         let t = self.topic_named(full, type_name, &qos)?;
         let p = self.node.create_publisher::<M>(&t, Some(qos)).map_err(|e| mw(format!("publisher {full}"), e))?;
-        Ok(DdsPublisher { publisher: p, topic: leak_name(full), readers: Readers::new(&self.context, full) })
+        Ok(DdsPublisher { publisher: Paced::new(p), topic: leak_name(full), readers: Readers::new(&self.context, full) })
     }
 
     /// A writer on the node's participant, announced as the node's. Not ros2-client's
@@ -464,7 +464,7 @@ impl RosNode {
         let s = self.node.create_subscription::<M>(&t, Some(qos)).map_err(|e| mw(format!("subscription {full}"), e))?;
         // ros2-client has just announced the node without the writers made here.
         self.announce_now();
-        Ok(DdsSubscription { subscription: s, topic: leak_name(full) })
+        Ok(DdsSubscription { subscription: Paced::new(s), topic: leak_name(full) })
     }
 
     /// A subscription that hands over each sample's serialised CDR as it arrived (the
@@ -482,13 +482,13 @@ impl RosNode {
             subscriber.create_simple_datareader_no_key::<RawCdr, RawAdapter>(&t, Some((&qos).into())).map_err(|e| mw(format!("raw subscription {full}"), e))?;
         self.extra.lock().unwrap_or_else(PoisonError::into_inner).readers.push(ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&reader)));
         self.announce_now();
-        Ok(RawSubscription { reader, topic: full.to_string() })
+        Ok(RawSubscription { reader: Paced::new(reader), topic: full.to_string() })
     }
 
     /// A writer that sends serialised CDR as it is given (the player's output).
     pub fn raw_publisher(&mut self, full: &str, type_name: &str, qos: QosProfile) -> Result<RawPublisher, NodeError> {
         let writer = self.writer::<RawCdr, RawAdapter>(full, type_name, qos)?;
-        Ok(RawPublisher { writer, topic: full.to_string(), matched: 0, acks: Acks::default() })
+        Ok(RawPublisher { writer: Paced::new(writer), topic: full.to_string(), matched: 0, acks: Acks::default() })
     }
 
     /// Sends the node's entities on `ros_discovery_info` now.
@@ -507,14 +507,14 @@ impl RosNode {
         let t = self.topic(topic)?;
         let p = self.node.create_publisher::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("publisher {}", topic.name), e))?;
         let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
-        Ok(DdsPublisher { publisher: p, topic: topic.name, readers: Readers::new(&self.context, &full) })
+        Ok(DdsPublisher { publisher: Paced::new(p), topic: topic.name, readers: Readers::new(&self.context, &full) })
     }
 
     /// A typed publisher whose [`Publish::flush`] waits for its readers' acknowledgments.
     pub fn acknowledged_publisher<M: Serialize>(&mut self, topic: &Topic) -> Result<AcknowledgedPublisher<M>, NodeError> {
         let full = oilfilm_graph::topics::qualified(&self.namespace, topic);
         let writer = self.writer::<M, CDRSerializerAdapter<M>>(&full, topic.type_name, qos_of(topic))?;
-        Ok(AcknowledgedPublisher { writer, topic: topic.name, readers: Readers::new(&self.context, &full), acks: Acks::default() })
+        Ok(AcknowledgedPublisher { writer: Paced::new(writer), topic: topic.name, readers: Readers::new(&self.context, &full), acks: Acks::default() })
     }
 
     pub fn subscription<M: DeserializeOwned + 'static>(&mut self, topic: &Topic) -> Result<DdsSubscription<M>, NodeError> {
@@ -522,7 +522,7 @@ impl RosNode {
         let s = self.node.create_subscription::<M>(&t, Some(qos_of(topic))).map_err(|e| mw(format!("subscription {}", topic.name), e))?;
         // ros2-client has just announced the node without the writers made here.
         self.announce_now();
-        Ok(DdsSubscription { subscription: s, topic: topic.name })
+        Ok(DdsSubscription { subscription: Paced::new(s), topic: topic.name })
     }
 
     /// Waits (at most `timeout`) until `topic` has a matched subscription, so that what is
@@ -551,24 +551,70 @@ impl Drop for RosNode {
     /// entities and the node, then the context, which lets the participant say goodbye to
     /// DDS. On every path out of a node, errors included: entities go before their
     /// participant, or DDS cannot remove them cleanly ("Cannot remove Reader/Writer ...
-    /// Disconnected", `nodes/tests/clean_exit.rs`).
+    /// Disconnected", `nodes/tests/clean_exit.rs`), and one at a time ([`REMOVAL_PACE`]).
     fn drop(&mut self) {
         crate::logging::detach();
-        self.rosout = None;
+        if self.rosout.take().is_some() {
+            std::thread::sleep(REMOVAL_PACE);
+        }
         self.parameters = None;
         self.clock = None;
         if let Some(a) = self.announcer.take() {
+            // Its writer goes with its thread.
             a.stop();
+            std::thread::sleep(REMOVAL_PACE);
         }
         // SAFETY: `node` is dropped here once, and nothing uses it after: this is `drop`.
         unsafe { ManuallyDrop::drop(&mut self.node) };
+        // ros2-client's node had its own `/parameter_events` writer.
+        std::thread::sleep(REMOVAL_PACE);
         // SAFETY: as for `node`: dropped here once, never used after.
         unsafe { ManuallyDrop::drop(&mut self.context) };
     }
 }
 
+/// How long a node waits after dropping one of its DDS entities before the next. RustDDS
+/// queues each removal for its event loop in a channel of four and gives up after 20 ms
+/// (ERROR "Cannot remove Writer ... Full", the entity left announced), and a node's entities
+/// dropped together on a loaded machine overflowed it (`nodes/tests/clean_exit.rs`).
+const REMOVAL_PACE: std::time::Duration = std::time::Duration::from_millis(10);
+
+/// A DDS entity that, when dropped, waits [`REMOVAL_PACE`] after its removal is queued.
+pub(crate) struct Paced<T> {
+    entity: T,
+    _pace: RemovalPace,
+}
+
+/// Declared after the entity, so dropped after it (fields drop in declaration order).
+struct RemovalPace;
+
+impl Drop for RemovalPace {
+    fn drop(&mut self) {
+        std::thread::sleep(REMOVAL_PACE);
+    }
+}
+
+impl<T> Paced<T> {
+    pub(crate) fn new(entity: T) -> Self {
+        Self { entity, _pace: RemovalPace }
+    }
+}
+
+impl<T> std::ops::Deref for Paced<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.entity
+    }
+}
+
+impl<T> std::ops::DerefMut for Paced<T> {
+    fn deref_mut(&mut self) -> &mut T {
+        &mut self.entity
+    }
+}
+
 pub struct DdsPublisher<M: Serialize> {
-    publisher: ros2_client::Publisher<M>,
+    publisher: Paced<ros2_client::Publisher<M>>,
     topic: &'static str,
     readers: Readers,
 }
@@ -576,7 +622,7 @@ pub struct DdsPublisher<M: Serialize> {
 /// A typed writer that can wait for its readers' acknowledgments
 /// ([`RosNode::acknowledged_publisher`]).
 pub struct AcknowledgedPublisher<M: Serialize> {
-    writer: dds_no_key::DataWriter<M, CDRSerializerAdapter<M>>,
+    writer: Paced<dds_no_key::DataWriter<M, CDRSerializerAdapter<M>>>,
     topic: &'static str,
     readers: Readers,
     acks: Acks,
@@ -673,7 +719,7 @@ impl dds_no_key::SerializerAdapter<RawCdr> for RawAdapter {
 }
 
 pub struct RawSubscription {
-    reader: dds_no_key::SimpleDataReader<RawCdr, RawAdapter>,
+    reader: Paced<dds_no_key::SimpleDataReader<RawCdr, RawAdapter>>,
     topic: String,
 }
 
@@ -691,7 +737,7 @@ impl Receive<RawCdr> for RawSubscription {
 }
 
 pub struct RawPublisher {
-    writer: dds_no_key::DataWriter<RawCdr, RawAdapter>,
+    writer: Paced<dds_no_key::DataWriter<RawCdr, RawAdapter>>,
     topic: String,
     matched: i32,
     acks: Acks,
@@ -728,7 +774,7 @@ impl Acks {
 impl RawPublisher {
     /// The writer's GID, as the graph (`ros_discovery_info`) lists it.
     pub fn gid(&self) -> ros2_client::Gid {
-        ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&self.writer))
+        ros2_client::Gid::from(ros2_client::dds::rustdds::RTPSEntity::guid(&*self.writer))
     }
 
     /// Readers this writer is matched with now. A reader DDS discovery has seen is not
@@ -784,7 +830,7 @@ impl<M: Serialize> Publish<M> for AcknowledgedPublisher<M> {
 }
 
 pub struct DdsSubscription<M> {
-    subscription: ros2_client::Subscription<M>,
+    subscription: Paced<ros2_client::Subscription<M>>,
     topic: &'static str,
 }
 

@@ -26,7 +26,7 @@ use oilfilm_graph::params::{Rule, Spec, USE_SIM_TIME};
 use oilfilm_graph::stamp::Stamp;
 use oilfilm_graph::NodeError;
 
-use crate::dds::{from_parameter, mw, to_parameter};
+use crate::dds::{from_parameter, mw, to_parameter, Paced};
 
 /// A change the node is asked to apply: the whole parameter set as it would be after it.
 pub struct Change<'a> {
@@ -48,18 +48,18 @@ pub enum SimTime {
 }
 
 struct Servers {
-    get: Server<GetParametersRequest, GetParametersResponse>,
-    types: Server<GetParameterTypesRequest, GetParameterTypesResponse>,
-    set: Server<SetParametersRequest, SetParametersResponse>,
-    atomic: Server<SetParametersRequest, SetParametersAtomicallyResponse>,
-    list: Server<ListParametersRequest, ListParametersResponse>,
-    describe: Server<DescribeParametersRequest, DescribeParametersResponse>,
+    get: Paced<Server<GetParametersRequest, GetParametersResponse>>,
+    types: Paced<Server<GetParameterTypesRequest, GetParameterTypesResponse>>,
+    set: Paced<Server<SetParametersRequest, SetParametersResponse>>,
+    atomic: Paced<Server<SetParametersRequest, SetParametersAtomicallyResponse>>,
+    list: Paced<Server<ListParametersRequest, ListParametersResponse>>,
+    describe: Paced<Server<DescribeParametersRequest, DescribeParametersResponse>>,
 }
 
 /// One node's parameter services and its `/parameter_events` writer.
 pub struct ParameterServer {
     servers: Servers,
-    events: Publisher<raw::ParameterEvent>,
+    events: Paced<Publisher<raw::ParameterEvent>>,
     node_name: String,
     specs: Vec<Spec>,
     values: Map<String, Value>,
@@ -127,16 +127,16 @@ impl ParameterServer {
         now: Stamp,
     ) -> Result<Self, NodeError> {
         let servers = Servers {
-            get: server(node, fqn, "get_parameters", "GetParameters")?,
-            types: server(node, fqn, "get_parameter_types", "GetParameterTypes")?,
-            set: server(node, fqn, "set_parameters", "SetParameters")?,
-            atomic: server(node, fqn, "set_parameters_atomically", "SetParametersAtomically")?,
-            list: server(node, fqn, "list_parameters", "ListParameters")?,
-            describe: server(node, fqn, "describe_parameters", "DescribeParameters")?,
+            get: Paced::new(server(node, fqn, "get_parameters", "GetParameters")?),
+            types: Paced::new(server(node, fqn, "get_parameter_types", "GetParameterTypes")?),
+            set: Paced::new(server(node, fqn, "set_parameters", "SetParameters")?),
+            atomic: Paced::new(server(node, fqn, "set_parameters_atomically", "SetParametersAtomically")?),
+            list: Paced::new(server(node, fqn, "list_parameters", "ListParameters")?),
+            describe: Paced::new(server(node, fqn, "describe_parameters", "DescribeParameters")?),
         };
         let topic = context.get_parameter_events_topic();
         let events = node.create_publisher(&topic, Some(parameter_events_qos())).map_err(|e| mw("/parameter_events publisher", e))?;
-        let s = Self { servers, events, node_name: fqn.to_string(), specs, values, use_sim_time, sim_time };
+        let s = Self { servers, events: Paced::new(events), node_name: fqn.to_string(), specs, values, use_sim_time, sim_time };
         let declared: Vec<String> = s.names();
         s.announce(now, &declared, true);
         Ok(s)
