@@ -310,18 +310,25 @@ fn random_transitions_never_exceed_the_slew_limit() {
     assert_eq!(*d.f.last().unwrap(), [0.0, 0.0], "shutdown ends at zero");
 }
 
-/// A commands port whose subscriber count the test sets.
+/// A commands port whose subscriber count the test sets, and which logs what the node did
+/// with it: "command", "stop" (a command with `stop` set) and "flush".
 struct Commands {
     bus: oilfilm_graph::ports::memory::Publisher<ExciterCommand>,
     readers: std::rc::Rc<std::cell::Cell<usize>>,
+    log: std::rc::Rc<std::cell::RefCell<Vec<&'static str>>>,
 }
 
 impl Publish<ExciterCommand> for Commands {
     fn publish(&mut self, m: ExciterCommand) -> Result<(), NodeError> {
+        self.log.borrow_mut().push(if m.stop { "stop" } else { "command" });
         self.bus.publish(m)
     }
     fn readers(&mut self) -> Option<usize> {
         Some(self.readers.get())
+    }
+    fn flush(&mut self, _timeout: std::time::Duration) -> Result<bool, NodeError> {
+        self.log.borrow_mut().push("flush");
+        Ok(true)
     }
 }
 
@@ -333,11 +340,12 @@ fn the_node_ramps_down_when_its_last_subscriber_goes_and_restarts_when_one_is_ba
     let mut node = Exciter::new(&params, &oilfilm_graph::node::Start { now: T0, rig: &load, namespace: "/oilfilm" }).unwrap();
     let (requests, status, commands) = (Bus::<ExciterCommand>::new(), Bus::<RigStatus>::new(), Bus::<ExciterCommand>::new());
     let readers = std::rc::Rc::new(std::cell::Cell::new(1));
+    let log = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
     let mut out = commands.subscriber();
     let mut ports = ExciterPorts {
         requests: Box::new(requests.subscriber()),
         status: Box::new(status.subscriber()),
-        commands: Box::new(Commands { bus: commands.publisher(), readers: readers.clone() }),
+        commands: Box::new(Commands { bus: commands.publisher(), readers: readers.clone(), log: log.clone() }),
     };
     let mut rig_clock = status.publisher();
     let mut d = Driver::default();
@@ -356,6 +364,9 @@ fn the_node_ramps_down_when_its_last_subscriber_goes_and_restarts_when_one_is_ba
         tick(&mut node, &mut ports, k * 500);
     }
     node.finish(T0, &mut ports).unwrap();
+    // Its last act: the ramp to zero, then the wait for every subscriber to have it.
+    assert_eq!(log.borrow().iter().rev().take(2).rev().copied().collect::<Vec<_>>(), ["stop", "flush"]);
+    assert_eq!(log.borrow().iter().filter(|e| **e == "flush").count(), 1, "no wait while running: {:?}", log.borrow());
     let cmds = out.drain();
     for c in &cmds {
         d.take(c);
