@@ -8,9 +8,9 @@
 //! seconds away (`ros2 topic info -v --no-daemon` showed `_NODE_NAME_UNKNOWN_` every time).
 //! So the announcer answers a newly matched reader with a fresh announcement.
 //!
-//! The proof: a reader that joins between two scheduled repeats (after the 8 s wait, before
-//! the 15 s one) receives, within a second, an announcement written after it joined, and it
-//! lists the node's raw writer.
+//! The proof: a reader that joins between two scheduled repeats (the fourth and the fifth)
+//! receives, within 1.5 s, an announcement written after it joined, and it lists the node's
+//! raw writer.
 
 use std::time::{Duration, Instant};
 
