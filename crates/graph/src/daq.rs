@@ -615,9 +615,7 @@ impl SimDaq {
             }
         };
         if self.status_at.is_none() {
-            ports.status.publish(self.core.status())?;
-            self.status_at = Some(now);
-            turn.handled += 1;
+            self.say_status(now, ports, &mut turn)?;
         }
         let p = &self.params;
         let epoch = self.core.epoch();
@@ -639,13 +637,8 @@ impl SimDaq {
             // wait `command_timeout_s` for a running exciter.
             let timeout_s = if self.core.now() == epoch { p.command_timeout_s.max(READER_WAIT_S) } else { p.command_timeout_s };
             if now.seconds_since(since) < timeout_s {
-                let mut said = self.status_at.unwrap_or(now);
-                if now.seconds_since(said) >= STATUS_REPEAT_S {
-                    ports.status.publish(self.core.status())?;
-                    said = now;
-                    self.status_at = Some(now);
-                    turn.handled += 1;
-                }
+                let said = self.status_at.unwrap_or(now);
+                let said = if now.seconds_since(said) >= STATUS_REPEAT_S { self.say_status(now, ports, &mut turn)? } else { said };
                 return Ok(Turn { wake: Some(later(since, timeout_s).min(later(said, STATUS_REPEAT_S))), ..turn });
             }
             tracing::warn!(
@@ -658,10 +651,17 @@ impl SimDaq {
         self.waiting_since = None;
         let frame = self.core.produce()?;
         ports.frames.publish(frame)?;
+        turn.handled += 1;
+        self.say_status(now, ports, &mut turn)?;
+        Ok(turn)
+    }
+
+    /// Publishes the rig's status now; returns when (the runner's clock).
+    fn say_status(&mut self, now: Stamp, ports: &mut DaqPorts<'_>, turn: &mut Turn) -> Result<Stamp, NodeError> {
         ports.status.publish(self.core.status())?;
         self.status_at = Some(now);
-        turn.handled += 2;
-        Ok(turn)
+        turn.handled += 1;
+        Ok(now)
     }
 }
 
